@@ -1,0 +1,132 @@
+"""Binding: resolve controller joint names in a Newton model to per-env index tables.
+
+Reads the model's joint tables once, on the host, at construction. A joint name matches a Newton joint label
+exactly or by the label's last ``/``-separated part (``add_urdf`` labels joints ``panda/panda_joint1``).
+"""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import newton
+import numpy as np
+
+from .config import ConfigError
+
+_ONE_DOF = {int(newton.JointType.REVOLUTE): "revolute", int(newton.JointType.PRISMATIC): "prismatic"}
+
+
+@dataclass
+class JointBinding:
+    """Where each controlled joint lives in every env of a Newton model.
+
+    Row r of env e has its coordinate at ``q_base[e] + q_off[r]`` in ``joint_q``/``joint_target_q`` and its DOF at
+    ``qd_base[e] + qd_off[r]`` in ``joint_qd``/``joint_target_qd``/``joint_f`` and the per-DOF model arrays.
+    """
+
+    joint_names: list[str]
+    num_envs: int
+    joint_index: np.ndarray  # (num_envs, rows) int32, Newton joint ids
+    coord_index: np.ndarray  # (num_envs, rows) int32
+    dof_index: np.ndarray  # (num_envs, rows) int32
+    q_base: np.ndarray  # (num_envs,) int32
+    qd_base: np.ndarray  # (num_envs,) int32
+    q_off: np.ndarray  # (rows,) int32
+    qd_off: np.ndarray  # (rows,) int32
+    qlimits: np.ndarray  # (rows, 2) float32 [rad or m], env 0's limits (as ManiSkill's get_qlimits()[0])
+
+
+def _short(label: str) -> str:
+    return label.rsplit("/", 1)[-1]
+
+
+def bind_joints(model: newton.Model, joint_names: Sequence[str]) -> JointBinding:
+    """Resolve ``joint_names`` in every world of ``model``.
+
+    Every world must hold each name exactly once (as a 1-DOF revolute or prismatic joint). A model with a single
+    world whose joints are global (built without ``replicate``/``begin_world``) counts as one env.
+
+    Raises:
+        ConfigError: unknown or ambiguous name, a joint that is not 1-DOF, a world missing the robot, or worlds whose
+            joints are laid out differently.
+    """
+    names = list(joint_names)
+    labels = list(model.joint_label)
+    jworld = model.joint_world.numpy()
+    jtype = model.joint_type.numpy()
+    q_start = model.joint_q_start.numpy()
+    qd_start = model.joint_qd_start.numpy()
+    world_count = max(int(model.world_count), 1)
+    if world_count == 1 and (jworld == 0).sum() == 0:
+        jworld = np.zeros_like(jworld)  # a single-world model built without worlds: its joints are global
+
+    by_world: list[dict[str, list[int]]] = [{} for _ in range(world_count)]
+    for j, label in enumerate(labels):
+        w = int(jworld[j])
+        if w < 0 or w >= world_count:
+            continue
+        d = by_world[w]
+        d.setdefault(label, []).append(j)
+        short = _short(label)
+        if short != label:
+            d.setdefault(short, []).append(j)
+
+    table = np.zeros((world_count, len(names)), np.int32)
+    for w in range(world_count):
+        for r, name in enumerate(names):
+            cand = sorted(set(by_world[w].get(name, [])))
+            if not cand:
+                known = sorted({_short(lb) for lb in labels})
+                close = difflib.get_close_matches(name, known, n=5, cutoff=0.5)
+                hint = f"; close matches: {close}" if close else f"; the model's joints: {known[:20]}"
+                raise ConfigError(f"joint_names: joint {name!r} is not in world {w} of the model{hint}")
+            if len(cand) > 1:
+                raise ConfigError(
+                    f"joint_names: joint {name!r} matches {len(cand)} joints in world {w}: "
+                    f"{[labels[j] for j in cand]}; use the full label"
+                )
+            j = cand[0]
+            t = int(jtype[j])
+            if t not in _ONE_DOF or int(qd_start[j + 1] - qd_start[j]) != 1:
+                tname = newton.JointType(t).name if t in set(int(x) for x in newton.JointType) else str(t)
+                raise ConfigError(
+                    f"joint_names: joint {labels[j]!r} is a {tname} joint; wpctrl controls 1-DOF revolute or "
+                    f"prismatic joints only"
+                )
+            table[w, r] = j
+
+    coord = q_start[table].astype(np.int32)
+    dof = qd_start[table].astype(np.int32)
+    if len(names):
+        q_base, qd_base = coord[:, 0].copy(), dof[:, 0].copy()
+    else:
+        q_base = qd_base = np.zeros(world_count, np.int32)
+    q_rel = coord - q_base[:, None]
+    qd_rel = dof - qd_base[:, None]
+    if (q_rel != q_rel[:1]).any() or (qd_rel != qd_rel[:1]).any():
+        bad = int(np.nonzero((q_rel != q_rel[:1]).any(axis=1) | (qd_rel != qd_rel[:1]).any(axis=1))[0][0])
+        raise ConfigError(
+            f"joint_names: the joints are laid out differently in world {bad} than in world 0 "
+            f"(relative coordinate offsets {q_rel[bad].tolist()} vs {q_rel[0].tolist()}); every world must hold the "
+            f"same robot"
+        )
+    lower = model.joint_limit_lower.numpy()
+    upper = model.joint_limit_upper.numpy()
+    d0 = dof[0] if len(names) else np.zeros(0, np.int32)
+    qlimits = np.stack([lower[d0], upper[d0]], axis=1).astype(np.float32) if len(names) else np.zeros((0, 2), np.float32)
+    # Newton marks unlimited joints with +-MAXVAL; report them as infinite, as ManiSkill does.
+    qlimits[np.abs(qlimits) >= 0.99 * newton.MAXVAL] = np.inf * np.sign(qlimits[np.abs(qlimits) >= 0.99 * newton.MAXVAL])
+    return JointBinding(
+        joint_names=names,
+        num_envs=world_count,
+        joint_index=table,
+        coord_index=coord,
+        dof_index=dof,
+        q_base=q_base.astype(np.int32),
+        qd_base=qd_base.astype(np.int32),
+        q_off=q_rel[0].astype(np.int32) if len(names) else np.zeros(0, np.int32),
+        qd_off=qd_rel[0].astype(np.int32) if len(names) else np.zeros(0, np.int32),
+        qlimits=qlimits,
+    )

@@ -1,0 +1,1 @@
+"""Private Warp kernels of wpctrl (not a public import path)."""

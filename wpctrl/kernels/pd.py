@@ -1,0 +1,250 @@
+"""Warp kernels for ManiSkill-style PD joint control over all envs of a Newton model.
+
+Private module. Every kernel runs one thread per env that walks that env's rows (controlled joints), so mimic rows
+can read their source row's fresh target without a race, and the per-env substep counter needs no atomics.
+Row parameters are shared by all envs; gains are ``(1 | num_envs, rows)`` arrays indexed with the batch rule
+``env if shape[0] > 1 else 0``. Newton arrays are flat: a row's coordinate is ``q_base[env] + q_off[row]`` in
+``joint_q``/``joint_target_q`` and its DOF ``qd_base[env] + qd_off[row]`` in ``joint_qd``/``joint_target_qd``/
+``joint_f``.
+
+Parameter naming follows MuJoCo Warp: row and env tables first (no suffix), then ``_in`` inputs, then ``_out``
+outputs (an ``_out`` array that a kernel also reads is marked "in/out").
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+from .. import config as _cfg
+
+wp.set_module_options({"enable_backward": False})
+
+ROW_POS = wp.constant(_cfg.ROW_POS)
+ROW_VEL = wp.constant(_cfg.ROW_VEL)
+ROW_PASSIVE = wp.constant(_cfg.ROW_PASSIVE)
+
+FLAG_NORMALIZE = wp.constant(_cfg.FLAG_NORMALIZE)
+FLAG_DELTA = wp.constant(_cfg.FLAG_DELTA)
+FLAG_TARGET = wp.constant(_cfg.FLAG_TARGET)
+FLAG_INTERPOLATE = wp.constant(_cfg.FLAG_INTERPOLATE)
+FLAG_VEL_TARGET = wp.constant(_cfg.FLAG_VEL_TARGET)
+
+
+@wp.func
+def _bidx(n: int, env: int):
+    """Batch index into a ``(1 | num_envs, ...)`` parameter array."""
+    if n > 1:
+        return env
+    return 0
+
+
+@wp.func
+def _scale(a: float, lo: float, hi: float, normalize: int):
+    """ManiSkill's normalisation: clip to [-1, 1] first, then ``0.5(h+l) + 0.5(h-l)a`` in float32."""
+    if normalize == 0:
+        return a
+    c = wp.clamp(a, -1.0, 1.0)
+    return 0.5 * (hi + lo) + (0.5 * (hi - lo)) * c
+
+
+@wp.func
+def _interp(start: float, target: float, k: int, num_substeps: int):
+    """Substep k (1-based, held at num_substeps) of ``start + k * (target - start) / K``, ManiSkill's rounding."""
+    step_size = (target - start) / float(num_substeps)
+    return start + step_size * float(wp.min(k, num_substeps))
+
+
+@wp.kernel
+def _set_action_kernel(
+    # Rows:
+    row_kind: wp.array[wp.int32],
+    row_flags: wp.array[wp.int32],
+    row_act_col: wp.array[wp.int32],
+    row_vel_col: wp.array[wp.int32],
+    row_lo: wp.array[float],
+    row_hi: wp.array[float],
+    row_vlo: wp.array[float],
+    row_vhi: wp.array[float],
+    row_mimic_src: wp.array[wp.int32],
+    row_mimic_mul: wp.array[float],
+    row_mimic_off: wp.array[float],
+    row_q_off: wp.array[wp.int32],
+    # Envs:
+    env_q_base: wp.array[wp.int32],
+    # In:
+    action_in: wp.array2d[float],
+    joint_q_in: wp.array[float],
+    # Out:
+    processed_action_out: wp.array2d[float],
+    start_qpos_out: wp.array2d[float],
+    target_qpos_out: wp.array2d[float],  # in/out: the previous (virtual) target
+    target_qvel_out: wp.array2d[float],
+    step_out: wp.array[wp.int32],
+    bad_action_count_out: wp.array[wp.int32],  # in/out
+):
+    env = wp.tid()
+    num_rows = row_kind.shape[0]
+    num_cols = action_in.shape[1]
+
+    # A non-finite action leaves the whole env untouched (targets hold) and is counted.
+    for c in range(num_cols):
+        if not wp.isfinite(action_in[env, c]):
+            bad_action_count_out[env] = bad_action_count_out[env] + 1
+            return
+
+    q_base = env_q_base[env]
+    # Pass 1: every row that is not a mimic follower.
+    for r in range(num_rows):
+        if row_mimic_src[r] >= 0:
+            continue
+        kind = row_kind[r]
+        flags = row_flags[r]
+        norm = flags & FLAG_NORMALIZE
+        col = row_act_col[r]
+        if kind == ROW_POS:
+            q = joint_q_in[q_base + row_q_off[r]]
+            start_qpos_out[env, r] = q
+            if col >= 0:
+                a = _scale(action_in[env, col], row_lo[r], row_hi[r], norm)
+                processed_action_out[env, col] = a
+                t = a
+                if flags & FLAG_DELTA:
+                    if flags & FLAG_TARGET:
+                        t = target_qpos_out[env, r] + a
+                    else:
+                        t = q + a
+                target_qpos_out[env, r] = t
+            vcol = row_vel_col[r]
+            if vcol >= 0:
+                v = _scale(action_in[env, vcol], row_vlo[r], row_vhi[r], norm)
+                processed_action_out[env, vcol] = v
+                target_qvel_out[env, r] = v
+        elif kind == ROW_VEL:
+            v = _scale(action_in[env, col], row_lo[r], row_hi[r], norm)
+            processed_action_out[env, col] = v
+            target_qvel_out[env, r] = v
+
+    # Pass 2: mimic followers read their (never mimic) source's fresh target.
+    for r in range(num_rows):
+        src = row_mimic_src[r]
+        if src >= 0:
+            start_qpos_out[env, r] = joint_q_in[q_base + row_q_off[r]]
+            target_qpos_out[env, r] = target_qpos_out[env, src] * row_mimic_mul[r] + row_mimic_off[r]
+
+    step_out[env] = 0
+
+
+@wp.kernel
+def _substep_kernel(
+    # Rows:
+    row_kind: wp.array[wp.int32],
+    row_flags: wp.array[wp.int32],
+    row_q_off: wp.array[wp.int32],
+    row_qd_off: wp.array[wp.int32],
+    # Envs:
+    env_q_base: wp.array[wp.int32],
+    env_qd_base: wp.array[wp.int32],
+    # Gains (1 | num_envs, rows):
+    kp: wp.array2d[float],
+    kd: wp.array2d[float],
+    force_limit: wp.array2d[float],
+    num_substeps: int,
+    explicit_pd: int,
+    # In:
+    joint_q_in: wp.array[float],
+    joint_qd_in: wp.array[float],
+    start_qpos_in: wp.array2d[float],
+    target_qpos_in: wp.array2d[float],
+    target_qvel_in: wp.array2d[float],
+    # Out:
+    step_out: wp.array[wp.int32],  # in/out
+    joint_target_q_out: wp.array[float],
+    joint_target_qd_out: wp.array[float],
+    joint_f_out: wp.array[float],
+):
+    env = wp.tid()
+    num_rows = row_kind.shape[0]
+    k = step_out[env] + 1
+    step_out[env] = k
+    q_base = env_q_base[env]
+    qd_base = env_qd_base[env]
+    gk = _bidx(kp.shape[0], env)
+    gd = _bidx(kd.shape[0], env)
+    gf = _bidx(force_limit.shape[0], env)
+    for r in range(num_rows):
+        kind = row_kind[r]
+        qi = q_base + row_q_off[r]
+        di = qd_base + row_qd_off[r]
+        tq = float(0.0)
+        tqd = target_qvel_in[env, r]
+        if kind == ROW_POS:
+            tq = target_qpos_in[env, r]
+            if row_flags[r] & FLAG_INTERPOLATE:
+                tq = _interp(start_qpos_in[env, r], tq, k, num_substeps)
+            joint_target_q_out[qi] = tq
+        if kind != ROW_POS or (row_flags[r] & FLAG_VEL_TARGET) != 0:
+            joint_target_qd_out[di] = tqd
+        if explicit_pd != 0:
+            u = kd[gd, r] * (tqd - joint_qd_in[di])
+            if kind == ROW_POS:
+                u = u + kp[gk, r] * (tq - joint_q_in[qi])
+            lim = force_limit[gf, r]
+            joint_f_out[di] = wp.clamp(u, -lim, lim)
+
+
+@wp.kernel
+def _reset_kernel(
+    # Rows:
+    row_kind: wp.array[wp.int32],
+    row_flags: wp.array[wp.int32],
+    row_q_off: wp.array[wp.int32],
+    row_qd_off: wp.array[wp.int32],
+    # Envs:
+    env_q_base: wp.array[wp.int32],
+    env_qd_base: wp.array[wp.int32],
+    first: int,
+    # In:
+    env_ids_in: wp.array[wp.int32],  # optional: thread i resets env env_ids_in[i]
+    env_mask_in: wp.array[wp.bool],  # optional: reset only where True
+    joint_q_in: wp.array[float],
+    joint_qd_in: wp.array[float],
+    # Out:
+    start_qpos_out: wp.array2d[float],
+    target_qpos_out: wp.array2d[float],
+    target_qvel_out: wp.array2d[float],
+    step_out: wp.array[wp.int32],
+    joint_target_q_out: wp.array[float],  # optional (no Control given)
+    joint_target_qd_out: wp.array[float],  # optional
+    joint_f_out: wp.array[float],  # optional (explicit actuation only)
+):
+    env = wp.tid()
+    num_envs = step_out.shape[0]
+    if env_ids_in:
+        env = env_ids_in[env]
+        if env < 0 or env >= num_envs:
+            return
+    if env_mask_in:
+        if not env_mask_in[env]:
+            return
+    num_rows = row_kind.shape[0]
+    q_base = env_q_base[env]
+    qd_base = env_qd_base[env]
+    step_out[env] = 0
+    for r in range(num_rows):
+        kind = row_kind[r]
+        qi = q_base + row_q_off[r]
+        di = qd_base + row_qd_off[r]
+        q = joint_q_in[qi]
+        start_qpos_out[env, r] = q
+        target_qpos_out[env, r] = q
+        vel_target = kind != ROW_POS or (row_flags[r] & FLAG_VEL_TARGET) != 0
+        v = float(0.0)
+        if first != 0 and kind == ROW_POS and vel_target:
+            v = joint_qd_in[di]  # ManiSkill's first reset of a PDJointPosVel takes the measured velocity
+        target_qvel_out[env, r] = v
+        if joint_target_q_out and kind == ROW_POS:
+            joint_target_q_out[qi] = q
+        if joint_target_qd_out and vel_target:
+            joint_target_qd_out[di] = v
+        if joint_f_out:
+            joint_f_out[di] = 0.0

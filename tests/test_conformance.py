@@ -12,7 +12,6 @@ import json
 
 import numpy as np
 import pytest
-import warp as wp
 from conftest import CONFORMANCE, need_shared
 
 import wpctrl

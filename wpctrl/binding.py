@@ -115,9 +115,12 @@ def bind_joints(model: newton.Model, joint_names: Sequence[str]) -> JointBinding
     lower = model.joint_limit_lower.numpy()
     upper = model.joint_limit_upper.numpy()
     d0 = dof[0] if len(names) else np.zeros(0, np.int32)
-    qlimits = np.stack([lower[d0], upper[d0]], axis=1).astype(np.float32) if len(names) else np.zeros((0, 2), np.float32)
+    qlimits = (
+        np.stack([lower[d0], upper[d0]], axis=1).astype(np.float32) if len(names) else np.zeros((0, 2), np.float32)
+    )
     # Newton marks unlimited joints with +-MAXVAL; report them as infinite, as ManiSkill does.
-    qlimits[np.abs(qlimits) >= 0.99 * newton.MAXVAL] = np.inf * np.sign(qlimits[np.abs(qlimits) >= 0.99 * newton.MAXVAL])
+    unlimited = np.abs(qlimits) >= 0.99 * newton.MAXVAL
+    qlimits[unlimited] = np.copysign(np.inf, qlimits[unlimited])
     return JointBinding(
         joint_names=names,
         num_envs=world_count,

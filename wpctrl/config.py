@@ -299,8 +299,8 @@ def _check_box(config, low: np.ndarray, high: np.ndarray, names: Sequence[str], 
         if inf.size:
             i = int(inf[0])
             raise ConfigError(
-                f"{_name(config)}.{what}: normalize_action needs finite bounds, got [{float(low[i])}, {float(high[i])}] "
-                f"for joint {names[i]!r} (an unlimited joint: set lower/upper in the config)"
+                f"{_name(config)}.{what}: normalize_action needs finite bounds, got "
+                f"[{float(low[i])}, {float(high[i])}] for joint {names[i]!r} (an unlimited joint: set lower/upper in the config)"
             )
 
 
@@ -363,9 +363,7 @@ def _pos_rows(config, qlimits: np.ndarray, *, mimic: bool = False, posvel: bool 
             c_name = entry["joint"]
             for role, jn in (("mimic joint", m_name), ("control joint", c_name)):
                 if jn not in names:
-                    raise MimicJointError(
-                        f"{_name(config)}.mimic: {role} {jn!r} is not in joint_names {names}"
-                    )
+                    raise MimicJointError(f"{_name(config)}.mimic: {role} {jn!r} is not in joint_names {names}")
             m = float(entry.get("multiplier", 1.0))
             o = float(entry.get("offset", 0.0))
             if not (math.isfinite(m) and math.isfinite(o)):

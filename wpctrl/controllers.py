@@ -21,6 +21,7 @@ from .binding import JointBinding, bind_joints
 from .kernels import pd as K
 
 _ACTUATIONS = ("implicit", "explicit")
+_NAN_POLICIES = ("hold", "raise")
 
 
 def _torch():
@@ -345,6 +346,19 @@ def _action_array(action, num_envs: int, dim: int, device, buffer: wp.array) -> 
     return buffer
 
 
+def _raise_on_nonfinite(a: wp.array) -> None:
+    """nan_policy="raise": a host check (a device-to-host copy and a sync; not graph-capturable)."""
+    host = a.numpy()
+    bad = ~np.isfinite(host)
+    if bad.any():
+        envs = np.nonzero(bad.any(axis=1))[0]
+        e = int(envs[0])
+        raise ValueError(
+            f"action: non-finite values in {envs.size} env(s), e.g. env {e}: {host[e].tolist()} "
+            f"(nan_policy='raise'; the default 'hold' keeps those envs' targets and counts them)"
+        )
+
+
 def _env_selection(env_ids, num_envs: int, device):
     """Return (ids, mask) device arrays for ``reset``; exactly one may be non-None, both None means all envs."""
     if env_ids is None:
@@ -428,6 +442,7 @@ class BaseController:
         *,
         actuation: str = "implicit",
         solver: Any = None,
+        nan_policy: str = "hold",
     ):
         self.config = config
         self.control_freq = control_freq
@@ -436,6 +451,9 @@ class BaseController:
         if actuation not in _ACTUATIONS:
             raise ValueError(f"actuation: expected one of {_ACTUATIONS}, got {actuation!r}")
         self.actuation = actuation
+        if nan_policy not in _NAN_POLICIES:
+            raise ValueError(f"nan_policy: expected one of {_NAN_POLICIES}, got {nan_policy!r}")
+        self.nan_policy = nan_policy
         if isinstance(config, Mapping):
             configs = dict(config)
             configs.pop("balance_passive_force", None)  # a ManiSkill agent option, not a controller
@@ -497,6 +515,7 @@ class BaseController:
         self.control_freq = parent.control_freq
         self.sim_freq = parent.sim_freq
         self.actuation = parent.actuation
+        self.nan_policy = parent.nan_policy
         self._engine = parent._engine
         self._rows = rows_slice
         self._cols = cols_slice
@@ -598,7 +617,10 @@ class BaseController:
             raise TypeError(f"{what}: expected a newton.State, got {type(state).__name__}")
         if state.joint_q.device != eng.device:
             raise ValueError(f"{what}: state is on {state.joint_q.device}, the controller on {eng.device}")
-        if state.joint_q.shape[0] != eng.model.joint_coord_count or state.joint_qd.shape[0] != eng.model.joint_dof_count:
+        if (
+            state.joint_q.shape[0] != eng.model.joint_coord_count
+            or state.joint_qd.shape[0] != eng.model.joint_dof_count
+        ):
             raise ValueError(
                 f"{what}: state has {state.joint_q.shape[0]} coordinates / {state.joint_qd.shape[0]} DOFs, the "
                 f"controller's model {eng.model.joint_coord_count} / {eng.model.joint_dof_count}: another model?"
@@ -627,6 +649,8 @@ class BaseController:
         self._check_state(state, "set_action")
         eng = self._engine
         a = _action_array(action, eng.num_envs, eng.action_dim, eng.device, eng.action_buffer)
+        if self.nan_policy == "raise":
+            _raise_on_nonfinite(a)
         eng.set_action(a, state.joint_q)
 
     def before_simulation_step(self, state: newton.State, control: newton.Control) -> None:
@@ -681,7 +705,9 @@ class BaseController:
         if not state or not self._uses_target:
             return
         eng = self._engine
-        new = _as_rows_array("target_qpos", state["target_qpos"], (eng.num_envs, self._rows.stop - self._rows.start), eng.device)
+        new = _as_rows_array(
+            "target_qpos", state["target_qpos"], (eng.num_envs, self._rows.stop - self._rows.start), eng.device
+        )
         full = eng.target_qpos.numpy()
         full[:, self._rows] = new
         eng.target_qpos.assign(full)
@@ -774,6 +800,7 @@ def build_controller(
     actuation: str = "implicit",
     *,
     solver: Any = None,
+    nan_policy: str = "hold",
 ) -> BaseController:
     """Build the controller for one config or a ManiSkill control-mode dict ``{uid: config}``.
 
@@ -786,9 +813,15 @@ def build_controller(
         actuation: ``"implicit"`` (the solver's built-in PD tracks ``Control.joint_target_q/qd``) or
             ``"explicit"`` (wpctrl's kernel writes clamped PD torques into ``Control.joint_f``; built-in drive off).
         solver: Optional solver already built on ``model``: notified of the changed drive properties.
+        nan_policy: ``"hold"`` (an env whose action holds NaN/Inf keeps its previous targets; counted in
+            ``bad_action_count``; graph-capturable) or ``"raise"`` (ValueError before any launch; costs a host sync).
     """
     if isinstance(config, Mapping):
-        return CombinedController(config, model, control_freq, sim_freq, actuation=actuation, solver=solver)
+        return CombinedController(
+            config, model, control_freq, sim_freq, actuation=actuation, solver=solver, nan_policy=nan_policy
+        )
     if not isinstance(config, cfg.ControllerConfig):
         raise cfg.ConfigError(f"config: expected a controller config or a dict of them, got {type(config).__name__}")
-    return type(config).controller_cls(config, model, control_freq, sim_freq, actuation=actuation, solver=solver)
+    return type(config).controller_cls(
+        config, model, control_freq, sim_freq, actuation=actuation, solver=solver, nan_policy=nan_policy
+    )

@@ -300,7 +300,8 @@ def _check_box(config, low: np.ndarray, high: np.ndarray, names: Sequence[str], 
             i = int(inf[0])
             raise ConfigError(
                 f"{_name(config)}.{what}: normalize_action needs finite bounds, got "
-                f"[{float(low[i])}, {float(high[i])}] for joint {names[i]!r} (an unlimited joint: set lower/upper in the config)"
+                f"[{float(low[i])}, {float(high[i])}] for joint {names[i]!r} (an unlimited joint: set lower/upper in "
+                f"the config)"
             )
 
 

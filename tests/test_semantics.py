@@ -605,7 +605,7 @@ def test_graph_capture_replay_is_bit_identical_on_cpu():
         act = wp.zeros((n, 8), dtype=wp.float32)
         mask = wp.array(np.arange(n) % 5 == 0, dtype=wp.bool)
 
-        def control_step():
+        def control_step(h=h, act=act):
             h.ctrl.set_action(act, h.state)
             for _ in range(h.ctrl.num_substeps):
                 h.ctrl.before_simulation_step(h.state, h.control)

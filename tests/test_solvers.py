@@ -2,8 +2,8 @@
 
 MuJoCo-Warp (reduced coordinates, integrates joint_q) and XPBD (maximal coordinates: joint_q is recovered with
 ``newton.eval_ik`` after each step), each with wpctrl's implicit actuation (the solver's built-in drive) and explicit
-actuation (wpctrl's clamped PD torques in ``Control.joint_f``), gravity on. Gains are chosen stable for the explicit law at
-100 Hz. The tracking error must shrink 10x within one second of simulated time.
+actuation (wpctrl's clamped PD torques in ``Control.joint_f``), gravity on. Gains are chosen stable for the explicit
+law at 100 Hz. The tracking error must shrink 10x within one second of simulated time.
 """
 
 from __future__ import annotations

@@ -14,8 +14,10 @@ FINGERS = ["panda_finger_joint1", "panda_finger_joint2"]
 class Harness:
     """Controller + state + control over ``num_envs`` Pandas; q/qd/targets addressed in the controller's rows."""
 
-    def __init__(self, config, num_envs: int = 1, actuation: str = "implicit", control_freq=20, sim_freq=100, **kw):
-        self.model = build_panda(num_envs)
+    def __init__(
+        self, config, num_envs: int = 1, actuation: str = "implicit", control_freq=20, sim_freq=100, device="cpu", **kw
+    ):
+        self.model = build_panda(num_envs, device=device)
         self.ctrl = wpctrl.build_controller(config, self.model, control_freq, sim_freq, actuation, **kw)
         self.state = self.model.state()
         self.control = self.model.control()

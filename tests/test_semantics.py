@@ -446,8 +446,12 @@ def test_34_drive_properties_written_per_joint():
     np.testing.assert_array_equal(m.joint_target_mode.numpy()[dof], [P] * 7 + [V, V])
     hv = Harness(wpctrl.PDJointVelControllerConfig(ARM, -1.0, 1.0, 1e2))
     assert not hv.model.joint_target_ke.numpy()[hv.dof[0]].any()
-    with pytest.raises(NotImplementedError, match="acceleration"):
-        Harness(wpctrl.PDJointPosControllerConfig(ARM, -0.1, 0.1, 1e3, 1e2, drive_mode="acceleration"))
+    # per-joint drive_mode sequence, indexed by joint order: only the acceleration joints get inertia-scaled gains
+    ha = Harness(
+        wpctrl.PDJointPosControllerConfig(ARM, -0.1, 0.1, 1e3, 1e2, drive_mode=["acceleration"] + ["force"] * 6)
+    )
+    ke = ha.model.joint_target_ke.numpy()[ha.dof[0]]
+    assert ke[0] != 1e3 and (ke[1:] == 1e3).all()  # tests/test_acceleration.py checks the scaling itself
 
 
 def test_35_velocity_targets_are_the_scaled_action():

@@ -22,6 +22,8 @@ from .kernels import pd as K
 
 _ACTUATIONS = ("implicit", "explicit")
 _NAN_POLICIES = ("hold", "raise")
+_EXPLICIT_PD = ("naive", "stable")
+_INERTIA_UPDATES = ("control", "substep")
 
 
 def _torch():
@@ -38,17 +40,21 @@ def _is_torch(x) -> bool:
 
 
 class _Launch:
-    """A recorded ``wp.launch`` whose array parameters are re-bound only when they change."""
+    """A recorded ``wp.launch`` whose parameters are re-bound (by name) only when they change."""
 
-    def __init__(self, kernel, dim, inputs: list, device):
-        self._cmd = wp.launch(kernel, dim=dim, inputs=inputs, device=device, record_cmd=True)
-        self._keys = [_key(v) for v in inputs]
+    def __init__(self, kernel, dim, params: dict, device):
+        names = [a.label for a in kernel.adj.args]
+        assert list(params) == names, f"{kernel.key}: parameters {list(params)} != {names}"
+        self._cmd = wp.launch(kernel, dim=dim, inputs=list(params.values()), device=device, record_cmd=True)
+        self._index = {n: i for i, n in enumerate(names)}
+        self._keys = [_key(v) for v in params.values()]
 
-    def bind(self, index: int, value) -> None:
+    def bind(self, name: str, value) -> None:
+        i = self._index[name]
         k = _key(value)
-        if self._keys[index] != k:
-            self._cmd.set_param_at_index(index, value)
-            self._keys[index] = k
+        if self._keys[i] != k:
+            self._cmd.set_param_at_index(i, value)
+            self._keys[i] = k
 
     def launch(self) -> None:
         self._cmd.launch()
@@ -70,6 +76,9 @@ class _Engine:
         model: newton.Model,
         num_substeps: int,
         actuation: str,
+        explicit_pd: str = "naive",
+        inertia_update: str = "control",
+        sim_dt: float = 0.01,
     ):
         self.rows = rows
         self.binding = binding
@@ -80,6 +89,10 @@ class _Engine:
         self.action_dim = rows.action_dim
         self.num_substeps = num_substeps
         self.explicit = actuation == "explicit"
+        self.explicit_mode = 0 if not self.explicit else (2 if explicit_pd == "stable" else 1)
+        self.sim_dt = float(sim_dt)
+        self.inertia_update = inertia_update
+        self.solver = None  # notified after per-env gain edits (implicit acceleration drive)
         dev = self.device
         E, R = self.num_envs, self.num_rows
 
@@ -104,6 +117,14 @@ class _Engine:
         self.kp = up(rows.kp[None, :], wp.float32)
         self.kd = up(rows.kd[None, :], wp.float32)
         self.force_limit = up(rows.force_limit[None, :], wp.float32)
+        self.row_accel = up(rows.accel.astype(np.int32), wp.int32)
+        self.has_accel = bool(rows.accel.any())
+        # The joint-space response r = (H^-1)_ii per env and row: acceleration drives and stable explicit PD need it.
+        self.needs_response = self.has_accel or self.explicit_mode == 2
+        self.response = wp.ones((E if self.needs_response else 1, max(R, 1)), dtype=wp.float32, device=dev)
+        self._jsr = None
+        if self.needs_response:
+            self._init_response(model, binding)
 
         self.start_qpos = wp.zeros((E, R), dtype=wp.float32, device=dev)
         self.target_qpos = wp.zeros((E, R), dtype=wp.float32, device=dev)
@@ -116,79 +137,138 @@ class _Engine:
         self._launch_substep: _Launch | None = None
         self._reset_count = 0
 
+    def _init_response(self, model: newton.Model, binding: JointBinding) -> None:
+        from newton.actuators import JointSpaceResponse
+
+        art = model.joint_articulation.numpy()[binding.joint_index]  # (E, R)
+        if (art < 0).any():
+            raise cfg.ConfigError(
+                "drive_mode: 'acceleration' and stable explicit PD need the joints to be in an articulation "
+                "(ModelBuilder.add_articulation)"
+            )
+        art_dof0 = model.joint_qd_start.numpy()[model.articulation_start.numpy()[art]]
+        local = binding.dof_index - art_dof0  # (E, R) DOF index inside its articulation
+        base = art[:, 0]
+        if ((art - base[:, None]) != (art[:1] - base[:1])).any() or (local != local[:1]).any():
+            raise cfg.ConfigError("joint_names: the articulations are laid out differently across worlds")
+        dev = self.device
+        self.row_art_off = wp.array((art[0] - base[0]).astype(np.int32), dtype=wp.int32, device=dev)
+        self.row_art_dof = wp.array(local[0].astype(np.int32), dtype=wp.int32, device=dev)
+        self.env_art_base = wp.array(base.astype(np.int32), dtype=wp.int32, device=dev)
+        self._jsr = JointSpaceResponse(model)
+
+    def update_response(self, state) -> None:
+        """Recompute r = (H^-1)_ii for the current configuration; with an implicit acceleration drive, write the
+        per-env solver gains Kp / r, Kd / r into the model (and notify the solver, if one was given)."""
+        if not self.needs_response:
+            return
+        self._jsr.refresh(state)
+        wp.launch(
+            K._response_kernel,
+            dim=self.num_envs,
+            inputs=[self.row_art_off, self.row_art_dof, self.env_art_base, self._jsr.inverse_blocks, self.response],
+            device=self.device,
+        )
+        if self.has_accel and not self.explicit:
+            m = self.model
+            wp.launch(
+                K._accel_gains_kernel,
+                dim=self.num_envs,
+                inputs=[
+                    self.row_accel,
+                    self.row_qd_off,
+                    self.env_qd_base,
+                    self.kp,
+                    self.kd,
+                    self.response,
+                    m.joint_target_ke,
+                    m.joint_target_kd,
+                ],
+                device=self.device,
+            )
+            if self.solver is not None:
+                self.solver.notify_model_changed(newton.ModelFlags.JOINT_DOF_FORCE_PROPERTIES)
+
     # -- stages ---------------------------------------------------------------------------------------------------
 
-    def set_action(self, action: wp.array, joint_q: wp.array) -> None:
+    def set_action(self, action: wp.array, state) -> None:
+        if self.inertia_update == "control":
+            self.update_response(state)
         if self._launch_set_action is None:
             self._launch_set_action = _Launch(
                 K._set_action_kernel,
                 self.num_envs,
-                [
-                    self.row_kind,
-                    self.row_flags,
-                    self.row_act_col,
-                    self.row_vel_col,
-                    self.row_lo,
-                    self.row_hi,
-                    self.row_vlo,
-                    self.row_vhi,
-                    self.row_mimic_src,
-                    self.row_mimic_mul,
-                    self.row_mimic_off,
-                    self.row_q_off,
-                    self.env_q_base,
-                    action,
-                    joint_q,
-                    self.processed_action,
-                    self.start_qpos,
-                    self.target_qpos,
-                    self.target_qvel,
-                    self.step,
-                    self.bad_action_count,
-                ],
+                {
+                    "row_kind": self.row_kind,
+                    "row_flags": self.row_flags,
+                    "row_act_col": self.row_act_col,
+                    "row_vel_col": self.row_vel_col,
+                    "row_lo": self.row_lo,
+                    "row_hi": self.row_hi,
+                    "row_vlo": self.row_vlo,
+                    "row_vhi": self.row_vhi,
+                    "row_mimic_src": self.row_mimic_src,
+                    "row_mimic_mul": self.row_mimic_mul,
+                    "row_mimic_off": self.row_mimic_off,
+                    "row_q_off": self.row_q_off,
+                    "env_q_base": self.env_q_base,
+                    "action_in": action,
+                    "joint_q_in": state.joint_q,
+                    "processed_action_out": self.processed_action,
+                    "start_qpos_out": self.start_qpos,
+                    "target_qpos_out": self.target_qpos,
+                    "target_qvel_out": self.target_qvel,
+                    "step_out": self.step,
+                    "bad_action_count_out": self.bad_action_count,
+                },
                 self.device,
             )
         ln = self._launch_set_action
-        ln.bind(13, action)
-        ln.bind(14, joint_q)
+        ln.bind("action_in", action)
+        ln.bind("joint_q_in", state.joint_q)
         ln.launch()
 
     def substep(self, state: newton.State, control: newton.Control) -> None:
+        if self.inertia_update == "substep":
+            self.update_response(state)
         joint_f = control.joint_f if self.explicit else None
         if self._launch_substep is None:
             self._launch_substep = _Launch(
                 K._substep_kernel,
                 self.num_envs,
-                [
-                    self.row_kind,
-                    self.row_flags,
-                    self.row_q_off,
-                    self.row_qd_off,
-                    self.env_q_base,
-                    self.env_qd_base,
-                    self.kp,
-                    self.kd,
-                    self.force_limit,
-                    self.num_substeps,
-                    int(self.explicit),
-                    state.joint_q,
-                    state.joint_qd,
-                    self.start_qpos,
-                    self.target_qpos,
-                    self.target_qvel,
-                    self.step,
-                    control.joint_target_q,
-                    control.joint_target_qd,
-                    joint_f,
-                ],
+                {
+                    "row_kind": self.row_kind,
+                    "row_flags": self.row_flags,
+                    "row_q_off": self.row_q_off,
+                    "row_qd_off": self.row_qd_off,
+                    "env_q_base": self.env_q_base,
+                    "env_qd_base": self.env_qd_base,
+                    "kp": self.kp,
+                    "kd": self.kd,
+                    "force_limit": self.force_limit,
+                    "row_accel": self.row_accel,
+                    "num_substeps": self.num_substeps,
+                    "explicit_pd": self.explicit_mode,
+                    "dt": self.sim_dt,
+                    "joint_q_in": state.joint_q,
+                    "joint_qd_in": state.joint_qd,
+                    "response_in": self.response,
+                    "start_qpos_in": self.start_qpos,
+                    "target_qpos_in": self.target_qpos,
+                    "target_qvel_in": self.target_qvel,
+                    "step_out": self.step,
+                    "joint_target_q_out": control.joint_target_q,
+                    "joint_target_qd_out": control.joint_target_qd,
+                    "joint_f_out": joint_f,
+                },
                 self.device,
             )
         ln = self._launch_substep
-        ln.bind(11, state.joint_q)
-        ln.bind(12, state.joint_qd)
-        ln.bind(17, control.joint_target_q)
-        ln.bind(18, control.joint_target_qd)
-        ln.bind(19, joint_f)
+        ln.bind("joint_q_in", state.joint_q)
+        ln.bind("joint_qd_in", state.joint_qd)
+        ln.bind("joint_target_q_out", control.joint_target_q)
+        ln.bind("joint_target_qd_out", control.joint_target_qd)
+        ln.bind("joint_f_out", joint_f)
         ln.launch()
 
     def reset(self, state, env_ids, env_mask, control, first: bool) -> None:
@@ -443,6 +523,8 @@ class BaseController:
         actuation: str = "implicit",
         solver: Any = None,
         nan_policy: str = "hold",
+        explicit_pd: str = "naive",
+        inertia_update: str = "control",
     ):
         self.config = config
         self.control_freq = control_freq
@@ -454,6 +536,11 @@ class BaseController:
         if nan_policy not in _NAN_POLICIES:
             raise ValueError(f"nan_policy: expected one of {_NAN_POLICIES}, got {nan_policy!r}")
         self.nan_policy = nan_policy
+        if explicit_pd not in _EXPLICIT_PD:
+            raise ValueError(f"explicit_pd: expected one of {_EXPLICIT_PD}, got {explicit_pd!r}")
+        if inertia_update not in _INERTIA_UPDATES:
+            raise ValueError(f"inertia_update: expected one of {_INERTIA_UPDATES}, got {inertia_update!r}")
+        self.explicit_pd = explicit_pd
         if isinstance(config, Mapping):
             configs = dict(config)
             configs.pop("balance_passive_force", None)  # a ManiSkill agent option, not a controller
@@ -467,15 +554,20 @@ class BaseController:
                 raise cfg.ConfigError(f"config: expected a controller config, got {type(c).__name__}")
             b = bind_joints(model, cfg._joint_names(c))
             rows = cfg.config_rows(c, b.qlimits)
-            if rows.accel.any():
-                raise NotImplementedError(
-                    f"{type(c).__name__}.drive_mode: 'acceleration' is not implemented yet; use 'force'"
-                )
             parts.append((uid, c, rows))
             names += rows.joint_names
         all_rows = cfg.Rows.concat([p[2] for p in parts])
         binding = bind_joints(model, names)
-        self._engine = _Engine(all_rows, binding, model, num_substeps, actuation)
+        self._engine = _Engine(
+            all_rows,
+            binding,
+            model,
+            num_substeps,
+            actuation,
+            explicit_pd=explicit_pd,
+            inertia_update=inertia_update,
+            sim_dt=1.0 / sim_freq,
+        )
         self._rows = slice(0, all_rows.count)
         self._cols = slice(0, all_rows.action_dim)
         self._owner = True
@@ -498,6 +590,9 @@ class BaseController:
         self.action_space = _batched(self.single_action_space, self.num_envs)
 
         changed = self._engine.apply_drive_properties()
+        model_state = _ModelState(model)
+        self._engine.update_response(model_state)  # per-env gains of implicit acceleration drives
+        self._engine.solver = solver
         if solver is not None:
             solver.notify_model_changed(newton.ModelFlags.JOINT_DOF_FORCE_PROPERTIES)
             if changed and type(solver).__name__ == "SolverMuJoCo":
@@ -507,7 +602,6 @@ class BaseController:
                     stacklevel=2,
                 )
         # Targets start at the model's initial pose (the first reset() re-initialises every env from the state).
-        model_state = _ModelState(model)
         self._engine.reset(model_state, None, None, None, first=False)
 
     def _init_view(self, config, parent: BaseController, rows_slice: slice, cols_slice: slice, rows: cfg.Rows):
@@ -516,6 +610,7 @@ class BaseController:
         self.sim_freq = parent.sim_freq
         self.actuation = parent.actuation
         self.nan_policy = parent.nan_policy
+        self.explicit_pd = parent.explicit_pd
         self._engine = parent._engine
         self._rows = rows_slice
         self._cols = cols_slice
@@ -605,6 +700,21 @@ class BaseController:
         """(num_envs,) int32 count of actions rejected for NaN/Inf; those envs kept their previous targets."""
         return self._engine.bad_action_count
 
+    def attach_solver(self, solver) -> None:
+        """Notify ``solver`` of the drive properties now, and after every per-env gain update (implicit acceleration
+        drives). Use it when the solver is built after the controller (as MuJoCo requires)."""
+        self._require_owner("attach_solver")
+        self._engine.solver = solver
+        solver.notify_model_changed(newton.ModelFlags.JOINT_DOF_FORCE_PROPERTIES)
+
+    @property
+    def response(self) -> wp.array | None:
+        """(num_envs, n_joints) joint-space response r = (H^-1)_ii [1/(kg m^2) or 1/kg] of the last update (1/r is
+        the effective inertia), when acceleration drives or stable explicit PD use it; otherwise None."""
+        if not self._engine.needs_response:
+            return None
+        return self._view(self._engine.response)
+
     # -- per-step API ---------------------------------------------------------------------------------------------
 
     def _require_owner(self, what: str) -> None:
@@ -651,7 +761,7 @@ class BaseController:
         a = _action_array(action, eng.num_envs, eng.action_dim, eng.device, eng.action_buffer)
         if self.nan_policy == "raise":
             _raise_on_nonfinite(a)
-        eng.set_action(a, state.joint_q)
+        eng.set_action(a, state)
 
     def before_simulation_step(self, state: newton.State, control: newton.Control) -> None:
         """Call once before every solver substep: writes the (interpolated) drive targets and, for explicit
@@ -801,6 +911,8 @@ def build_controller(
     *,
     solver: Any = None,
     nan_policy: str = "hold",
+    explicit_pd: str = "naive",
+    inertia_update: str = "control",
 ) -> BaseController:
     """Build the controller for one config or a ManiSkill control-mode dict ``{uid: config}``.
 
@@ -815,13 +927,22 @@ def build_controller(
         solver: Optional solver already built on ``model``: notified of the changed drive properties.
         nan_policy: ``"hold"`` (an env whose action holds NaN/Inf keeps its previous targets; counted in
             ``bad_action_count``; graph-capturable) or ``"raise"`` (ValueError before any launch; costs a host sync).
+        explicit_pd: With ``actuation="explicit"``: ``"naive"`` (``clamp(Kp (q* - q) + Kd (qd* - qd))``) or
+            ``"stable"`` (the same law on the predicted end-of-substep state, solved with each joint's response
+            r = (H^-1)_ii: ``(Kp (q* - q - dt qd) + Kd (qd* - qd)) / (1 + r dt (Kd + dt Kp))``, then clamped;
+            stable at implicit-drive gains).
+        inertia_update: When r = (H^-1)_ii is recomputed (acceleration drives, stable PD): once per control step
+            in ``set_action`` (``"control"``) or before every substep (``"substep"``).
     """
+    kw = dict(
+        actuation=actuation,
+        solver=solver,
+        nan_policy=nan_policy,
+        explicit_pd=explicit_pd,
+        inertia_update=inertia_update,
+    )
     if isinstance(config, Mapping):
-        return CombinedController(
-            config, model, control_freq, sim_freq, actuation=actuation, solver=solver, nan_policy=nan_policy
-        )
+        return CombinedController(config, model, control_freq, sim_freq, **kw)
     if not isinstance(config, cfg.ControllerConfig):
         raise cfg.ConfigError(f"config: expected a controller config or a dict of them, got {type(config).__name__}")
-    return type(config).controller_cls(
-        config, model, control_freq, sim_freq, actuation=actuation, solver=solver, nan_policy=nan_policy
-    )
+    return type(config).controller_cls(config, model, control_freq, sim_freq, **kw)

@@ -29,6 +29,10 @@ FLAG_TARGET = wp.constant(_cfg.FLAG_TARGET)
 FLAG_INTERPOLATE = wp.constant(_cfg.FLAG_INTERPOLATE)
 FLAG_VEL_TARGET = wp.constant(_cfg.FLAG_VEL_TARGET)
 
+EXPLICIT_OFF = wp.constant(0)
+EXPLICIT_NAIVE = wp.constant(1)
+EXPLICIT_STABLE = wp.constant(2)
+
 
 @wp.func
 def _bidx(n: int, env: int):
@@ -148,11 +152,14 @@ def _substep_kernel(
     kp: wp.array2d[float],
     kd: wp.array2d[float],
     force_limit: wp.array2d[float],
+    row_accel: wp.array[wp.int32],
     num_substeps: int,
     explicit_pd: int,
+    dt: float,
     # In:
     joint_q_in: wp.array[float],
     joint_qd_in: wp.array[float],
+    response_in: wp.array2d[float],
     start_qpos_in: wp.array2d[float],
     target_qpos_in: wp.array2d[float],
     target_qvel_in: wp.array2d[float],
@@ -185,11 +192,75 @@ def _substep_kernel(
         if kind != ROW_POS or (row_flags[r] & FLAG_VEL_TARGET) != 0:
             joint_target_qd_out[di] = tqd
         if explicit_pd != 0:
-            u = kd[gd, r] * (tqd - joint_qd_in[di])
+            qd = joint_qd_in[di]
+            kpe = float(0.0)
+            e = float(0.0)
             if kind == ROW_POS:
-                u = u + kp[gk, r] * (tq - joint_q_in[qi])
+                kpe = kp[gk, r]
+                e = tq - joint_q_in[qi]
+            kde = kd[gd, r]
+            resp = response_in[_bidx(response_in.shape[0], env), r]
+            if row_accel[r] != 0:  # acceleration drive: gains times the effective inertia 1/r
+                kpe = kpe / resp
+                kde = kde / resp
+            u = float(0.0)
+            if explicit_pd == EXPLICIT_STABLE:
+                # PD on the end-of-step state of a semi-implicit Euler step, solved with the joint's response r:
+                # u = Kp (q* - q - dt qd) + Kd (qd* - qd) over 1 + r dt (Kd + dt Kp)
+                u = (kpe * (e - dt * qd) + kde * (tqd - qd)) / (1.0 + resp * dt * (kde + dt * kpe))
+            else:
+                u = kpe * e + kde * (tqd - qd)
             lim = force_limit[gf, r]
             joint_f_out[di] = wp.clamp(u, -lim, lim)
+
+
+@wp.kernel
+def _response_kernel(
+    # Rows:
+    row_art_off: wp.array[wp.int32],
+    row_art_dof: wp.array[wp.int32],
+    # Envs:
+    env_art_base: wp.array[wp.int32],
+    # In:
+    inverse_blocks_in: wp.array3d[float],
+    # Out:
+    response_out: wp.array2d[float],
+):
+    """Each row's joint-space response r = (H^-1)_ii [1/(kg m^2) or 1/kg] from the articulation's inverse block."""
+    env = wp.tid()
+    base = env_art_base[env]
+    for r in range(row_art_off.shape[0]):
+        i = row_art_dof[r]
+        response_out[env, r] = inverse_blocks_in[base + row_art_off[r], i, i]
+
+
+@wp.kernel
+def _accel_gains_kernel(
+    # Rows:
+    row_accel: wp.array[wp.int32],
+    row_qd_off: wp.array[wp.int32],
+    # Envs:
+    env_qd_base: wp.array[wp.int32],
+    # Gains (1 | num_envs, rows):
+    kp: wp.array2d[float],
+    kd: wp.array2d[float],
+    # In:
+    response_in: wp.array2d[float],
+    # Out:
+    joint_target_ke_out: wp.array[float],
+    joint_target_kd_out: wp.array[float],
+):
+    """Implicit acceleration drive: the solver's per-env gains are Kp / r and Kd / r (r: the joint's response)."""
+    env = wp.tid()
+    qd_base = env_qd_base[env]
+    gk = _bidx(kp.shape[0], env)
+    gd = _bidx(kd.shape[0], env)
+    for r in range(row_accel.shape[0]):
+        if row_accel[r] != 0:
+            di = qd_base + row_qd_off[r]
+            resp = response_in[env, r]
+            joint_target_ke_out[di] = kp[gk, r] / resp
+            joint_target_kd_out[di] = kd[gd, r] / resp
 
 
 @wp.kernel

@@ -108,6 +108,14 @@ class _Engine:
         self.row_vlo = up(rows.vlo, wp.float32)
         self.row_vhi = up(rows.vhi, wp.float32)
         self.row_mimic_src = up(rows.mimic_src, wp.int32)
+        # Followers of each row (CSR): set_action's source-row thread writes them.
+        order = np.argsort(rows.mimic_src, kind="stable")
+        order = order[rows.mimic_src[order] >= 0]
+        counts = np.bincount(rows.mimic_src[order], minlength=R) if R else np.zeros(0, np.int64)
+        self.row_follow_start = up(np.concatenate([[0], np.cumsum(counts)]).astype(np.int32), wp.int32)
+        self.row_follow = up(order.astype(np.int32) if order.size else np.zeros(1, np.int32), wp.int32)
+        leads = np.nonzero(rows.mimic_src < 0)[0]
+        self.lead_row = int(leads[0]) if leads.size else 0
         self.row_mimic_mul = up(rows.mimic_mul, wp.float32)
         self.row_mimic_off = up(rows.mimic_off, wp.float32)
         self.row_q_off = up(binding.q_off, wp.int32)
@@ -131,6 +139,8 @@ class _Engine:
         self.target_qvel = wp.zeros((E, R), dtype=wp.float32, device=dev)
         self.processed_action = wp.zeros((E, self.action_dim), dtype=wp.float32, device=dev)
         self.step = wp.zeros(E, dtype=wp.int32, device=dev)
+        self.row_step = wp.zeros((E, R), dtype=wp.int32, device=dev)
+        self.dim = E * R  # one thread per (env, row)
         self.bad_action_count = wp.zeros(E, dtype=wp.int32, device=dev)
         self.action_buffer = wp.zeros((E, self.action_dim), dtype=wp.float32, device=dev)
         self._launch_set_action: _Launch | None = None
@@ -165,7 +175,7 @@ class _Engine:
         self._jsr.refresh(state)
         wp.launch(
             K._response_kernel,
-            dim=self.num_envs,
+            dim=self.dim,
             inputs=[self.row_art_off, self.row_art_dof, self.env_art_base, self._jsr.inverse_blocks, self.response],
             device=self.device,
         )
@@ -173,7 +183,7 @@ class _Engine:
             m = self.model
             wp.launch(
                 K._accel_gains_kernel,
-                dim=self.num_envs,
+                dim=self.dim,
                 inputs=[
                     self.row_accel,
                     self.row_qd_off,
@@ -197,7 +207,7 @@ class _Engine:
         if self._launch_set_action is None:
             self._launch_set_action = _Launch(
                 K._set_action_kernel,
-                self.num_envs,
+                self.dim,
                 {
                     "row_kind": self.row_kind,
                     "row_flags": self.row_flags,
@@ -208,9 +218,12 @@ class _Engine:
                     "row_vlo": self.row_vlo,
                     "row_vhi": self.row_vhi,
                     "row_mimic_src": self.row_mimic_src,
+                    "row_follow_start": self.row_follow_start,
+                    "row_follow": self.row_follow,
                     "row_mimic_mul": self.row_mimic_mul,
                     "row_mimic_off": self.row_mimic_off,
                     "row_q_off": self.row_q_off,
+                    "lead_row": self.lead_row,
                     "env_q_base": self.env_q_base,
                     "action_in": action,
                     "joint_q_in": state.joint_q,
@@ -219,6 +232,7 @@ class _Engine:
                     "target_qpos_out": self.target_qpos,
                     "target_qvel_out": self.target_qvel,
                     "step_out": self.step,
+                    "row_step_out": self.row_step,
                     "bad_action_count_out": self.bad_action_count,
                 },
                 self.device,
@@ -235,7 +249,7 @@ class _Engine:
         if self._launch_substep is None:
             self._launch_substep = _Launch(
                 K._substep_kernel,
-                self.num_envs,
+                self.dim,
                 {
                     "row_kind": self.row_kind,
                     "row_flags": self.row_flags,
@@ -257,6 +271,7 @@ class _Engine:
                     "target_qpos_in": self.target_qpos,
                     "target_qvel_in": self.target_qvel,
                     "step_out": self.step,
+                    "row_step_out": self.row_step,
                     "joint_target_q_out": control.joint_target_q,
                     "joint_target_qd_out": control.joint_target_qd,
                     "joint_f_out": joint_f,
@@ -272,7 +287,7 @@ class _Engine:
         ln.launch()
 
     def reset(self, state, env_ids, env_mask, control, first: bool) -> None:
-        dim = self.num_envs if env_ids is None else env_ids.shape[0]
+        dim = (self.num_envs if env_ids is None else env_ids.shape[0]) * self.num_rows
         if dim == 0:
             return
         wp.launch(
@@ -294,6 +309,7 @@ class _Engine:
                 self.target_qpos,
                 self.target_qvel,
                 self.step,
+                self.row_step,
                 None if control is None else control.joint_target_q,
                 None if control is None else control.joint_target_qd,
                 None if (control is None or not self.explicit) else control.joint_f,

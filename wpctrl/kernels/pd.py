@@ -1,11 +1,18 @@
 """Warp kernels for ManiSkill-style PD joint control over all envs of a Newton model.
 
-Private module. Every kernel runs one thread per env that walks that env's rows (controlled joints), so mimic rows
-can read their source row's fresh target without a race, and the per-env substep counter needs no atomics.
+Private module. Every kernel runs one thread per (env, row), where a row is one controlled joint, with the row
+index fastest: a warp's loads and stores of the ``(num_envs, rows)`` buffers and of Newton's flat arrays are
+contiguous. The few cross-row dependencies are arranged so that no thread reads what another writes:
+
+- ``set_action``: a mimic follower has no thread of its own; the thread of its source row writes it (it only reads
+  its source's fresh target). An env whose action holds NaN/Inf is left untouched by all its threads; its lead row
+  (the first non-follower) counts it.
+- ``before_simulation_step``: an interpolating row keeps its own substep counter in ``(num_envs, rows)``; the
+  per-env counter exposed as ManiSkill's ``_step`` is written by row 0 alone and read by no other thread.
+
 Row parameters are shared by all envs; gains are ``(1 | num_envs, rows)`` arrays indexed with the batch rule
-``env if shape[0] > 1 else 0``. Newton arrays are flat: a row's coordinate is ``q_base[env] + q_off[row]`` in
-``joint_q``/``joint_target_q`` and its DOF ``qd_base[env] + qd_off[row]`` in ``joint_qd``/``joint_target_qd``/
-``joint_f``.
+``env if shape[0] > 1 else 0``. A row's coordinate is ``q_base[env] + q_off[row]`` in ``joint_q``/``joint_target_q``
+and its DOF ``qd_base[env] + qd_off[row]`` in ``joint_qd``/``joint_target_qd``/``joint_f``.
 
 Parameter naming follows MuJoCo Warp: row and env tables first (no suffix), then ``_in`` inputs, then ``_out``
 outputs (an ``_out`` array that a kernel also reads is marked "in/out").
@@ -70,9 +77,12 @@ def _set_action_kernel(
     row_vlo: wp.array[float],
     row_vhi: wp.array[float],
     row_mimic_src: wp.array[wp.int32],
+    row_follow_start: wp.array[wp.int32],
+    row_follow: wp.array[wp.int32],
     row_mimic_mul: wp.array[float],
     row_mimic_off: wp.array[float],
     row_q_off: wp.array[wp.int32],
+    lead_row: int,
     # Envs:
     env_q_base: wp.array[wp.int32],
     # In:
@@ -84,58 +94,60 @@ def _set_action_kernel(
     target_qpos_out: wp.array2d[float],  # in/out: the previous (virtual) target
     target_qvel_out: wp.array2d[float],
     step_out: wp.array[wp.int32],
+    row_step_out: wp.array2d[wp.int32],
     bad_action_count_out: wp.array[wp.int32],  # in/out
 ):
-    env = wp.tid()
+    tid = wp.tid()
     num_rows = row_kind.shape[0]
-    num_cols = action_in.shape[1]
+    env = tid // num_rows
+    r = tid - env * num_rows
+    if row_mimic_src[r] >= 0:
+        return  # a follower: written by its source row's thread
 
-    # A non-finite action leaves the whole env untouched (targets hold) and is counted.
-    for c in range(num_cols):
+    # A non-finite action leaves the whole env untouched (targets hold) and is counted once.
+    for c in range(action_in.shape[1]):
         if not wp.isfinite(action_in[env, c]):
-            bad_action_count_out[env] = bad_action_count_out[env] + 1
+            if r == lead_row:
+                bad_action_count_out[env] = bad_action_count_out[env] + 1
             return
 
+    if r == lead_row:
+        step_out[env] = 0
+    row_step_out[env, r] = 0
     q_base = env_q_base[env]
-    # Pass 1: every row that is not a mimic follower.
-    for r in range(num_rows):
-        if row_mimic_src[r] >= 0:
-            continue
-        kind = row_kind[r]
-        flags = row_flags[r]
-        norm = flags & FLAG_NORMALIZE
-        col = row_act_col[r]
-        if kind == ROW_POS:
-            q = joint_q_in[q_base + row_q_off[r]]
-            start_qpos_out[env, r] = q
-            if col >= 0:
-                a = _scale(action_in[env, col], row_lo[r], row_hi[r], norm)
-                processed_action_out[env, col] = a
-                t = a
-                if flags & FLAG_DELTA:
-                    if flags & FLAG_TARGET:
-                        t = target_qpos_out[env, r] + a
-                    else:
-                        t = q + a
-                target_qpos_out[env, r] = t
-            vcol = row_vel_col[r]
-            if vcol >= 0:
-                v = _scale(action_in[env, vcol], row_vlo[r], row_vhi[r], norm)
-                processed_action_out[env, vcol] = v
-                target_qvel_out[env, r] = v
-        elif kind == ROW_VEL:
-            v = _scale(action_in[env, col], row_lo[r], row_hi[r], norm)
-            processed_action_out[env, col] = v
+    kind = row_kind[r]
+    flags = row_flags[r]
+    norm = flags & FLAG_NORMALIZE
+    col = row_act_col[r]
+    if kind == ROW_POS:
+        q = joint_q_in[q_base + row_q_off[r]]
+        start_qpos_out[env, r] = q
+        t = target_qpos_out[env, r]  # a joint outside the mimic map keeps its target
+        if col >= 0:
+            a = _scale(action_in[env, col], row_lo[r], row_hi[r], norm)
+            processed_action_out[env, col] = a
+            t = a
+            if flags & FLAG_DELTA:
+                if flags & FLAG_TARGET:
+                    t = target_qpos_out[env, r] + a
+                else:
+                    t = q + a
+            target_qpos_out[env, r] = t
+        vcol = row_vel_col[r]
+        if vcol >= 0:
+            v = _scale(action_in[env, vcol], row_vlo[r], row_vhi[r], norm)
+            processed_action_out[env, vcol] = v
             target_qvel_out[env, r] = v
-
-    # Pass 2: mimic followers read their (never mimic) source's fresh target.
-    for r in range(num_rows):
-        src = row_mimic_src[r]
-        if src >= 0:
-            start_qpos_out[env, r] = joint_q_in[q_base + row_q_off[r]]
-            target_qpos_out[env, r] = target_qpos_out[env, src] * row_mimic_mul[r] + row_mimic_off[r]
-
-    step_out[env] = 0
+        # Followers: target[m] = target[source] * multiplier + offset.
+        for i in range(row_follow_start[r], row_follow_start[r + 1]):
+            m = row_follow[i]
+            start_qpos_out[env, m] = joint_q_in[q_base + row_q_off[m]]
+            target_qpos_out[env, m] = t * row_mimic_mul[m] + row_mimic_off[m]
+            row_step_out[env, m] = 0
+    elif kind == ROW_VEL:
+        v = _scale(action_in[env, col], row_lo[r], row_hi[r], norm)
+        processed_action_out[env, col] = v
+        target_qvel_out[env, r] = v
 
 
 @wp.kernel
@@ -165,53 +177,115 @@ def _substep_kernel(
     target_qvel_in: wp.array2d[float],
     # Out:
     step_out: wp.array[wp.int32],  # in/out
+    row_step_out: wp.array2d[wp.int32],  # in/out
     joint_target_q_out: wp.array[float],
     joint_target_qd_out: wp.array[float],
     joint_f_out: wp.array[float],
 ):
-    env = wp.tid()
+    tid = wp.tid()
     num_rows = row_kind.shape[0]
-    k = step_out[env] + 1
-    step_out[env] = k
-    q_base = env_q_base[env]
-    qd_base = env_qd_base[env]
-    gk = _bidx(kp.shape[0], env)
-    gd = _bidx(kd.shape[0], env)
-    gf = _bidx(force_limit.shape[0], env)
-    for r in range(num_rows):
-        kind = row_kind[r]
-        qi = q_base + row_q_off[r]
-        di = qd_base + row_qd_off[r]
-        tq = float(0.0)
+    env = tid // num_rows
+    r = tid - env * num_rows
+    if r == 0:
+        step_out[env] = step_out[env] + 1
+    kind = row_kind[r]
+    flags = row_flags[r]
+    qi = env_q_base[env] + row_q_off[r]
+    di = env_qd_base[env] + row_qd_off[r]
+    tq = float(0.0)
+    tqd = float(0.0)
+    if kind != ROW_POS or (flags & FLAG_VEL_TARGET) != 0:
         tqd = target_qvel_in[env, r]
+        joint_target_qd_out[di] = tqd
+    if kind == ROW_POS:
+        tq = target_qpos_in[env, r]
+        if flags & FLAG_INTERPOLATE:
+            k = row_step_out[env, r] + 1
+            row_step_out[env, r] = k
+            tq = _interp(start_qpos_in[env, r], tq, k, num_substeps)
+        joint_target_q_out[qi] = tq
+    if explicit_pd != 0:
+        qd = joint_qd_in[di]
+        kpe = float(0.0)
+        e = float(0.0)
         if kind == ROW_POS:
-            tq = target_qpos_in[env, r]
-            if row_flags[r] & FLAG_INTERPOLATE:
-                tq = _interp(start_qpos_in[env, r], tq, k, num_substeps)
-            joint_target_q_out[qi] = tq
-        if kind != ROW_POS or (row_flags[r] & FLAG_VEL_TARGET) != 0:
-            joint_target_qd_out[di] = tqd
-        if explicit_pd != 0:
-            qd = joint_qd_in[di]
-            kpe = float(0.0)
-            e = float(0.0)
-            if kind == ROW_POS:
-                kpe = kp[gk, r]
-                e = tq - joint_q_in[qi]
-            kde = kd[gd, r]
+            kpe = kp[_bidx(kp.shape[0], env), r]
+            e = tq - joint_q_in[qi]
+        kde = kd[_bidx(kd.shape[0], env), r]
+        resp = float(1.0)
+        if explicit_pd == EXPLICIT_STABLE or row_accel[r] != 0:
             resp = response_in[_bidx(response_in.shape[0], env), r]
-            if row_accel[r] != 0:  # acceleration drive: gains times the effective inertia 1/r
-                kpe = kpe / resp
-                kde = kde / resp
-            u = float(0.0)
-            if explicit_pd == EXPLICIT_STABLE:
-                # PD on the end-of-step state of a semi-implicit Euler step, solved with the joint's response r:
-                # u = Kp (q* - q - dt qd) + Kd (qd* - qd) over 1 + r dt (Kd + dt Kp)
-                u = (kpe * (e - dt * qd) + kde * (tqd - qd)) / (1.0 + resp * dt * (kde + dt * kpe))
-            else:
-                u = kpe * e + kde * (tqd - qd)
-            lim = force_limit[gf, r]
-            joint_f_out[di] = wp.clamp(u, -lim, lim)
+        if row_accel[r] != 0:  # acceleration drive: gains times the effective inertia 1/r
+            kpe = kpe / resp
+            kde = kde / resp
+        u = float(0.0)
+        if explicit_pd == EXPLICIT_STABLE:
+            # PD on the end-of-step state of a semi-implicit Euler step, solved with the joint's response r:
+            # u = Kp (q* - q - dt qd) + Kd (qd* - qd) over 1 + r dt (Kd + dt Kp)
+            u = (kpe * (e - dt * qd) + kde * (tqd - qd)) / (1.0 + resp * dt * (kde + dt * kpe))
+        else:
+            u = kpe * e + kde * (tqd - qd)
+        lim = force_limit[_bidx(force_limit.shape[0], env), r]
+        joint_f_out[di] = wp.clamp(u, -lim, lim)
+
+
+@wp.kernel
+def _reset_kernel(
+    # Rows:
+    row_kind: wp.array[wp.int32],
+    row_flags: wp.array[wp.int32],
+    row_q_off: wp.array[wp.int32],
+    row_qd_off: wp.array[wp.int32],
+    # Envs:
+    env_q_base: wp.array[wp.int32],
+    env_qd_base: wp.array[wp.int32],
+    first: int,
+    # In:
+    env_ids_in: wp.array[wp.int32],  # optional: thread block i resets env env_ids_in[i]
+    env_mask_in: wp.array[wp.bool],  # optional: reset only where True
+    joint_q_in: wp.array[float],
+    joint_qd_in: wp.array[float],
+    # Out:
+    start_qpos_out: wp.array2d[float],
+    target_qpos_out: wp.array2d[float],
+    target_qvel_out: wp.array2d[float],
+    step_out: wp.array[wp.int32],
+    row_step_out: wp.array2d[wp.int32],
+    joint_target_q_out: wp.array[float],  # optional (no Control given)
+    joint_target_qd_out: wp.array[float],  # optional
+    joint_f_out: wp.array[float],  # optional (explicit actuation only)
+):
+    tid = wp.tid()
+    num_rows = row_kind.shape[0]
+    env = tid // num_rows
+    r = tid - env * num_rows
+    if env_ids_in:
+        env = env_ids_in[env]
+        if env < 0 or env >= step_out.shape[0]:
+            return
+    if env_mask_in:
+        if not env_mask_in[env]:
+            return
+    if r == 0:
+        step_out[env] = 0
+    row_step_out[env, r] = 0
+    kind = row_kind[r]
+    qi = env_q_base[env] + row_q_off[r]
+    di = env_qd_base[env] + row_qd_off[r]
+    q = joint_q_in[qi]
+    start_qpos_out[env, r] = q
+    target_qpos_out[env, r] = q
+    vel_target = kind != ROW_POS or (row_flags[r] & FLAG_VEL_TARGET) != 0
+    v = float(0.0)
+    if first != 0 and kind == ROW_POS and vel_target:
+        v = joint_qd_in[di]  # ManiSkill's first reset of a PDJointPosVel takes the measured velocity
+    target_qvel_out[env, r] = v
+    if joint_target_q_out and kind == ROW_POS:
+        joint_target_q_out[qi] = q
+    if joint_target_qd_out and vel_target:
+        joint_target_qd_out[di] = v
+    if joint_f_out:
+        joint_f_out[di] = 0.0
 
 
 @wp.kernel
@@ -227,11 +301,12 @@ def _response_kernel(
     response_out: wp.array2d[float],
 ):
     """Each row's joint-space response r = (H^-1)_ii [1/(kg m^2) or 1/kg] from the articulation's inverse block."""
-    env = wp.tid()
-    base = env_art_base[env]
-    for r in range(row_art_off.shape[0]):
-        i = row_art_dof[r]
-        response_out[env, r] = inverse_blocks_in[base + row_art_off[r], i, i]
+    tid = wp.tid()
+    num_rows = row_art_off.shape[0]
+    env = tid // num_rows
+    r = tid - env * num_rows
+    i = row_art_dof[r]
+    response_out[env, r] = inverse_blocks_in[env_art_base[env] + row_art_off[r], i, i]
 
 
 @wp.kernel
@@ -251,71 +326,12 @@ def _accel_gains_kernel(
     joint_target_kd_out: wp.array[float],
 ):
     """Implicit acceleration drive: the solver's per-env gains are Kp / r and Kd / r (r: the joint's response)."""
-    env = wp.tid()
-    qd_base = env_qd_base[env]
-    gk = _bidx(kp.shape[0], env)
-    gd = _bidx(kd.shape[0], env)
-    for r in range(row_accel.shape[0]):
-        if row_accel[r] != 0:
-            di = qd_base + row_qd_off[r]
-            resp = response_in[env, r]
-            joint_target_ke_out[di] = kp[gk, r] / resp
-            joint_target_kd_out[di] = kd[gd, r] / resp
-
-
-@wp.kernel
-def _reset_kernel(
-    # Rows:
-    row_kind: wp.array[wp.int32],
-    row_flags: wp.array[wp.int32],
-    row_q_off: wp.array[wp.int32],
-    row_qd_off: wp.array[wp.int32],
-    # Envs:
-    env_q_base: wp.array[wp.int32],
-    env_qd_base: wp.array[wp.int32],
-    first: int,
-    # In:
-    env_ids_in: wp.array[wp.int32],  # optional: thread i resets env env_ids_in[i]
-    env_mask_in: wp.array[wp.bool],  # optional: reset only where True
-    joint_q_in: wp.array[float],
-    joint_qd_in: wp.array[float],
-    # Out:
-    start_qpos_out: wp.array2d[float],
-    target_qpos_out: wp.array2d[float],
-    target_qvel_out: wp.array2d[float],
-    step_out: wp.array[wp.int32],
-    joint_target_q_out: wp.array[float],  # optional (no Control given)
-    joint_target_qd_out: wp.array[float],  # optional
-    joint_f_out: wp.array[float],  # optional (explicit actuation only)
-):
-    env = wp.tid()
-    num_envs = step_out.shape[0]
-    if env_ids_in:
-        env = env_ids_in[env]
-        if env < 0 or env >= num_envs:
-            return
-    if env_mask_in:
-        if not env_mask_in[env]:
-            return
-    num_rows = row_kind.shape[0]
-    q_base = env_q_base[env]
-    qd_base = env_qd_base[env]
-    step_out[env] = 0
-    for r in range(num_rows):
-        kind = row_kind[r]
-        qi = q_base + row_q_off[r]
-        di = qd_base + row_qd_off[r]
-        q = joint_q_in[qi]
-        start_qpos_out[env, r] = q
-        target_qpos_out[env, r] = q
-        vel_target = kind != ROW_POS or (row_flags[r] & FLAG_VEL_TARGET) != 0
-        v = float(0.0)
-        if first != 0 and kind == ROW_POS and vel_target:
-            v = joint_qd_in[di]  # ManiSkill's first reset of a PDJointPosVel takes the measured velocity
-        target_qvel_out[env, r] = v
-        if joint_target_q_out and kind == ROW_POS:
-            joint_target_q_out[qi] = q
-        if joint_target_qd_out and vel_target:
-            joint_target_qd_out[di] = v
-        if joint_f_out:
-            joint_f_out[di] = 0.0
+    tid = wp.tid()
+    num_rows = row_accel.shape[0]
+    env = tid // num_rows
+    r = tid - env * num_rows
+    if row_accel[r] != 0:
+        di = env_qd_base[env] + row_qd_off[r]
+        resp = response_in[env, r]
+        joint_target_ke_out[di] = kp[_bidx(kp.shape[0], env), r] / resp
+        joint_target_kd_out[di] = kd[_bidx(kd.shape[0], env), r] / resp

@@ -238,13 +238,27 @@ def _per_joint(config, field_name: str, value, n: int, *, allow_none: bool = Fal
             f"got shape {arr.shape}: {value!r}"
         )
     arr = np.broadcast_to(arr, (n,)).astype(np.float64)
+
+    def bad(mask, expected: str):
+        i = int(np.nonzero(mask)[0][0])
+        names = getattr(config, "joint_names", None)
+        joint = f" for joint {names[i]!r}" if isinstance(names, Sequence) and i < len(names) else ""
+        where = f" (in {value!r})" if arr.shape[0] > 1 and np.ndim(value) else ""
+        raise ConfigError(f"{_name(config)}.{field_name}: expected {expected}, got {float(arr[i])!r}{joint}{where}")
+
     if np.isnan(arr).any():
-        raise ConfigError(f"{_name(config)}.{field_name}: expected finite numbers, got NaN in {value!r}")
+        bad(np.isnan(arr), "finite numbers")
     if nonneg:
-        if np.isinf(arr).any() and field_name != "force_limit":
-            raise ConfigError(f"{_name(config)}.{field_name}: expected finite numbers >= 0, got {value!r}")
+        if field_name == "force_limit":  # an infinite force limit means no limit (also beyond float32's range)
+            arr = np.where(arr > float(np.finfo(np.float32).max), np.inf, arr)
+        else:
+            # Values are used in float32: 1e39 would become inf there (and inf * 0 = NaN torques).
+            with np.errstate(over="ignore"):
+                bad_inf = ~np.isfinite(arr.astype(np.float32))
+            if bad_inf.any():
+                bad(bad_inf, "finite numbers >= 0 (within float32 range, |x| <= 3.4e38)")
         if (arr < 0).any():
-            raise ConfigError(f"{_name(config)}.{field_name}: expected values >= 0, got {value!r}")
+            bad(arr < 0, "values >= 0")
     return arr
 
 
@@ -286,12 +300,17 @@ def _bounds(config, lower, upper, qlimits: np.ndarray, fields=("lower", "upper")
     return lim[:, 0].copy(), lim[:, 1].copy()
 
 
+def _f32(x) -> str:
+    """The shortest repr of a float32 value (-1.7628, not -1.7627999782562256)."""
+    return str(np.float32(x))
+
+
 def _check_box(config, low: np.ndarray, high: np.ndarray, names: Sequence[str], normalized: bool, what: str):
     bad = np.nonzero(low > high)[0]
     if bad.size:
         i = int(bad[0])
         raise ConfigError(
-            f"{_name(config)}.{what}: lower must be <= upper, got lower={float(low[i])!r} > upper={float(high[i])!r} "
+            f"{_name(config)}.{what}: lower must be <= upper, got lower={_f32(low[i])} > upper={_f32(high[i])} "
             f"for joint {names[i]!r}"
         )
     if normalized:
@@ -300,7 +319,7 @@ def _check_box(config, low: np.ndarray, high: np.ndarray, names: Sequence[str], 
             i = int(inf[0])
             raise ConfigError(
                 f"{_name(config)}.{what}: normalize_action needs finite bounds, got "
-                f"[{float(low[i])}, {float(high[i])}] for joint {names[i]!r} (an unlimited joint: set lower/upper in "
+                f"[{_f32(low[i])}, {_f32(high[i])}] for joint {names[i]!r} (an unlimited joint: set lower/upper in "
                 f"the config)"
             )
 
@@ -365,11 +384,19 @@ def _pos_rows(config, qlimits: np.ndarray, *, mimic: bool = False, posvel: bool 
             for role, jn in (("mimic joint", m_name), ("control joint", c_name)):
                 if jn not in names:
                     raise MimicJointError(f"{_name(config)}.mimic: {role} {jn!r} is not in joint_names {names}")
-            m = float(entry.get("multiplier", 1.0))
-            o = float(entry.get("offset", 0.0))
-            if not (math.isfinite(m) and math.isfinite(o)):
+            try:
+                m = float(entry.get("multiplier", 1.0))
+                o = float(entry.get("offset", 0.0))
+            except (TypeError, ValueError) as e:
                 raise ConfigError(
-                    f"{_name(config)}.mimic[{m_name!r}]: multiplier and offset must be finite, got {m!r}, {o!r}"
+                    f"{_name(config)}.mimic[{m_name!r}]: expected numbers for multiplier and offset, got "
+                    f"{entry.get('multiplier', 1.0)!r}, {entry.get('offset', 0.0)!r}"
+                ) from e
+            # Finite in float32, where they are used (1e39 would become inf).
+            if not all(math.isfinite(x) and abs(x) <= float(np.finfo(np.float32).max) for x in (m, o)):
+                raise ConfigError(
+                    f"{_name(config)}.mimic[{m_name!r}]: expected a finite multiplier and offset (within float32 "
+                    f"range), got multiplier={m!r}, offset={o!r}"
                 )
             if m_name == c_name:
                 raise ConfigError(f"{_name(config)}.mimic[{m_name!r}]: a joint cannot mimic itself")
@@ -381,10 +408,16 @@ def _pos_rows(config, qlimits: np.ndarray, *, mimic: bool = False, posvel: bool 
             off[i] = np.float32(o)
         chained = sorted(set(followers) & set(sources))
         if chained:
-            jn = names[chained[0]]
+            # Walk from a follower whose source follows too, to show the whole chain (or cycle).
+            start = next(i for i in followers if mimic_src[i] in chained)
+            path = [start]
+            while mimic_src[path[-1]] >= 0 and path.count(path[-1]) == 1:
+                path.append(int(mimic_src[path[-1]]))
+            what = "cycle" if path.count(path[-1]) > 1 else "chain"
+            shown = " -> ".join(repr(names[i]) for i in path)
             raise ConfigError(
-                f"{_name(config)}.mimic: joint {jn!r} both follows and commands another joint (a mimic chain or "
-                f"cycle); make every follower mimic a commanded joint directly"
+                f"{_name(config)}.mimic: expected every follower to mimic a commanded joint directly, got a mimic "
+                f"{what} {shown} (read 'a' -> 'b' as 'a' follows 'b'); make each follower mimic the commanded joint"
             )
         control = sorted(set(sources))  # ascending position in joint_names, as ManiSkill's torch.unique
         for c, j in enumerate(control):

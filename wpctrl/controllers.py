@@ -143,6 +143,7 @@ class _Engine:
         self.dim = E * R  # one thread per (env, row)
         self.bad_action_count = wp.zeros(E, dtype=wp.int32, device=dev)
         self.action_buffer = wp.zeros((E, self.action_dim), dtype=wp.float32, device=dev)
+        self.wrappers: dict = {}  # zero-copy wp.array views of torch actions, by (address, strides)
         self._launch_set_action: _Launch | None = None
         self._launch_substep: _Launch | None = None
         self._reset_count = 0
@@ -387,32 +388,44 @@ def _check_shape(name: str, shape: tuple, num_envs: int, dim: int) -> None:
         raise ValueError(f"{name}: expected shape ({num_envs}, {dim}) (num_envs, action_dim), got {tuple(shape)}")
 
 
-def _action_array(action, num_envs: int, dim: int, device, buffer: wp.array) -> wp.array:
-    """Return ``action`` as a float32 (num_envs, dim) wp.array on ``device``, zero-copy where possible."""
+def _action_array(action, num_envs: int, dim: int, device, buffer: wp.array, cache: dict | None = None) -> wp.array:
+    """Return ``action`` as a float32 (num_envs, dim) wp.array on ``device``, zero-copy where possible.
+
+    A float32 torch tensor is wrapped in place (wrappers are cached by address, shape and strides: torch's caching
+    allocator hands the same memory back step after step). Anything that needs a conversion (float64, a layout
+    Warp cannot index) is copied into the controller's own ``buffer``, never into a temporary that could be freed
+    before the kernel runs.
+    """
     if _is_torch(action):
         torch = _torch()
         t = action.detach()
         if t.dim() == 1 and num_envs == 1:
             t = t.unsqueeze(0)
         _check_shape("action", tuple(t.shape), num_envs, dim)
-        if t.dtype == torch.float64:
-            t = t.to(torch.float32)
-        elif t.dtype != torch.float32:
+        if t.dtype not in (torch.float32, torch.float64):
             raise TypeError(f"action: expected a float32 (or float64) tensor, got dtype {t.dtype}")
-        tdev = wp.device_from_torch(t.device)
-        if tdev != device:
+        if wp.device_from_torch(t.device) != device:
             raise ValueError(f"action: expected a tensor on {device}, got one on {t.device}")
         if dim == 0:
             return buffer
-        if t.stride(1) != 1 and t.stride(0) != 1 and not t.is_contiguous():
-            t = t.contiguous()
-        return wp.array(
+        if t.dtype != torch.float32:
+            wp.to_torch(buffer).copy_(t)
+            return buffer
+        key = (t.data_ptr(), t.stride(0), t.stride(1))
+        if cache is not None and key in cache:
+            return cache[key]
+        a = wp.array(
             ptr=t.data_ptr(),
             dtype=wp.float32,
             shape=tuple(t.shape),
             strides=(t.stride(0) * 4, t.stride(1) * 4),
             device=device,
         )
+        if cache is not None:
+            if len(cache) >= 16:
+                cache.clear()
+            cache[key] = a
+        return a
     if isinstance(action, wp.array):
         a = action
         if a.ndim == 1 and num_envs == 1:
@@ -774,7 +787,7 @@ class BaseController:
         self._require_owner("set_action")
         self._check_state(state, "set_action")
         eng = self._engine
-        a = _action_array(action, eng.num_envs, eng.action_dim, eng.device, eng.action_buffer)
+        a = _action_array(action, eng.num_envs, eng.action_dim, eng.device, eng.action_buffer, eng.wrappers)
         if self.nan_policy == "raise":
             _raise_on_nonfinite(a)
         eng.set_action(a, state)

@@ -717,7 +717,11 @@ class BaseController:
     def processed_action(self) -> wp.array:
         """(num_envs, action_dim) last action after clip and scale (raw units) (live view)."""
         arr = self._engine.processed_action
-        return arr if self._owner else arr[:, self._cols.start : self._cols.stop]
+        if self._owner:
+            return arr
+        if self._cols.start == self._cols.stop:  # a child without action columns (passive)
+            return wp.zeros((self.num_envs, 0), dtype=wp.float32, device=self.device)
+        return arr[:, self._cols.start : self._cols.stop]
 
     @property
     def step_counter(self) -> wp.array:
@@ -815,7 +819,9 @@ class BaseController:
             self._check_control(control, "reset")
         eng = self._engine
         first = eng._reset_count == 0
-        ids, mask = (None, None) if first else _env_selection(env_ids, eng.num_envs, eng.device)
+        ids, mask = _env_selection(env_ids, eng.num_envs, eng.device)  # validated on every call
+        if first:
+            ids = mask = None  # the first reset initialises every env, as ManiSkill's
         eng.reset(state, ids, mask, control, first=first)
         eng._reset_count += 1
 

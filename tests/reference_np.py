@@ -1,0 +1,489 @@
+"""An independent numpy float32 re-derivation of wpctrl's controller semantics, for the property tests.
+
+Written from the configs and ``shared/reference/maniskill-controllers.md`` (sections 1 and 3), ManiSkill-style: one
+small class per config type (``reset`` / ``set_action`` / ``before_simulation_step`` / drive targets / explicit PD
+torque) and a combined wrapper that slices a flat action in dict order. It shares nothing with wpctrl but the
+config dataclasses it reads: no row tables, no kernels, no binding.
+
+Where wpctrl deliberately differs from ManiSkill, this reference follows wpctrl:
+
+1. ``reset(mask)`` re-initialises only the masked envs (the first reset: all envs). PDJointPosVel takes the measured
+   velocity as its velocity target on the first reset and 0 on later ones; PDJointVel and passive joints get 0 on
+   every reset. At construction every buffer holds the model's initial pose (velocity targets 0).
+2. Drive targets are written at every substep; a reset with a control also writes the reset envs' targets (and zeroes
+   their explicit torques).
+3. Interpolation holds at the K-th value past K: ``start + ((target - start) / K) * min(k, K)``, computed from the
+   current start and target.
+4. An env whose flat action holds any NaN/Inf is left completely untouched and counted.
+5. ``set_state`` copies.
+
+Arrays are float32 throughout and every operation is written in ManiSkill's order, so results agree with wpctrl to
+the last bit (up to the compiler's freedom to fuse multiply-adds).
+
+Layout: the robot has J joints (``robot_joints``, model order); measured states and drive writes are (N, J) arrays in
+that order. Drive writes are returned as ``{"target_q" | "target_qd" | "f": (written (N, J) bool, value (N, J))}``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from wpctrl.config import (
+    PassiveControllerConfig,
+    PDJointPosControllerConfig,
+    PDJointPosMimicControllerConfig,
+    PDJointPosVelControllerConfig,
+    PDJointVelControllerConfig,
+)
+
+F32 = np.float32
+WRITE_KEYS = ("target_q", "target_qd", "f")
+
+
+def _bcast(value, n: int) -> np.ndarray:
+    """ManiSkill's ``np.broadcast_to(value, n)``, as float32."""
+    return np.broadcast_to(np.asarray(value, dtype=np.float64), (n,)).astype(F32)
+
+
+def empty_writes(num_envs: int, num_joints: int) -> dict:
+    return {k: (np.zeros((num_envs, num_joints), bool), np.zeros((num_envs, num_joints), F32)) for k in WRITE_KEYS}
+
+
+def _write(writes: dict, key: str, env_mask: np.ndarray, cols: Sequence[int], values: np.ndarray) -> None:
+    """``writes[key][env, cols] = values[env]`` for the envs in ``env_mask``."""
+    written, out = writes[key]
+    envs = np.nonzero(env_mask)[0]
+    if envs.size == 0 or len(cols) == 0:
+        return
+    ix = np.ix_(envs, np.asarray(cols))
+    written[ix] = True
+    out[ix] = np.asarray(values, F32)[envs]
+
+
+class RefRobot:
+    """Joint names in model order and their (J, 2) float32 position limits (ManiSkill's ``get_qlimits()[0]``)."""
+
+    def __init__(self, joint_names: Sequence[str], limits: np.ndarray):
+        self.joint_names = list(joint_names)
+        self.limits = np.asarray(limits, F32).reshape(len(self.joint_names), 2)
+
+    def cols(self, names: Sequence[str]) -> list[int]:
+        return [self.joint_names.index(s) for s in names]
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# One class per config type.
+
+
+class RefController:
+    """Shared state of every controller: (N, n) buffers over the config's joints, a per-env substep counter."""
+
+    has_qpos = False  # has a position target (start/target buffers are meaningful)
+    has_vel_target = False  # writes a velocity drive target
+
+    def __init__(self, config, robot: RefRobot, num_envs: int, num_substeps: int, q0: np.ndarray):
+        self.config = config
+        self.names = list(config.joint_names)
+        self.cols = robot.cols(self.names)
+        self.n = len(self.names)
+        self.N = num_envs
+        self.K = num_substeps
+        q0 = np.asarray(q0, F32)[:, self.cols]
+        self.start_qpos = q0.copy()
+        self.target_qpos = q0.copy()
+        self.target_qvel = np.zeros((num_envs, self.n), F32)
+        self.step = np.zeros(num_envs, np.int64)
+        n = self.n
+        self.kp = np.zeros(n, F32)
+        self.kd = _bcast(config.damping, n)
+        self.force_limit = _bcast(config.force_limit, n)
+        self.friction = _bcast(config.friction, n)
+        mode = getattr(config, "drive_mode", "force")  # ManiSkill's passive drive is always "force"
+        modes = [mode] * n if isinstance(mode, str) else list(mode)
+        self.accel = np.array([m == "acceleration" for m in modes], bool)
+        self.low = np.zeros(0, F32)
+        self.high = np.zeros(0, F32)
+        self.normalize = False
+        self.processed_action = np.zeros((num_envs, 0), F32)
+
+    @property
+    def action_dim(self) -> int:
+        return self.low.shape[0]
+
+    def _set_bounds(self, low, high, normalize: bool) -> None:
+        self.low = np.asarray(low, F32)
+        self.high = np.asarray(high, F32)
+        self.normalize = bool(normalize)
+        self.processed_action = np.zeros((self.N, self.low.shape[0]), F32)
+
+    def preprocess(self, a: np.ndarray) -> np.ndarray:
+        """ManiSkill's ``clip_and_scale_action``: clip first, then ``0.5(h+l) + 0.5(h-l)a``, float32."""
+        a = np.asarray(a, F32)
+        if not self.normalize:
+            return a.copy()
+        a = np.clip(a, F32(-1), F32(1))
+        return F32(0.5) * (self.high + self.low) + F32(0.5) * (self.high - self.low) * a
+
+    # -- stages -----------------------------------------------------------------------------------------------------
+
+    def reset(self, q: np.ndarray, qd: np.ndarray, mask: np.ndarray, first: bool) -> None:
+        q = q[:, self.cols]
+        self.step[mask] = 0
+        self.start_qpos[mask] = q[mask]
+        self.target_qpos[mask] = q[mask]
+        self.target_qvel[mask] = 0
+
+    def set_action(self, a: np.ndarray, q: np.ndarray, good: np.ndarray) -> None:
+        self.step[good] = 0
+
+    def drive_target_q(self) -> np.ndarray | None:
+        """(N, n) position drive target at the current substep counter, or None (no position drive)."""
+        return None
+
+    def before_simulation_step(self, q, qd, response, explicit_pd: str | None, dt, writes: dict) -> None:
+        """One substep: count it, write the drive targets and, with explicit actuation, the clamped PD torque.
+
+        ``response``: (N, n) joint-space response r = (H^-1)_ii (an input, as the physics is); acceleration drives
+        scale both gains by 1/r; the "stable" law is ``(Kp (e - dt qd) + Kd (qd* - qd)) / (1 + r dt (Kd + dt Kp))``.
+        """
+        self.step += 1
+        everyone = np.ones(self.N, bool)
+        tq = self.drive_target_q()
+        if tq is not None:
+            _write(writes, "target_q", everyone, self.cols, tq)
+        if self.has_vel_target:
+            _write(writes, "target_qd", everyone, self.cols, self.target_qvel)
+        if explicit_pd is None:
+            return
+        qm, qdm = q[:, self.cols], qd[:, self.cols]
+        r = np.asarray(response, F32)
+        kp = np.broadcast_to(self.kp, (self.N, self.n))
+        kd = np.broadcast_to(self.kd, (self.N, self.n))
+        e = np.zeros((self.N, self.n), F32)
+        if tq is None:
+            kp = np.zeros_like(kp)
+        else:
+            e = tq - qm
+        kp = np.where(self.accel, kp / r, kp)
+        kd = np.where(self.accel, kd / r, kd)
+        if explicit_pd == "stable":
+            u = (kp * (e - dt * qdm) + kd * (self.target_qvel - qdm)) / (F32(1) + r * dt * (kd + dt * kp))
+        else:
+            u = kp * e + kd * (self.target_qvel - qdm)
+        _write(writes, "f", everyone, self.cols, np.clip(u, -self.force_limit, self.force_limit))
+
+    def reset_writes(self, q: np.ndarray, mask: np.ndarray, explicit: bool, writes: dict) -> None:
+        """What ``reset(..., control=c)`` writes for the reset envs."""
+        if self.has_qpos:
+            _write(writes, "target_q", mask, self.cols, q[:, self.cols])
+        if self.has_vel_target:
+            _write(writes, "target_qd", mask, self.cols, self.target_qvel)
+        if explicit:
+            _write(writes, "f", mask, self.cols, np.zeros((self.N, self.n), F32))
+
+    # -- model drive properties -------------------------------------------------------------------------------------
+
+    def drive_properties(self, explicit: bool, response=None) -> dict[str, np.ndarray]:
+        """(N, n) stiffness, damping, force limit, friction and the Newton target-mode name the model must hold.
+
+        Implicit acceleration drives hand the solver per-env gains Kp / r and Kd / r (``response``: (N, n) r)."""
+        if self.has_qpos:
+            mode = "POSITION_VELOCITY" if self.has_vel_target else "POSITION"
+        else:
+            mode = "VELOCITY"
+        shape = (self.N, self.n)
+        r = np.ones(shape, F32) if response is None else np.asarray(response, F32)
+        zero = np.zeros(shape, F32)
+        ke = np.broadcast_to(self.kp, shape)
+        kd = np.broadcast_to(self.kd, shape)
+        return {
+            "ke": zero if explicit else np.where(self.accel, ke / r, ke),
+            "kd": zero if explicit else np.where(self.accel, kd / r, kd),
+            "effort": np.broadcast_to(self.force_limit, shape),
+            "friction": np.broadcast_to(self.friction, shape),
+            "mode": np.broadcast_to(np.array(["EFFORT" if explicit else mode] * self.n), shape),
+        }
+
+    # -- state ------------------------------------------------------------------------------------------------------
+
+    @property
+    def uses_target(self) -> bool:
+        return bool(getattr(self.config, "use_delta", False) and getattr(self.config, "use_target", False))
+
+    def get_state(self) -> dict:
+        return {"target_qpos": self.target_qpos.copy()} if self.uses_target else {}
+
+    def set_state(self, state) -> None:
+        if state and self.uses_target:
+            self.target_qpos[...] = np.asarray(state["target_qpos"], F32)
+
+
+class RefPDJointPos(RefController):
+    """§1.1: absolute, delta from the measured position, or delta on the virtual target; optional interpolation."""
+
+    has_qpos = True
+
+    def __init__(self, config, robot, num_envs, num_substeps, q0):
+        super().__init__(config, robot, num_envs, num_substeps, q0)
+        self.kp = _bcast(config.stiffness, self.n)
+        lim = robot.limits[self.cols].copy()  # float32 (n, 2)
+        if config.lower is not None:
+            lim[:, 0] = config.lower
+        if config.upper is not None:
+            lim[:, 1] = config.upper
+        self.pos_low, self.pos_high = lim[:, 0].copy(), lim[:, 1].copy()
+        self._set_bounds(self.pos_low, self.pos_high, config.normalize_action)
+
+    def _new_target(self, a: np.ndarray, q: np.ndarray) -> np.ndarray:
+        c = self.config
+        if c.use_delta:
+            if c.use_target:
+                return self.target_qpos + a
+            return q + a
+        return a
+
+    def set_action(self, a, q, good):
+        a = self.preprocess(a)
+        self.processed_action[good] = a[good]
+        self.step[good] = 0
+        qm = q[:, self.cols]
+        self.start_qpos[good] = qm[good]
+        self._set_pos_targets(a[:, : self._pos_dim], qm, good)
+
+    @property
+    def _pos_dim(self) -> int:
+        return self.n
+
+    def _set_pos_targets(self, a, qm, good):
+        target = self._new_target(a, qm)
+        self.target_qpos[good] = target[good]
+
+    def drive_target_q(self):
+        if not self.config.interpolate:
+            return self.target_qpos.copy()
+        step_size = (self.target_qpos - self.start_qpos) / F32(self.K)
+        k = np.minimum(self.step, self.K).astype(F32)[:, None]
+        return self.start_qpos + step_size * k
+
+
+class RefPDJointPosMimic(RefPDJointPos):
+    """§1.2: the action commands the control joints (ascending position in joint_names); mimics follow."""
+
+    def __init__(self, config, robot, num_envs, num_substeps, q0):
+        super().__init__(config, robot, num_envs, num_substeps, q0)
+        mimic = dict(config.mimic or {})
+        if not mimic and self.n == 2:
+            mimic = {self.names[0]: {"joint": self.names[1]}}  # ManiSkill's default (without mutating the config)
+        self.mimic_idx = np.array([self.names.index(k) for k in mimic], np.int64)
+        self.mimic_src = np.array([self.names.index(v["joint"]) for v in mimic.values()], np.int64)
+        self.mul = np.array([v.get("multiplier", 1.0) for v in mimic.values()], F32)
+        self.off = np.array([v.get("offset", 0.0) for v in mimic.values()], F32)
+        self.control_idx = np.unique(self.mimic_src)  # sorted, as torch.unique
+        self._set_bounds(self.pos_low[self.control_idx], self.pos_high[self.control_idx], config.normalize_action)
+
+    @property
+    def _pos_dim(self) -> int:
+        return len(self.control_idx)
+
+    def _set_pos_targets(self, a, qm, good):
+        c = self.config
+        C = self.control_idx
+        target = self.target_qpos.copy()
+        if c.use_delta:
+            if c.use_target:
+                target[:, C] = target[:, C] + a
+            else:
+                target[:, C] = qm[:, C] + a
+        else:
+            target[:, C] = a
+        target[:, self.mimic_idx] = target[:, self.mimic_src] * self.mul + self.off
+        self.target_qpos[good] = target[good]
+
+
+class RefPDJointPosVel(RefPDJointPos):
+    """§1.4: PDJointPos on the first half of the action, velocity targets from the second half (not interpolated)."""
+
+    has_vel_target = True
+
+    def __init__(self, config, robot, num_envs, num_substeps, q0):
+        super().__init__(config, robot, num_envs, num_substeps, q0)
+        vl, vh = _bcast(config.vel_lower, self.n), _bcast(config.vel_upper, self.n)
+        self._set_bounds(
+            np.concatenate([self.pos_low, vl]), np.concatenate([self.pos_high, vh]), config.normalize_action
+        )
+
+    def set_action(self, a, q, good):
+        super().set_action(a, q, good)
+        v = self.preprocess(a)[:, self.n :]
+        self.target_qvel[good] = v[good]
+
+    def reset(self, q, qd, mask, first):
+        super().reset(q, qd, mask, first)
+        if first:
+            self.target_qvel[mask] = qd[:, self.cols][mask]
+
+
+class RefPDJointVel(RefController):
+    """§1.3: velocity targets = the (clipped, scaled) action; stiffness 0."""
+
+    has_vel_target = True
+
+    def __init__(self, config, robot, num_envs, num_substeps, q0):
+        super().__init__(config, robot, num_envs, num_substeps, q0)
+        self._set_bounds(_bcast(config.lower, self.n), _bcast(config.upper, self.n), config.normalize_action)
+
+    def set_action(self, a, q, good):
+        v = self.preprocess(a)
+        self.processed_action[good] = v[good]
+        self.target_qvel[good] = v[good]
+        self.step[good] = 0
+
+
+class RefPassive(RefController):
+    """§1.5: no action; damping toward a zero velocity target."""
+
+    has_vel_target = True
+
+
+def ref_controller_cls(config):
+    for cls, ref in (
+        (PDJointPosMimicControllerConfig, RefPDJointPosMimic),
+        (PDJointPosVelControllerConfig, RefPDJointPosVel),
+        (PDJointPosControllerConfig, RefPDJointPos),
+        (PDJointVelControllerConfig, RefPDJointVel),
+        (PassiveControllerConfig, RefPassive),
+    ):
+        if isinstance(config, cls):
+            return ref
+    raise TypeError(type(config).__name__)
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# The combined controller (a single config is a one-child dict with uid "").
+
+
+def env_mask(env_ids, num_envs: int) -> np.ndarray:
+    """A (num_envs,) bool mask from None, an int, a sequence of ints or a bool mask (numpy, torch or wp)."""
+    if env_ids is None:
+        return np.ones(num_envs, bool)
+    if hasattr(env_ids, "numpy"):
+        env_ids = env_ids.numpy() if not hasattr(env_ids, "detach") else env_ids.detach().cpu().numpy()
+    a = np.asarray(env_ids)
+    if a.dtype == np.bool_:
+        return a.reshape(num_envs).copy()
+    m = np.zeros(num_envs, bool)
+    m[a.reshape(-1).astype(np.int64)] = True
+    return m
+
+
+class RefCombined:
+    """One control mode: a config or a ``{uid: config}`` dict, with a flat action in dict insertion order."""
+
+    def __init__(
+        self,
+        config,
+        robot: RefRobot,
+        num_envs: int,
+        num_substeps: int,
+        q0: np.ndarray,
+        actuation: str = "implicit",
+        explicit_pd: str = "naive",
+        sim_dt: float = 0.01,
+    ):
+        configs = dict(config) if isinstance(config, Mapping) else {"": config}
+        configs.pop("balance_passive_force", None)
+        self.robot = robot
+        self.N = num_envs
+        self.K = num_substeps
+        self.explicit = actuation == "explicit"
+        self.explicit_pd = explicit_pd if self.explicit else None
+        self.dt = F32(sim_dt)
+        self.children: dict[str, RefController] = {}
+        self.action_mapping: dict[str, tuple[int, int]] = {}
+        col = 0
+        for uid, c in configs.items():
+            ch = ref_controller_cls(c)(c, robot, num_envs, num_substeps, q0)
+            self.children[uid] = ch
+            self.action_mapping[uid] = (col, col + ch.action_dim)
+            col += ch.action_dim
+        self.action_dim = col
+        self.bad_action_count = np.zeros(num_envs, np.int64)
+        self.num_resets = 0
+
+    @property
+    def action_low(self) -> np.ndarray:
+        """Flat single-action-space bounds: [-1, 1] for normalising children, raw bounds otherwise."""
+        return np.concatenate([-np.ones_like(c.low) if c.normalize else c.low for c in self.children.values()])
+
+    @property
+    def action_high(self) -> np.ndarray:
+        return np.concatenate([np.ones_like(c.high) if c.normalize else c.high for c in self.children.values()])
+
+    @property
+    def step_counter(self) -> np.ndarray:
+        steps = [c.step for c in self.children.values()]
+        for s in steps[1:]:
+            assert np.array_equal(s, steps[0])
+        return steps[0]
+
+    def reset(self, q, qd, env_ids=None, with_control: bool = False) -> dict:
+        """Returns the drive writes made when a control is passed (empty writes otherwise)."""
+        first = self.num_resets == 0
+        self.num_resets += 1
+        mask = np.ones(self.N, bool) if first else env_mask(env_ids, self.N)
+        q, qd = np.asarray(q, F32), np.asarray(qd, F32)
+        writes = empty_writes(self.N, len(self.robot.joint_names))
+        for ch in self.children.values():
+            ch.reset(q, qd, mask, first)
+            if with_control:
+                ch.reset_writes(q, mask, self.explicit, writes)
+        return writes
+
+    def set_action(self, action, q) -> None:
+        a = np.asarray(action).astype(F32).reshape(self.N, self.action_dim)
+        good = np.isfinite(a).all(axis=1)
+        self.bad_action_count[~good] += 1
+        q = np.asarray(q, F32)
+        with np.errstate(invalid="ignore", over="ignore"):  # rejected envs are computed, then dropped
+            for uid, ch in self.children.items():
+                s, e = self.action_mapping[uid]
+                ch.set_action(a[:, s:e], q, good)
+
+    def before_simulation_step(self, q, qd, response: Mapping | None = None) -> dict:
+        """``response``: {uid: (N, n) r} for children with acceleration drives or under stable explicit PD."""
+        q, qd = np.asarray(q, F32), np.asarray(qd, F32)
+        writes = empty_writes(self.N, len(self.robot.joint_names))
+        for uid, ch in self.children.items():
+            r = (response or {}).get(uid)
+            r = np.ones((self.N, ch.n), F32) if r is None else r
+            ch.before_simulation_step(q, qd, r, self.explicit_pd, self.dt, writes)
+        return writes
+
+    def initial_control_targets(self, q0) -> dict:
+        """Drive targets of a ``Model.control()`` made after construction: the initial pose on position joints, 0 on
+        the coordinates of joints without a position drive, 0 velocity targets."""
+        writes = empty_writes(self.N, len(self.robot.joint_names))
+        everyone = np.ones(self.N, bool)
+        for ch in self.children.values():
+            if ch.has_qpos:
+                _write(writes, "target_q", everyone, ch.cols, np.asarray(q0, F32)[:, ch.cols])
+            else:
+                _write(writes, "target_q", everyone, ch.cols, np.zeros((self.N, ch.n), F32))
+            if ch.has_vel_target:
+                _write(writes, "target_qd", everyone, ch.cols, np.zeros((self.N, ch.n), F32))
+        return writes
+
+    def get_state(self, single: bool) -> dict:
+        if single:
+            return self.children[""].get_state()
+        return {uid: s for uid, ch in self.children.items() if (s := ch.get_state())}
+
+    def set_state(self, state, single: bool) -> None:
+        if single:
+            self.children[""].set_state(state)
+            return
+        state = state or {}
+        for uid, ch in self.children.items():
+            ch.set_state(state.get(uid))

@@ -42,6 +42,66 @@ def _short(label: str) -> str:
     return label.rsplit("/", 1)[-1]
 
 
+def _resolve(names, labels, joints, world: int, jtype, qd_start) -> np.ndarray:
+    """Joint ids of ``names`` among ``joints`` (those of one world), by exact label or its last ``/`` part."""
+    index: dict[str, list[int]] = {}
+    for j in joints:
+        label = labels[j]
+        index.setdefault(label, []).append(j)
+        short = _short(label)
+        if short != label:
+            index.setdefault(short, []).append(j)
+    out = np.zeros(len(names), np.int32)
+    for r, name in enumerate(names):
+        cand = sorted(set(index.get(name, [])))
+        if not cand:
+            known = sorted({_short(lb) for lb in labels})
+            close = difflib.get_close_matches(name, known, n=5, cutoff=0.5)
+            hint = f"; close matches: {close}" if close else f"; the model's joints: {known[:20]}"
+            raise ConfigError(f"joint_names: joint {name!r} is not in world {world} of the model{hint}")
+        if len(cand) > 1:
+            raise ConfigError(
+                f"joint_names: joint {name!r} matches {len(cand)} joints in world {world}: "
+                f"{[labels[j] for j in cand]}; use the full label"
+            )
+        j = cand[0]
+        t = int(jtype[j])
+        if t not in _ONE_DOF or int(qd_start[j + 1] - qd_start[j]) != 1:
+            tname = newton.JointType(t).name if t in set(int(x) for x in newton.JointType) else str(t)
+            raise ConfigError(
+                f"joint_names: joint {labels[j]!r} is a {tname} joint; wpctrl controls 1-DOF revolute or "
+                f"prismatic joints only"
+            )
+        out[r] = j
+    return out
+
+
+def _replicated_table(model, names, labels, jworld, jtype, qd_start, world_count: int) -> np.ndarray | None:
+    """Fast path for replicated worlds: resolve in world 0 and offset by each world's first joint.
+
+    Applies when every world holds the same joints (labels and types) in the same order, contiguously; then the
+    names resolve identically everywhere (checked with numpy, not a Python loop over every joint of every world).
+    Returns None when the worlds differ.
+    """
+    jws = getattr(model, "joint_world_start", None)
+    if world_count < 2 or jws is None:
+        return None
+    jws = jws.numpy()[: world_count + 1].astype(np.int64)
+    per = np.diff(jws)
+    if per.size == 0 or (per != per[0]).any() or per[0] == 0:
+        return None
+    n = int(per[0])
+    span = slice(int(jws[0]), int(jws[world_count]))
+    if (jworld[span] != np.repeat(np.arange(world_count), n)).any():
+        return None
+    lab = np.array(labels[span], dtype=object).reshape(world_count, n)
+    typ = jtype[span].reshape(world_count, n)
+    if not (lab == lab[0]).all() or not (typ == typ[0]).all():
+        return None
+    row0 = _resolve(names, labels, range(int(jws[0]), int(jws[1])), 0, jtype, qd_start)
+    return (row0[None, :] - jws[0] + jws[:world_count, None]).astype(np.int32)
+
+
 def bind_joints(model: newton.Model, joint_names: Sequence[str]) -> JointBinding:
     """Resolve ``joint_names`` in every world of ``model``.
 
@@ -62,40 +122,16 @@ def bind_joints(model: newton.Model, joint_names: Sequence[str]) -> JointBinding
     if world_count == 1 and (jworld == 0).sum() == 0:
         jworld = np.zeros_like(jworld)  # a single-world model built without worlds: its joints are global
 
-    by_world: list[dict[str, list[int]]] = [{} for _ in range(world_count)]
-    for j, label in enumerate(labels):
-        w = int(jworld[j])
-        if w < 0 or w >= world_count:
-            continue
-        d = by_world[w]
-        d.setdefault(label, []).append(j)
-        short = _short(label)
-        if short != label:
-            d.setdefault(short, []).append(j)
-
-    table = np.zeros((world_count, len(names)), np.int32)
-    for w in range(world_count):
-        for r, name in enumerate(names):
-            cand = sorted(set(by_world[w].get(name, [])))
-            if not cand:
-                known = sorted({_short(lb) for lb in labels})
-                close = difflib.get_close_matches(name, known, n=5, cutoff=0.5)
-                hint = f"; close matches: {close}" if close else f"; the model's joints: {known[:20]}"
-                raise ConfigError(f"joint_names: joint {name!r} is not in world {w} of the model{hint}")
-            if len(cand) > 1:
-                raise ConfigError(
-                    f"joint_names: joint {name!r} matches {len(cand)} joints in world {w}: "
-                    f"{[labels[j] for j in cand]}; use the full label"
-                )
-            j = cand[0]
-            t = int(jtype[j])
-            if t not in _ONE_DOF or int(qd_start[j + 1] - qd_start[j]) != 1:
-                tname = newton.JointType(t).name if t in set(int(x) for x in newton.JointType) else str(t)
-                raise ConfigError(
-                    f"joint_names: joint {labels[j]!r} is a {tname} joint; wpctrl controls 1-DOF revolute or "
-                    f"prismatic joints only"
-                )
-            table[w, r] = j
+    table = _replicated_table(model, names, labels, jworld, jtype, qd_start, world_count)
+    if table is None:  # worlds that differ: resolve the names world by world
+        table = np.zeros((world_count, len(names)), np.int32)
+        members: list[list[int]] = [[] for _ in range(world_count)]
+        for j in range(len(labels)):
+            w = int(jworld[j])
+            if 0 <= w < world_count:
+                members[w].append(j)
+        for w in range(world_count):
+            table[w] = _resolve(names, labels, members[w], w, jtype, qd_start)
 
     coord = q_start[table].astype(np.int32)
     dof = qd_start[table].astype(np.int32)

@@ -576,17 +576,19 @@ class BaseController:
             cfg.check_mode_dict(configs)
         else:
             configs = {"": config}
-        parts: list[tuple[str, Any, cfg.Rows]] = []
         names: list[str] = []
-        for uid, c in configs.items():
+        for c in configs.values():
             if not isinstance(c, cfg.ControllerConfig):
                 raise cfg.ConfigError(f"config: expected a controller config, got {type(c).__name__}")
-            b = bind_joints(model, cfg._joint_names(c))
-            rows = cfg.config_rows(c, b.qlimits)
-            parts.append((uid, c, rows))
-            names += rows.joint_names
+            names += cfg._joint_names(c)
+        binding = bind_joints(model, names)  # once for the whole mode
+        parts: list[tuple[str, Any, cfg.Rows]] = []
+        r0 = 0
+        for uid, c in configs.items():
+            n = len(c.joint_names)
+            parts.append((uid, c, cfg.config_rows(c, binding.qlimits[r0 : r0 + n])))
+            r0 += n
         all_rows = cfg.Rows.concat([p[2] for p in parts])
-        binding = bind_joints(model, names)
         self._engine = _Engine(
             all_rows,
             binding,

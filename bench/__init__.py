@@ -1,0 +1,1 @@
+"""Benchmarks of wpctrl against a torch baseline (see bench/README.md)."""

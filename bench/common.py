@@ -1,0 +1,432 @@
+"""Shared pieces of the benchmarks: Panda models (real or a synthetic large-N layout), timing, and result files."""
+
+from __future__ import annotations
+
+import copy
+import datetime
+import inspect
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from types import SimpleNamespace
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+import numpy as np  # noqa: E402
+import warp as wp  # noqa: E402
+
+wp.config.log_level = wp.LOG_WARNING
+
+DEFAULT_OUT = ROOT / "bench" / "results"
+
+
+def parse_envs(text: str) -> list[int]:
+    """``"1,64,1k,4k,1M"`` -> [1, 64, 1024, 4096, 1048576]."""
+    out = []
+    for tok in text.replace(" ", "").split(","):
+        if not tok:
+            continue
+        mult = 1
+        if tok[-1] in "kK":
+            mult, tok = 1024, tok[:-1]
+        elif tok[-1] in "mM":
+            mult, tok = 1024 * 1024, tok[:-1]
+        out.append(int(float(tok) * mult))
+    return out
+
+
+def fmt_envs(n: int) -> str:
+    if n >= 1024 * 1024 and n % (1024 * 1024) == 0:
+        return f"{n // (1024 * 1024)}M"
+    if n >= 1024 and n % 1024 == 0:
+        return f"{n // 1024}k"
+    return str(n)
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# Models
+
+
+def panda_mode(name: str = "pd_joint_target_delta_pos", interpolate: bool = False) -> dict:
+    """A fresh copy of ManiSkill's Panda control mode ``name`` with ``interpolate`` set on every child."""
+    from wpctrl.robots import panda_control_modes
+
+    mode = panda_control_modes()[name]
+    out = {}
+    for uid, c in mode.items():
+        c = copy.deepcopy(c)
+        if hasattr(c, "interpolate"):
+            c.interpolate = interpolate
+        out[uid] = c
+    return out
+
+
+def build_panda_model(num_envs: int, device, *, gravity: bool = True, visual_shapes: bool = False):
+    """``num_envs`` Pandas (wpctrl.robots.panda), one per world, through ``ModelBuilder.replicate``."""
+    import newton
+
+    from wpctrl.robots import panda
+
+    g = None if gravity else (0.0, 0.0, 0.0)
+    builder = newton.ModelBuilder() if g is None else newton.ModelBuilder(gravity=g)
+    builder.replicate(panda(visual_shapes=visual_shapes), num_envs)
+    return builder.finalize(device=device)
+
+
+class _WideModel:
+    """What wpctrl's engine and its State/Control checks read from a model, for a synthetic layout."""
+
+    def __init__(self, device, coord_count: int, dof_count: int):
+        self.device = device
+        self.joint_coord_count = coord_count
+        self.joint_dof_count = dof_count
+
+
+@dataclass
+class ControllerSetup:
+    """A wpctrl controller over ``num_envs`` Pandas with its State and Control (the solver is not involved)."""
+
+    num_envs: int
+    layout_kind: str  # "real" (replicated model) or "synthetic" (a small model's layout tiled to num_envs)
+    ctrl: object
+    state: object
+    control: object
+    layout: object  # bench.reference_torch.JointLayout of the mode's joints
+    build_s: float
+
+    def new_control(self):
+        """Another Control with the same initial contents (for the torch baseline, so the two never alias)."""
+        c = self.control
+        return SimpleNamespace(
+            joint_target_q=wp.clone(c.joint_target_q),
+            joint_target_qd=wp.clone(c.joint_target_qd),
+            joint_f=wp.clone(c.joint_f),
+        )
+
+
+def real_setup(mode: dict, model, *, actuation: str, control_freq: int, sim_freq: int) -> ControllerSetup:
+    import wpctrl
+    from bench.reference_torch import layout_from_model
+
+    t0 = time.perf_counter()
+    ctrl = wpctrl.build_controller(mode, model, control_freq=control_freq, sim_freq=sim_freq, actuation=actuation)
+    state, control = model.state(), model.control()
+    layout = layout_from_model(model, list(ctrl.joint_names))
+    return ControllerSetup(int(model.world_count), "real", ctrl, state, control, layout, time.perf_counter() - t0)
+
+
+def synthetic_setup(
+    mode: dict, small_model, num_envs: int, *, actuation: str, control_freq: int, sim_freq: int
+) -> ControllerSetup:
+    """A controller for ``num_envs`` Pandas without building ``num_envs`` of them.
+
+    The controller is built through the public API on ``small_model`` (a few replicated worlds), then its engine is
+    rebuilt over the same rows with the per-world index tables tiled to ``num_envs`` worlds at ``replicate``'s stride,
+    over flat State/Control arrays tiled from the small model's first world. Kernels see exactly the layout that a
+    replicated model of ``num_envs`` Pandas has (tests/test_bench_reference.py checks it against a real model).
+    Uses wpctrl internals (``controllers._Engine``, ``binding.JointBinding``): bench-only.
+    """
+    import wpctrl
+    from bench.reference_torch import layout_from_model, tile_layout
+    from wpctrl.binding import JointBinding
+    from wpctrl.controllers import _Engine
+
+    t0 = time.perf_counter()
+    small = wpctrl.build_controller(
+        mode, small_model, control_freq=control_freq, sim_freq=sim_freq, actuation=actuation
+    )
+    eng0 = small._engine
+    b0 = eng0.binding
+    w = b0.num_envs
+    cs = small_model.joint_coord_count // w
+    ds = small_model.joint_dof_count // w
+    if small_model.joint_coord_count != w * cs or small_model.joint_dof_count != w * ds:
+        raise ValueError("synthetic layout: the small model's worlds differ in size")
+    if not (np.array_equal(b0.q_base - b0.q_base[0], np.arange(w) * cs)):
+        raise ValueError("synthetic layout: the small model's worlds are not at a constant stride")
+    e = np.arange(num_envs, dtype=np.int64)[:, None]
+    binding = JointBinding(
+        joint_names=list(b0.joint_names),
+        num_envs=num_envs,
+        joint_index=(b0.joint_index[:1] + e * (small_model.joint_count // w)).astype(np.int32),
+        coord_index=(b0.coord_index[:1] + e * cs).astype(np.int32),
+        dof_index=(b0.dof_index[:1] + e * ds).astype(np.int32),
+        q_base=(b0.q_base[0] + e[:, 0] * cs).astype(np.int32),
+        qd_base=(b0.qd_base[0] + e[:, 0] * ds).astype(np.int32),
+        q_off=b0.q_off.copy(),
+        qd_off=b0.qd_off.copy(),
+        qlimits=b0.qlimits.copy(),
+    )
+    dev = small_model.device
+    shim = _WideModel(dev, num_envs * cs, num_envs * ds)
+    # Rebuild with the small engine's options (passing only those this wpctrl version's _Engine takes).
+    extra = {
+        "explicit_pd": "stable" if getattr(eng0, "explicit_mode", 1) == 2 else "naive",
+        "inertia_update": getattr(eng0, "inertia_update", "control"),
+        "sim_dt": getattr(eng0, "sim_dt", 1.0 / sim_freq),
+    }
+    params = inspect.signature(_Engine).parameters
+    extra = {k: v for k, v in extra.items() if k in params}
+    if getattr(eng0, "needs_response", False):
+        raise NotImplementedError("synthetic layout: controllers that need the joint-space response need a real model")
+    engine = _Engine(eng0.rows, binding, shim, eng0.num_substeps, actuation, **extra)
+    ctrl = copy.copy(small)
+    ctrl._engine = engine
+    ctrl.children = {}  # the small controller's child views point at the small engine
+
+    def tile(arr, per_world):
+        return wp.array(np.tile(arr.numpy()[:per_world], num_envs), dtype=wp.float32, device=dev)
+
+    state = SimpleNamespace(joint_q=tile(small_model.joint_q, cs), joint_qd=tile(small_model.joint_qd, ds))
+    control = SimpleNamespace(
+        joint_target_q=tile(small_model.joint_target_q, cs),
+        joint_target_qd=tile(small_model.joint_target_qd, ds),
+        joint_f=wp.zeros(num_envs * ds, dtype=wp.float32, device=dev),
+    )
+    layout = tile_layout(layout_from_model(small_model, list(small.joint_names)), num_envs)
+    return ControllerSetup(num_envs, "synthetic", ctrl, state, control, layout, time.perf_counter() - t0)
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# Timing
+
+
+class Sync:
+    """Waits for all queued device work (Warp's stream and, on CUDA, torch's current stream)."""
+
+    def __init__(self, device):
+        self.device = wp.get_device(device)
+        self.cuda = self.device.is_cuda
+        self._torch = None
+        if self.cuda:
+            try:
+                import torch
+
+                if torch.cuda.is_available():
+                    self._torch = torch
+            except ImportError:
+                pass
+
+    def __call__(self) -> None:
+        if self.cuda:
+            wp.synchronize_device(self.device)
+            if self._torch is not None:
+                self._torch.cuda.synchronize()
+
+
+def measure(
+    fn,
+    sync,
+    *,
+    repeats: int = 5,
+    min_time: float = 0.02,
+    warmup: int = 3,
+    max_iters: int = 1 << 16,
+    clock: str = "wall",
+    min_iters: int = 1,
+) -> dict:
+    """Median seconds per call of ``fn``.
+
+    ``warmup`` calls, then a calibration that doubles the loop count until one loop takes ``min_time / 4``; each of
+    ``repeats`` samples times ``iters`` back-to-back calls between two device syncs (host launch cost and device time
+    overlap as they would in a training loop), divided by ``iters``. Every sample records wall time and the calling
+    thread's CPU time (``time.thread_time``); ``clock`` picks the one reported as ``median_s``. Thread time is the
+    robust choice on a shared CPU when all work runs on the calling thread (Warp's CPU backend, torch with 1 thread).
+    """
+    for _ in range(warmup):
+        fn()
+    sync()
+    iters = max(1, min_iters)
+    while True:
+        t0 = time.perf_counter()
+        for _ in range(iters):
+            fn()
+        sync()
+        dt = time.perf_counter() - t0
+        if dt >= min_time / 4 or iters >= max_iters:
+            break
+        iters *= 2
+    iters = int(min(max_iters, max(min_iters, 1, round(iters * min_time / max(dt, 1e-9)))))
+    wall, cpu = [], []
+    for _ in range(repeats):
+        sync()
+        t0 = time.perf_counter()
+        c0 = time.thread_time()
+        for _ in range(iters):
+            fn()
+        sync()
+        cpu.append((time.thread_time() - c0) / iters)
+        wall.append((time.perf_counter() - t0) / iters)
+    samples = cpu if clock == "thread" else wall
+    if not samples:
+        return {"median_s": float("nan"), "samples_s": [], "iters": iters}
+    return {
+        "median_s": statistics.median(samples),
+        "samples_s": samples,
+        "wall_median_s": statistics.median(wall),
+        "thread_median_s": statistics.median(cpu),
+        "clock": clock,
+        "iters": iters,
+    }
+
+
+def measure_interleaved(
+    fns: dict,
+    sync,
+    *,
+    repeats: int = 5,
+    min_time: float = 0.02,
+    warmup: int = 3,
+    max_iters: int = 1 << 16,
+    clock: str = "wall",
+) -> dict:
+    """:func:`measure` for several functions, with the samples taken round-robin (one sample of each per round).
+
+    On a shared or throttling machine, slow phases then hit every variant alike, so their ratios stay meaningful.
+    """
+    iters = {}
+    for name, fn in fns.items():
+        iters[name] = measure(fn, sync, repeats=0, min_time=min_time, warmup=warmup, max_iters=max_iters)["iters"]
+    wall = {n: [] for n in fns}
+    cpu = {n: [] for n in fns}
+    for _ in range(repeats):
+        for name, fn in fns.items():
+            it = iters[name]
+            sync()
+            t0 = time.perf_counter()
+            c0 = time.thread_time()
+            for _ in range(it):
+                fn()
+            sync()
+            cpu[name].append((time.thread_time() - c0) / it)
+            wall[name].append((time.perf_counter() - t0) / it)
+    out = {}
+    for name in fns:
+        samples = cpu[name] if clock == "thread" else wall[name]
+        out[name] = {
+            "median_s": statistics.median(samples),
+            "samples_s": samples,
+            "wall_median_s": statistics.median(wall[name]),
+            "thread_median_s": statistics.median(cpu[name]),
+            "clock": clock,
+            "iters": iters[name],
+        }
+    return out
+
+
+def load_average() -> list[float]:
+    try:
+        return list(os.getloadavg())
+    except OSError:
+        return []
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# Metadata and result files
+
+
+def _sh(cmd: str) -> str:
+    try:
+        return subprocess.run(cmd, shell=True, capture_output=True, text=True, timeout=10).stdout.strip()
+    except Exception:  # noqa: BLE001
+        return ""
+
+
+def machine_info(device) -> dict:
+    import newton
+
+    info = {
+        "date_utc": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC"),
+        "host": platform.node(),
+        "platform": platform.platform(),
+        "python": platform.python_version(),
+        "cpu": _sh("lscpu | grep 'Model name' | sed 's/Model name:\\s*//'") or platform.processor(),
+        "cpu_count": os.cpu_count(),
+        "warp": wp.__version__,
+        "newton": newton.__version__,
+        "numpy": np.__version__,
+        "device": str(device),
+        "wpctrl_commit": _sh(f"cd '{ROOT}' && git rev-parse --short HEAD 2>/dev/null") or "unknown",
+        "wpctrl_dirty": bool(_sh(f"cd '{ROOT}' && git status --porcelain wpctrl 2>/dev/null")),
+    }
+    try:
+        import torch
+
+        info["torch"] = torch.__version__
+        info["torch_threads"] = torch.get_num_threads()
+        if torch.cuda.is_available():
+            info["torch_cuda"] = torch.version.cuda
+    except ImportError:
+        pass
+    try:
+        import mujoco_warp
+
+        info["mujoco_warp"] = getattr(mujoco_warp, "__version__", "?")
+    except ImportError:
+        pass
+    d = wp.get_device(device)
+    info["device_name"] = d.name
+    if d.is_cuda:
+        info["gpu"] = d.name
+        info["gpu_arch"] = d.arch
+        info["driver"] = _sh("nvidia-smi --query-gpu=driver_version --format=csv,noheader | head -1")
+    return info
+
+
+def write_results(out_dir, stem: str, meta: dict, rows: list[dict], markdown: str) -> tuple[Path, Path]:
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    jpath = out / f"{stem}.json"
+    mpath = out / f"{stem}.md"
+    jpath.write_text(json.dumps({"meta": meta, "rows": rows}, indent=1))
+    mpath.write_text(markdown)
+    return jpath, mpath
+
+
+def meta_markdown(meta: dict) -> str:
+    keys = [
+        "date_utc",
+        "device",
+        "device_name",
+        "cpu",
+        "cpu_count",
+        "python",
+        "warp",
+        "newton",
+        "torch",
+        "torch_threads",
+        "mujoco_warp",
+        "driver",
+        "wpctrl_commit",
+    ]
+    return "; ".join(f"{k}: {meta[k]}" for k in keys if k in meta)
+
+
+def md_table(header: list[str], rows: list[list]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    for r in rows:
+        lines.append("| " + " | ".join(str(x) for x in r) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def fmt_us(seconds: float) -> str:
+    us = seconds * 1e6
+    if us >= 100:
+        return f"{us:,.0f}"
+    if us >= 10:
+        return f"{us:.1f}"
+    return f"{us:.2f}"
+
+
+def fmt_ratio(x: float | None) -> str:
+    if x is None:
+        return "–"
+    return f"{x:.2f}×" if x < 10 else f"{x:.1f}×"

@@ -51,7 +51,8 @@ def _run(device, mode, actuation, acts, qs, resets, graph=False):
             if resets[i] is not None:
                 mask.assign(resets[i])
                 h.ctrl.reset(h.state, env_ids=mask)
-            out.append((h.ctrl.target_qpos.numpy(), h.drive_q(), h.drive_qd(), h.joint_f()))
+            # .numpy() of a CPU array is a view of live memory: copy each step's values
+            out.append((h.ctrl.target_qpos.numpy().copy(), h.drive_q(), h.drive_qd(), h.joint_f()))
         return out
 
 

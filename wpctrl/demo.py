@@ -179,9 +179,12 @@ def run(args) -> dict:
         for _ in range(K):
             ctrl.before_simulation_step(s0, control)
 
-    def solver_part():
+    def advance(with_controller: bool):
+        """K solver substeps (with wpctrl's substep call before each); the final state ends up in s0."""
         a, b = s0, s1
         for _ in range(K):
+            if with_controller:
+                ctrl.before_simulation_step(a, control)
             solver.step(a, b, control, None, dt)
             if maximal:
                 newton.eval_ik(model, b, b.joint_q, b.joint_qd)
@@ -189,17 +192,12 @@ def run(args) -> dict:
         if a is not s0:
             s0.assign(a)
 
+    def solver_part():
+        advance(with_controller=False)
+
     def control_step():
         ctrl.set_action(action, s0)
-        a, b = s0, s1
-        for _ in range(K):
-            ctrl.before_simulation_step(a, control)
-            solver.step(a, b, control, None, dt)
-            if maximal:
-                newton.eval_ik(model, b, b.joint_q, b.joint_qd)
-            a, b = b, a
-        if a is not s0:
-            s0.assign(a)
+        advance(with_controller=True)
 
     graph = None
     if args.graph:

@@ -7,7 +7,7 @@
 # Writes 6 files (the device machine returns at most 8): controller_step_cuda.md, profile_overhead_cuda.md,
 # rollout_cuda.md, inertia_update_cuda.md, run_gpu.log (with the CUDA tests' output), and json.tar holding the JSON files
 # (tar -xf json.tar -C bench/results). Each stage has a time limit so that a slow stage cannot starve the others.
-# Sizes: CTRL_ENVS, ROLLOUT_ENVS, ROLLOUT_SOLVERS, LAYOUT_ENVS, REPEATS; DEVICE (default cuda:0; "cpu" only to test
+# Sizes: CTRL_ENVS, ROLLOUT_ENVS, ROLLOUT_SOLVERS, REPEATS; DEVICE (default cuda:0; "cpu" only to test
 # the script: use the CPU commands of bench/README.md for CPU numbers).
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -20,7 +20,6 @@ export PYTHONUNBUFFERED=1
 CTRL_ENVS=${CTRL_ENVS:-1,64,1k,4k,16k,64k,256k,1M}
 ROLLOUT_ENVS=${ROLLOUT_ENVS:-1k,4k}
 ROLLOUT_SOLVERS=${ROLLOUT_SOLVERS:-mujoco,xpbd}
-LAYOUT_ENVS=${LAYOUT_ENVS:-1,4k,64k,256k,1M}
 REPEATS=${REPEATS:-5}
 DEVICE=${DEVICE:-cuda:0}
 LOG="$OUT/run_gpu.log"

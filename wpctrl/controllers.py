@@ -377,12 +377,6 @@ class _Engine:
 # Input conversion (host checks only: shapes, dtypes and devices are metadata, nothing is read back).
 
 
-@wp.kernel
-def _cast_f64_kernel(src_in: wp.array2d[wp.float64], dst_out: wp.array2d[float]):
-    i, j = wp.tid()
-    dst_out[i, j] = float(src_in[i, j])
-
-
 def _check_shape(name: str, shape: tuple, num_envs: int, dim: int) -> None:
     if tuple(shape) != (num_envs, dim):
         raise ValueError(f"{name}: expected shape ({num_envs}, {dim}) (num_envs, action_dim), got {tuple(shape)}")
@@ -437,7 +431,7 @@ def _action_array(action, num_envs: int, dim: int, device, buffer: wp.array, cac
             return a
         if a.dtype == wp.float64:
             if dim:
-                wp.launch(_cast_f64_kernel, dim=a.shape, inputs=[a, buffer], device=device)
+                wp.launch(K._cast_f64_kernel, dim=a.shape, inputs=[a, buffer], device=device)
             return buffer
         raise TypeError(f"action: expected a float32 (or float64) wp.array, got dtype {wp.types.type_repr(a.dtype)}")
     a = np.asarray(action)
@@ -514,7 +508,7 @@ def _env_selection(env_ids, num_envs: int, device):
     return wp.array(a.astype(np.int32), dtype=wp.int32, device=device), None
 
 
-def _as_rows_array(name: str, value, shape: tuple, device) -> np.ndarray:
+def _as_rows_array(name: str, value, shape: tuple) -> np.ndarray:
     if _is_torch(value):
         value = value.detach().cpu().numpy()
     elif isinstance(value, wp.array):
@@ -852,9 +846,7 @@ class BaseController:
         if not state or not self._uses_target:
             return
         eng = self._engine
-        new = _as_rows_array(
-            "target_qpos", state["target_qpos"], (eng.num_envs, self._rows.stop - self._rows.start), eng.device
-        )
+        new = _as_rows_array("target_qpos", state["target_qpos"], (eng.num_envs, self._rows.stop - self._rows.start))
         full = eng.target_qpos.numpy()
         full[:, self._rows] = new
         eng.target_qpos.assign(full)

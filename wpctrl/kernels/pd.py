@@ -335,3 +335,15 @@ def _accel_gains_kernel(
         resp = response_in[env, r]
         joint_target_ke_out[di] = kp[_bidx(kp.shape[0], env), r] / resp
         joint_target_kd_out[di] = kd[_bidx(kd.shape[0], env), r] / resp
+
+
+@wp.kernel
+def _cast_f64_kernel(
+    # In:
+    src_in: wp.array2d[wp.float64],
+    # Out:
+    dst_out: wp.array2d[float],
+):
+    """A float64 action copied into the controller's float32 action buffer."""
+    i, j = wp.tid()
+    dst_out[i, j] = float(src_in[i, j])

@@ -132,12 +132,12 @@ def synthetic_setup(
     rebuilt over the same rows with the per-world index tables tiled to ``num_envs`` worlds at ``replicate``'s stride,
     over flat State/Control arrays tiled from the small model's first world. Kernels see exactly the layout that a
     replicated model of ``num_envs`` Pandas has (tests/test_bench_reference.py checks it against a real model).
-    Uses wpctrl internals (``controllers._Engine``, ``binding.JointBinding``): bench-only.
+    Uses wpctrl internals (``engine._Engine``, ``binding.JointBinding``): bench-only.
     """
     import wpctrl
     from bench.reference_torch import layout_from_model, tile_layout
     from wpctrl.binding import JointBinding
-    from wpctrl.controllers import _Engine
+    from wpctrl.engine import _Engine
 
     t0 = time.perf_counter()
     small = wpctrl.build_controller(

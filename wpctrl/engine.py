@@ -1,0 +1,350 @@
+"""The device engine of one control mode: its arrays, its recorded kernel launches, the model's drive properties.
+
+One control mode (all rows of a single config or a ManiSkill ``{uid: config}`` dict) is one :class:`_Engine` with
+one kernel launch per stage: ``set_action`` (1 launch), ``substep`` (1 launch per solver substep) and ``reset``
+(1 launch). Launches are recorded once and re-bound only where an argument changed (:class:`_Launch`).
+"""
+
+from __future__ import annotations
+
+import newton
+import numpy as np
+import warp as wp
+
+from . import config as cfg
+from .binding import JointBinding
+from .kernels import pd as K
+
+
+class _Launch:
+    """A recorded ``wp.launch`` whose parameters are re-bound (by name) only when they change."""
+
+    def __init__(self, kernel, dim, params: dict, device):
+        names = [a.label for a in kernel.adj.args]
+        assert list(params) == names, f"{kernel.key}: parameters {list(params)} != {names}"
+        self._cmd = wp.launch(kernel, dim=dim, inputs=list(params.values()), device=device, record_cmd=True)
+        self._index = {n: i for i, n in enumerate(names)}
+        self._keys = [_key(v) for v in params.values()]
+
+    def bind(self, name: str, value) -> None:
+        i = self._index[name]
+        k = _key(value)
+        if self._keys[i] != k:
+            self._cmd.set_param_at_index(i, value)
+            self._keys[i] = k
+
+    def launch(self) -> None:
+        self._cmd.launch()
+
+
+def _key(v):
+    if isinstance(v, wp.array):
+        return (v.ptr, v.shape, v.strides)
+    return v
+
+
+class _Engine:
+    """Device arrays and launches of one control mode (all rows, all envs)."""
+
+    def __init__(
+        self,
+        rows: cfg.Rows,
+        binding: JointBinding,
+        model: newton.Model,
+        num_substeps: int,
+        actuation: str,
+        explicit_pd: str = "naive",
+        inertia_update: str = "control",
+        sim_dt: float = 0.01,
+    ):
+        self.rows = rows
+        self.binding = binding
+        self.model = model
+        self.device = model.device
+        self.num_envs = binding.num_envs
+        self.num_rows = rows.count
+        self.action_dim = rows.action_dim
+        self.num_substeps = num_substeps
+        self.explicit = actuation == "explicit"
+        self.explicit_mode = 0 if not self.explicit else (2 if explicit_pd == "stable" else 1)
+        self.sim_dt = float(sim_dt)
+        self.inertia_update = inertia_update
+        self.solver = None  # notified after per-env gain edits (implicit acceleration drive)
+        dev = self.device
+        E, R = self.num_envs, self.num_rows
+
+        def up(a, dtype):
+            return wp.array(np.ascontiguousarray(a), dtype=dtype, device=dev)
+
+        self.row_kind = up(rows.kind, wp.int32)
+        self.row_flags = up(rows.flags, wp.int32)
+        self.row_act_col = up(rows.act_col, wp.int32)
+        self.row_vel_col = up(rows.vel_col, wp.int32)
+        self.row_lo = up(rows.lo, wp.float32)
+        self.row_hi = up(rows.hi, wp.float32)
+        self.row_vlo = up(rows.vlo, wp.float32)
+        self.row_vhi = up(rows.vhi, wp.float32)
+        self.row_mimic_src = up(rows.mimic_src, wp.int32)
+        # Followers of each row (CSR): set_action's source-row thread writes them.
+        order = np.argsort(rows.mimic_src, kind="stable")
+        order = order[rows.mimic_src[order] >= 0]
+        counts = np.bincount(rows.mimic_src[order], minlength=R) if R else np.zeros(0, np.int64)
+        self.row_follow_start = up(np.concatenate([[0], np.cumsum(counts)]).astype(np.int32), wp.int32)
+        self.row_follow = up(order.astype(np.int32) if order.size else np.zeros(1, np.int32), wp.int32)
+        leads = np.nonzero(rows.mimic_src < 0)[0]
+        self.lead_row = int(leads[0]) if leads.size else 0
+        self.row_mimic_mul = up(rows.mimic_mul, wp.float32)
+        self.row_mimic_off = up(rows.mimic_off, wp.float32)
+        self.row_q_off = up(binding.q_off, wp.int32)
+        self.row_qd_off = up(binding.qd_off, wp.int32)
+        self.env_q_base = up(binding.q_base, wp.int32)
+        self.env_qd_base = up(binding.qd_base, wp.int32)
+        self.kp = up(rows.kp[None, :], wp.float32)
+        self.kd = up(rows.kd[None, :], wp.float32)
+        self.force_limit = up(rows.force_limit[None, :], wp.float32)
+        self.row_accel = up(rows.accel.astype(np.int32), wp.int32)
+        self.has_accel = bool(rows.accel.any())
+        # The joint-space response r = (H^-1)_ii per env and row: acceleration drives and stable explicit PD need it.
+        self.needs_response = self.has_accel or self.explicit_mode == 2
+        self.response = wp.ones((E if self.needs_response else 1, max(R, 1)), dtype=wp.float32, device=dev)
+        self._jsr = None
+        if self.needs_response:
+            self._init_response(model, binding)
+
+        self.start_qpos = wp.zeros((E, R), dtype=wp.float32, device=dev)
+        self.target_qpos = wp.zeros((E, R), dtype=wp.float32, device=dev)
+        self.target_qvel = wp.zeros((E, R), dtype=wp.float32, device=dev)
+        self.processed_action = wp.zeros((E, self.action_dim), dtype=wp.float32, device=dev)
+        self.step = wp.zeros(E, dtype=wp.int32, device=dev)
+        self.row_step = wp.zeros((E, R), dtype=wp.int32, device=dev)
+        self.dim = E * R  # one thread per (env, row)
+        self.bad_action_count = wp.zeros(E, dtype=wp.int32, device=dev)
+        self.action_buffer = wp.zeros((E, self.action_dim), dtype=wp.float32, device=dev)
+        self.wrappers: dict = {}  # zero-copy wp.array views of torch actions, by (address, strides)
+        self._launch_set_action: _Launch | None = None
+        self._launch_substep: _Launch | None = None
+        self._reset_count = 0
+
+    def _init_response(self, model: newton.Model, binding: JointBinding) -> None:
+        from newton.actuators import JointSpaceResponse
+
+        art = model.joint_articulation.numpy()[binding.joint_index]  # (E, R)
+        if (art < 0).any():
+            raise cfg.ConfigError(
+                "drive_mode: 'acceleration' and stable explicit PD need the joints to be in an articulation "
+                "(ModelBuilder.add_articulation)"
+            )
+        art_dof0 = model.joint_qd_start.numpy()[model.articulation_start.numpy()[art]]
+        local = binding.dof_index - art_dof0  # (E, R) DOF index inside its articulation
+        base = art[:, 0]
+        if ((art - base[:, None]) != (art[:1] - base[:1])).any() or (local != local[:1]).any():
+            raise cfg.ConfigError("joint_names: the articulations are laid out differently across worlds")
+        dev = self.device
+        self.row_art_off = wp.array((art[0] - base[0]).astype(np.int32), dtype=wp.int32, device=dev)
+        self.row_art_dof = wp.array(local[0].astype(np.int32), dtype=wp.int32, device=dev)
+        self.env_art_base = wp.array(base.astype(np.int32), dtype=wp.int32, device=dev)
+        self._jsr = JointSpaceResponse(model)
+
+    def update_response(self, state) -> None:
+        """Recompute r = (H^-1)_ii for the current configuration; with an implicit acceleration drive, write the
+        per-env solver gains Kp / r, Kd / r into the model (and notify the solver, if one was given)."""
+        if not self.needs_response:
+            return
+        self._jsr.refresh(state)
+        wp.launch(
+            K._response_kernel,
+            dim=self.dim,
+            inputs=[self.row_art_off, self.row_art_dof, self.env_art_base, self._jsr.inverse_blocks, self.response],
+            device=self.device,
+        )
+        if self.has_accel and not self.explicit:
+            m = self.model
+            wp.launch(
+                K._accel_gains_kernel,
+                dim=self.dim,
+                inputs=[
+                    self.row_accel,
+                    self.row_qd_off,
+                    self.env_qd_base,
+                    self.kp,
+                    self.kd,
+                    self.response,
+                    m.joint_target_ke,
+                    m.joint_target_kd,
+                ],
+                device=self.device,
+            )
+            if self.solver is not None:
+                self.solver.notify_model_changed(newton.ModelFlags.JOINT_DOF_FORCE_PROPERTIES)
+
+    # -- stages ---------------------------------------------------------------------------------------------------
+
+    def set_action(self, action: wp.array, state) -> None:
+        if self.inertia_update == "control":
+            self.update_response(state)
+        if self._launch_set_action is None:
+            self._launch_set_action = _Launch(
+                K._set_action_kernel,
+                self.dim,
+                {
+                    "row_kind": self.row_kind,
+                    "row_flags": self.row_flags,
+                    "row_act_col": self.row_act_col,
+                    "row_vel_col": self.row_vel_col,
+                    "row_lo": self.row_lo,
+                    "row_hi": self.row_hi,
+                    "row_vlo": self.row_vlo,
+                    "row_vhi": self.row_vhi,
+                    "row_mimic_src": self.row_mimic_src,
+                    "row_follow_start": self.row_follow_start,
+                    "row_follow": self.row_follow,
+                    "row_mimic_mul": self.row_mimic_mul,
+                    "row_mimic_off": self.row_mimic_off,
+                    "row_q_off": self.row_q_off,
+                    "lead_row": self.lead_row,
+                    "env_q_base": self.env_q_base,
+                    "action_in": action,
+                    "joint_q_in": state.joint_q,
+                    "processed_action_out": self.processed_action,
+                    "start_qpos_out": self.start_qpos,
+                    "target_qpos_out": self.target_qpos,
+                    "target_qvel_out": self.target_qvel,
+                    "step_out": self.step,
+                    "row_step_out": self.row_step,
+                    "bad_action_count_out": self.bad_action_count,
+                },
+                self.device,
+            )
+        ln = self._launch_set_action
+        ln.bind("action_in", action)
+        ln.bind("joint_q_in", state.joint_q)
+        ln.launch()
+
+    def substep(self, state: newton.State, control: newton.Control) -> None:
+        if self.inertia_update == "substep":
+            self.update_response(state)
+        joint_f = control.joint_f if self.explicit else None
+        if self._launch_substep is None:
+            self._launch_substep = _Launch(
+                K._substep_kernel,
+                self.dim,
+                {
+                    "row_kind": self.row_kind,
+                    "row_flags": self.row_flags,
+                    "row_q_off": self.row_q_off,
+                    "row_qd_off": self.row_qd_off,
+                    "env_q_base": self.env_q_base,
+                    "env_qd_base": self.env_qd_base,
+                    "kp": self.kp,
+                    "kd": self.kd,
+                    "force_limit": self.force_limit,
+                    "row_accel": self.row_accel,
+                    "num_substeps": self.num_substeps,
+                    "explicit_pd": self.explicit_mode,
+                    "dt": self.sim_dt,
+                    "joint_q_in": state.joint_q,
+                    "joint_qd_in": state.joint_qd,
+                    "response_in": self.response,
+                    "start_qpos_in": self.start_qpos,
+                    "target_qpos_in": self.target_qpos,
+                    "target_qvel_in": self.target_qvel,
+                    "step_out": self.step,
+                    "row_step_out": self.row_step,
+                    "joint_target_q_out": control.joint_target_q,
+                    "joint_target_qd_out": control.joint_target_qd,
+                    "joint_f_out": joint_f,
+                },
+                self.device,
+            )
+        ln = self._launch_substep
+        ln.bind("joint_q_in", state.joint_q)
+        ln.bind("joint_qd_in", state.joint_qd)
+        ln.bind("joint_target_q_out", control.joint_target_q)
+        ln.bind("joint_target_qd_out", control.joint_target_qd)
+        ln.bind("joint_f_out", joint_f)
+        ln.launch()
+
+    def reset(self, state, env_ids, env_mask, control, first: bool) -> None:
+        dim = (self.num_envs if env_ids is None else env_ids.shape[0]) * self.num_rows
+        if dim == 0:
+            return
+        wp.launch(
+            K._reset_kernel,
+            dim=dim,
+            inputs=[
+                self.row_kind,
+                self.row_flags,
+                self.row_q_off,
+                self.row_qd_off,
+                self.env_q_base,
+                self.env_qd_base,
+                int(first),
+                env_ids,
+                env_mask,
+                state.joint_q,
+                state.joint_qd,
+                self.start_qpos,
+                self.target_qpos,
+                self.target_qvel,
+                self.step,
+                self.row_step,
+                None if control is None else control.joint_target_q,
+                None if control is None else control.joint_target_qd,
+                None if (control is None or not self.explicit) else control.joint_f,
+            ],
+            device=self.device,
+        )
+
+    # -- model drive properties -----------------------------------------------------------------------------------
+
+    def apply_drive_properties(self) -> bool:
+        """Write gains, target modes, effort limits and friction into the model (as ManiSkill's set_drive_property).
+
+        Returns:
+            Whether any ``joint_target_mode`` changed (solvers such as MuJoCo fix actuators at construction).
+        """
+        m = self.model
+        rows = self.rows
+        dof = self.binding.dof_index  # (E, R)
+        coord = self.binding.coord_index
+        ke = m.joint_target_ke.numpy()
+        kd = m.joint_target_kd.numpy()
+        mode = m.joint_target_mode.numpy()
+        eff = m.joint_effort_limit.numpy()
+        fric = m.joint_friction.numpy()
+        old_mode = mode.copy()
+        vel_target = (rows.kind != cfg.ROW_POS) | ((rows.flags & cfg.FLAG_VEL_TARGET) != 0)
+        if self.explicit:
+            row_mode = np.full(self.num_rows, int(newton.JointTargetMode.EFFORT), np.int32)
+            ke[dof] = 0.0
+            kd[dof] = 0.0
+        else:
+            row_mode = np.where(
+                rows.kind == cfg.ROW_POS,
+                np.where(
+                    vel_target, int(newton.JointTargetMode.POSITION_VELOCITY), int(newton.JointTargetMode.POSITION)
+                ),
+                int(newton.JointTargetMode.VELOCITY),
+            ).astype(np.int32)
+            ke[dof] = rows.kp[None, :]
+            kd[dof] = rows.kd[None, :]
+        mode[dof] = row_mode[None, :]
+        eff[dof] = rows.force_limit[None, :]
+        fric[dof] = rows.friction[None, :]
+        m.joint_target_ke.assign(ke)
+        m.joint_target_kd.assign(kd)
+        m.joint_target_mode.assign(mode)
+        m.joint_effort_limit.assign(eff)
+        m.joint_friction.assign(fric)
+        # Initial targets of Model.control(): position rows hold the model's initial pose; rows without a position
+        # drive (stiffness 0) get 0, PhysX's default target, as in ManiSkill; velocity targets are 0.
+        tq = m.joint_target_q.numpy()
+        tqd = m.joint_target_qd.numpy()
+        q0 = m.joint_q.numpy()
+        pos = rows.kind == cfg.ROW_POS
+        tq[coord[:, pos]] = q0[coord[:, pos]]
+        tq[coord[:, ~pos]] = 0.0
+        tqd[dof[:, vel_target]] = 0.0
+        m.joint_target_q.assign(tq)
+        m.joint_target_qd.assign(tqd)
+        return bool((old_mode != mode).any())

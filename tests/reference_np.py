@@ -11,7 +11,11 @@ Where wpctrl deliberately differs from ManiSkill, this reference follows wpctrl:
    velocity as its velocity target on the first reset and 0 on later ones; PDJointVel and passive joints get 0 on
    every reset. At construction every buffer holds the model's initial pose (velocity targets 0).
 2. Drive targets are written at every substep; a reset with a control also writes the reset envs' targets (and zeroes
-   their explicit torques).
+   their explicit torques). Exception, a mode without per-substep work (implicit actuation, no interpolation, no
+   per-substep inertia update): the targets are constant over a control step, so they are written into the Control
+   the controller knows (the last one given to a substep or a reset) when they change (set_action: accepted envs;
+   reset, with or without a control: the reset envs), and a substep writes only a Control not known yet (every env).
+   A reset with a Control not known yet writes every env's targets into it; set_state forgets the Control.
 3. Interpolation holds at the K-th value past K: ``start + ((target - start) / K) * min(k, K)``, computed from the
    current start and target.
 4. An env whose flat action holds any NaN/Inf is left completely untouched and counted.
@@ -141,6 +145,14 @@ class RefController:
     def drive_target_q(self) -> np.ndarray | None:
         """(N, n) position drive target at the current substep counter, or None (no position drive)."""
         return None
+
+    def drive_writes(self, mask: np.ndarray, writes: dict) -> None:
+        """The drive targets a substep writes (position and velocity targets, no torque), for the envs in ``mask``."""
+        tq = self.drive_target_q()
+        if tq is not None:
+            _write(writes, "target_q", mask, self.cols, tq)
+        if self.has_vel_target:
+            _write(writes, "target_qd", mask, self.cols, self.target_qvel)
 
     def before_simulation_step(self, q, qd, response, explicit_pd: str | None, dt, writes: dict) -> None:
         """One substep: count it, write the drive targets and, with explicit actuation, the clamped PD torque.
@@ -391,6 +403,7 @@ class RefCombined:
         actuation: str = "implicit",
         explicit_pd: str = "naive",
         sim_dt: float = 0.01,
+        inertia_update: str = "control",
     ):
         configs = dict(config) if isinstance(config, Mapping) else {"": config}
         configs.pop("balance_passive_force", None)
@@ -411,6 +424,13 @@ class RefCombined:
         self.action_dim = col
         self.bad_action_count = np.zeros(num_envs, np.int64)
         self.num_resets = 0
+        # Per-substep work: explicit torques, interpolation, or r = (H^-1)_ii refreshed every substep for an
+        # acceleration drive. Without it, drive targets are written when they change, into the known Control.
+        kids = self.children.values()
+        interpolates = any(getattr(c.config, "interpolate", False) for c in kids)
+        accel_per_substep = inertia_update == "substep" and any(c.accel.any() for c in kids)
+        self.per_substep = self.explicit or interpolates or accel_per_substep
+        self.knows_control = False
 
     @property
     def action_low(self) -> np.ndarray:
@@ -437,29 +457,40 @@ class RefCombined:
         writes = empty_writes(self.N, len(self.robot.joint_names))
         for ch in self.children.values():
             ch.reset(q, qd, mask, first)
-            if with_control:
+            if with_control or (not self.per_substep and self.knows_control):
                 ch.reset_writes(q, mask, self.explicit, writes)
+            if with_control and not self.per_substep and not self.knows_control:
+                ch.drive_writes(np.ones(self.N, bool), writes)
+        if with_control and not self.per_substep:
+            self.knows_control = True
         return writes
 
-    def set_action(self, action, q) -> None:
+    def set_action(self, action, q) -> dict:
+        """Returns the drive writes (none, unless a mode without per-substep work knows a Control)."""
         a = np.asarray(action).astype(F32).reshape(self.N, self.action_dim)
         good = np.isfinite(a).all(axis=1)
         self.bad_action_count[~good] += 1
         q = np.asarray(q, F32)
+        writes = empty_writes(self.N, len(self.robot.joint_names))
         with np.errstate(invalid="ignore", over="ignore"):  # rejected envs are computed, then dropped
             for uid, ch in self.children.items():
                 s, e = self.action_mapping[uid]
                 ch.set_action(a[:, s:e], q, good)
+                if not self.per_substep and self.knows_control:
+                    ch.drive_writes(good, writes)
+        return writes
 
     def before_simulation_step(self, q, qd, response: Mapping | None = None) -> dict:
         """``response``: {uid: (N, n) r} for children with acceleration drives or under stable explicit PD."""
         q, qd = np.asarray(q, F32), np.asarray(qd, F32)
         writes = empty_writes(self.N, len(self.robot.joint_names))
+        unchanged = not self.per_substep and self.knows_control  # the known Control already holds the targets
         for uid, ch in self.children.items():
             r = (response or {}).get(uid)
             r = np.ones((self.N, ch.n), F32) if r is None else r
             ch.before_simulation_step(q, qd, r, self.explicit_pd, self.dt, writes)
-        return writes
+        self.knows_control = True
+        return empty_writes(self.N, len(self.robot.joint_names)) if unchanged else writes
 
     def initial_control_targets(self, q0) -> dict:
         """Drive targets of a ``Model.control()`` made after construction: the initial pose on position joints, 0 on
@@ -481,6 +512,7 @@ class RefCombined:
         return {uid: s for uid, ch in self.children.items() if (s := ch.get_state())}
 
     def set_state(self, state, single: bool) -> None:
+        self.knows_control = False
         if single:
             self.children[""].set_state(state)
             return

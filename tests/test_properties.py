@@ -261,7 +261,15 @@ class Harness:
             )
         robot = RefRobot(PANDA_JOINTS, self.layout.limits)
         self.ref = RefCombined(
-            mode, robot, num_envs, num_substeps, self.layout.q0, actuation, explicit_pd, 1.0 / (20 * num_substeps)
+            mode,
+            robot,
+            num_envs,
+            num_substeps,
+            self.layout.q0,
+            actuation,
+            explicit_pd,
+            1.0 / (20 * num_substeps),
+            inertia_update=inertia_update,
         )
         self.nan_policy = nan_policy
         self.state = self.model.state()
@@ -443,7 +451,7 @@ class Harness:
                     self.ctrl.set_action(self.as_input(a), self.state)
             else:
                 self.ctrl.set_action(self.as_input(a), self.state)
-                self.ref.set_action(a, self.q)
+                self.apply(self.ref.set_action(a, self.q))
             self.check("set_action")
         for k in range(self.K + int(self.rng.integers(0, 2)) * self.K):  # sometimes keep stepping past K
             if self.rng.random() < 0.5:

@@ -33,7 +33,10 @@ class BaseController:
     step call :meth:`set_action` once, then :meth:`before_simulation_step` before every solver substep. Drive
     targets are written into the ``Control`` in :meth:`before_simulation_step` (implicit actuation:
     ``joint_target_q``/``joint_target_qd``, the solver's built-in PD acts); explicit actuation also writes
-    ``joint_f = clamp(Kp (q* - q) + Kd (qd* - qd), -force_limit, force_limit)`` [N·m or N].
+    ``joint_f = clamp(Kp (q* - q) + Kd (qd* - qd), -force_limit, force_limit)`` [N·m or N]. Without per-substep
+    work (implicit actuation, no interpolation) the targets are constant over the control step: :meth:`set_action`
+    writes them into the Control last given to :meth:`before_simulation_step` or :meth:`reset`, and
+    :meth:`before_simulation_step` launches nothing unless it is handed another Control.
     """
 
     sets_target_qpos = False
@@ -224,8 +227,14 @@ class BaseController:
 
     @property
     def step_counter(self) -> wp.array:
-        """(num_envs,) int32 substeps since the last set_action or reset (ManiSkill's ``_step``, per env)."""
-        return self._engine.step
+        """(num_envs,) int32 substeps since the last set_action or reset (ManiSkill's ``_step``, per env).
+
+        With per-substep work (explicit actuation, interpolation) this is the live device counter. Without it no
+        substep launch exists to count: the value is the device's per-env part (set by set_action / reset) plus the
+        host's count of before_simulation_step calls since the last set_action, refreshed (one launch) at every read
+        of this property. A replayed graph of set_action + K substeps reads K, as eagerly; the host does not see graph
+        replays, so substeps run outside such a graph between replays are not counted by the next replay."""
+        return self._engine.step_counter()
 
     @property
     def bad_action_count(self) -> wp.array:
@@ -297,11 +306,23 @@ class BaseController:
 
     def before_simulation_step(self, state: newton.State, control: newton.Control) -> None:
         """Call once before every solver substep: writes the (interpolated) drive targets and, for explicit
-        actuation, the PD torques into ``control``. One kernel launch."""
+        actuation, the PD torques into ``control``. One kernel launch.
+
+        Without per-substep work (implicit actuation, no interpolating row) the drive targets do not change between
+        substeps and set_action already wrote them into the known Control (the one last given here or to
+        :meth:`reset`): no launch. A different Control (other ``joint_target_q``/``qd`` arrays: double-buffered
+        controls) gets the targets written (one launch) and becomes the known one. If you overwrite the known
+        Control's targets yourself (e.g. ``Control.clear()``), call :meth:`invalidate_control`."""
         self._require_owner("before_simulation_step")
         self._check_state(state, "before_simulation_step")
         self._check_control(control, "before_simulation_step")
         self._engine.substep(state, control)
+
+    def invalidate_control(self) -> None:
+        """Forget which Control holds the current drive targets: the next :meth:`before_simulation_step` writes them
+        again. Only needed without per-substep work, after something other than wpctrl wrote the targets."""
+        self._require_owner("invalidate_control")
+        self._engine.forget_control()
 
     def reset(self, state: newton.State, env_ids=None, control: newton.Control | None = None) -> None:
         """Re-initialise the targets of ``env_ids`` (None: all) from the measured ``state``: start = target = q.
@@ -353,6 +374,7 @@ class BaseController:
         full = eng.target_qpos.numpy()
         full[:, self._rows] = new
         eng.target_qpos.assign(full)
+        eng.forget_control()  # the Control's drive targets are now stale: the next substep rewrites them
 
     def __repr__(self) -> str:
         inner = ", ".join(self.joint_names)

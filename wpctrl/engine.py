@@ -3,6 +3,12 @@
 One control mode (all rows of a single config or a ManiSkill ``{uid: config}`` dict) is one :class:`_Engine` with
 one kernel launch per stage: ``set_action`` (1 launch), ``substep`` (1 launch per solver substep) and ``reset``
 (1 launch). Launches are recorded once and re-bound only where an argument changed (:class:`_Launch`).
+
+A mode without per-substep work (:attr:`_Engine.per_substep` False: implicit actuation, no interpolating row, no
+per-substep inertia update) has drive targets that do not change between substeps: ``set_action`` writes them into
+the Control it knows (the last one given to ``substep`` or ``reset``) and ``substep`` launches nothing, unless it is
+handed a Control other than that one (a small write there, which it then knows). The per-env substep counter is
+then ``step + host_substeps``, the host counting the substeps since the last ``set_action`` (see ``kernels/pd.py``).
 """
 
 from __future__ import annotations
@@ -35,6 +41,14 @@ class _Launch:
 
     def launch(self) -> None:
         self._cmd.launch()
+
+
+class _Targets:
+    """The drive-target arrays of a Control, shaped like one (``joint_target_q``, ``joint_target_qd``)."""
+
+    def __init__(self, joint_target_q: wp.array, joint_target_qd: wp.array):
+        self.joint_target_q = joint_target_q
+        self.joint_target_qd = joint_target_qd
 
 
 def _key(v):
@@ -99,6 +113,9 @@ class _Engine:
         self.row_qd_off = up(binding.qd_off, wp.int32)
         self.env_q_base = up(binding.q_base, wp.int32)
         self.env_qd_base = up(binding.qd_base, wp.int32)
+        # Flat coordinate / DOF index of every (env, row): one load where the kernels would chain table loads.
+        self.q_idx = up(binding.coord_index.reshape(E, R), wp.int32)
+        self.qd_idx = up(binding.dof_index.reshape(E, R), wp.int32)
         self.kp = up(rows.kp[None, :], wp.float32)
         self.kd = up(rows.kd[None, :], wp.float32)
         self.force_limit = up(rows.force_limit[None, :], wp.float32)
@@ -117,13 +134,35 @@ class _Engine:
         self.processed_action = wp.zeros((E, self.action_dim), dtype=wp.float32, device=dev)
         self.step = wp.zeros(E, dtype=wp.int32, device=dev)
         self.row_step = wp.zeros((E, R), dtype=wp.int32, device=dev)
-        self.dim = E * R  # one thread per (env, row)
+        self.dim = E * R  # one thread per (env, row), 1-D launches
+        self.dim2 = (E, R)  # the same, 2-D: wp.tid() gives (env, row)
+        self.per_substep = self._needs_per_substep_work()
+        # Elided substeps: the host's substep count since the last set_action, and the Control whose drive targets
+        # hold the current targets (its joint_target_q/qd arrays, kept alive so that their addresses stay unique).
+        self.host_substeps = 0
+        self._known_control: tuple[wp.array, wp.array] | None = None
+        self.step_view = wp.zeros(E, dtype=wp.int32, device=dev)
+        self._launch_targets: _Launch | None = None
         self.bad_action_count = wp.zeros(E, dtype=wp.int32, device=dev)
         self.action_buffer = wp.zeros((E, self.action_dim), dtype=wp.float32, device=dev)
         self.wrappers: dict = {}  # zero-copy wp.array views of torch actions, by (address, strides)
         self._launch_set_action: _Launch | None = None
         self._launch_substep: _Launch | None = None
         self._reset_count = 0
+
+    def _needs_per_substep_work(self) -> bool:
+        """Whether something must run before every solver substep: explicit torques (they depend on the measured
+        state), interpolation (the target moves), or a per-substep inertia update. Otherwise the drive targets are
+        constant over the control step and the substep launch is elided."""
+        interpolates = bool((self.rows.flags & cfg.FLAG_INTERPOLATE).any())
+        inertia_per_substep = self.needs_response and self.inertia_update == "substep"
+        return self.explicit or interpolates or inertia_per_substep
+
+    def _host_substeps(self) -> int:
+        """The host's substep count to bake into a launch (0 when the substep kernel counts on the device)."""
+        if self.per_substep:
+            return 0
+        return self.host_substeps
 
     def _init_response(self, model: newton.Model, binding: JointBinding) -> None:
         from newton.actuators import JointSpaceResponse
@@ -185,7 +224,7 @@ class _Engine:
         if self._launch_set_action is None:
             self._launch_set_action = _Launch(
                 K._set_action_kernel,
-                self.dim,
+                self.dim2,
                 {
                     "row_kind": self.row_kind,
                     "row_flags": self.row_flags,
@@ -200,9 +239,10 @@ class _Engine:
                     "row_follow": self.row_follow,
                     "row_mimic_mul": self.row_mimic_mul,
                     "row_mimic_off": self.row_mimic_off,
-                    "row_q_off": self.row_q_off,
                     "lead_row": self.lead_row,
-                    "env_q_base": self.env_q_base,
+                    "q_idx": self.q_idx,
+                    "qd_idx": self.qd_idx,
+                    "host_substeps": 0,
                     "action_in": action,
                     "joint_q_in": state.joint_q,
                     "processed_action_out": self.processed_action,
@@ -212,29 +252,44 @@ class _Engine:
                     "step_out": self.step,
                     "row_step_out": self.row_step,
                     "bad_action_count_out": self.bad_action_count,
+                    "joint_target_q_out": None,
+                    "joint_target_qd_out": None,
                 },
                 self.device,
             )
         ln = self._launch_set_action
         ln.bind("action_in", action)
         ln.bind("joint_q_in", state.joint_q)
+        if not self.per_substep:
+            # An env whose action is rejected keeps counting: it carries the substeps since the previous set_action.
+            # A captured graph does not know how many substeps preceded it at replay: it assumes a full control step.
+            carry = self.num_substeps if wp.get_device(self.device).is_capturing else self.host_substeps
+            ln.bind("host_substeps", carry)
+            known = self._known_control
+            ln.bind("joint_target_q_out", None if known is None else known[0])
+            ln.bind("joint_target_qd_out", None if known is None else known[1])
+            self.host_substeps = 0
         ln.launch()
 
     def substep(self, state: newton.State, control: newton.Control) -> None:
+        if not self.per_substep:
+            # The drive targets are constant over the control step: written by set_action into the known Control.
+            self.host_substeps += 1
+            if not self._is_known_control(control):
+                self.write_targets(control)
+            return
         if self.inertia_update == "substep":
             self.update_response(state)
         joint_f = control.joint_f if self.explicit else None
         if self._launch_substep is None:
             self._launch_substep = _Launch(
                 K._substep_kernel,
-                self.dim,
+                self.dim2,
                 {
                     "row_kind": self.row_kind,
                     "row_flags": self.row_flags,
-                    "row_q_off": self.row_q_off,
-                    "row_qd_off": self.row_qd_off,
-                    "env_q_base": self.env_q_base,
-                    "env_qd_base": self.env_qd_base,
+                    "q_idx": self.q_idx,
+                    "qd_idx": self.qd_idx,
                     "kp": self.kp,
                     "kd": self.kd,
                     "force_limit": self.force_limit,
@@ -264,21 +319,80 @@ class _Engine:
         ln.bind("joint_f_out", joint_f)
         ln.launch()
 
+    # -- the Control that holds the drive targets (no per-substep work) ----------------------------------------------
+
+    def _is_known_control(self, control) -> bool:
+        known = self._known_control
+        return (
+            known is not None
+            and known[0].ptr == control.joint_target_q.ptr
+            and known[1].ptr == control.joint_target_qd.ptr
+        )
+
+    def write_targets(self, control: newton.Control) -> None:
+        """Write every env's current drive targets into ``control`` (one launch) and make it the known Control."""
+        if self._launch_targets is None:
+            self._launch_targets = _Launch(
+                K._targets_kernel,
+                self.dim2,
+                {
+                    "row_kind": self.row_kind,
+                    "row_flags": self.row_flags,
+                    "q_idx": self.q_idx,
+                    "qd_idx": self.qd_idx,
+                    "target_qpos_in": self.target_qpos,
+                    "target_qvel_in": self.target_qvel,
+                    "joint_target_q_out": control.joint_target_q,
+                    "joint_target_qd_out": control.joint_target_qd,
+                },
+                self.device,
+            )
+        ln = self._launch_targets
+        ln.bind("joint_target_q_out", control.joint_target_q)
+        ln.bind("joint_target_qd_out", control.joint_target_qd)
+        ln.launch()
+        self._known_control = (control.joint_target_q, control.joint_target_qd)
+
+    def forget_control(self) -> None:
+        """The known Control no longer holds the current targets (they were edited on the host, or the user overwrote
+        the Control): the next substep writes them again."""
+        self._known_control = None
+
+    def step_counter(self) -> wp.array:
+        """(num_envs,) ManiSkill's ``_step``: the live device counter, or (elided substeps) a view refreshed now."""
+        if self.per_substep:
+            return self.step
+        wp.launch(
+            K._step_view_kernel,
+            dim=self.num_envs,
+            inputs=[self.host_substeps, self.step, self.step_view],
+            device=self.device,
+        )
+        return self.step_view
+
     def reset(self, state, env_ids, env_mask, control, first: bool) -> None:
-        dim = (self.num_envs if env_ids is None else env_ids.shape[0]) * self.num_rows
-        if dim == 0:
+        write_all = False
+        if not self.per_substep:
+            if control is None:
+                # The reset envs' targets go into the known Control (if any), which then still holds every env's.
+                control = None if self._known_control is None else _Targets(*self._known_control)
+            elif not self._is_known_control(control):
+                write_all = True  # a new Control: it gets every env's targets, not only the reset envs'
+        n = 0 if env_ids is None else env_ids.shape[0]
+        if (env_ids is not None and n == 0) or self.num_rows == 0:
+            if write_all:
+                self.write_targets(control)
             return
         wp.launch(
             K._reset_kernel,
-            dim=dim,
+            dim=(self.num_envs if env_ids is None else n, self.num_rows),
             inputs=[
                 self.row_kind,
                 self.row_flags,
-                self.row_q_off,
-                self.row_qd_off,
-                self.env_q_base,
-                self.env_qd_base,
+                self.q_idx,
+                self.qd_idx,
                 int(first),
+                self._host_substeps(),
                 env_ids,
                 env_mask,
                 state.joint_q,
@@ -294,6 +408,8 @@ class _Engine:
             ],
             device=self.device,
         )
+        if write_all:
+            self.write_targets(control)
 
     # -- model drive properties -----------------------------------------------------------------------------------
 

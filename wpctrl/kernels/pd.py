@@ -1,18 +1,24 @@
 """Warp kernels for ManiSkill-style PD joint control over all envs of a Newton model.
 
-Private module. Every kernel runs one thread per (env, row), where a row is one controlled joint, with the row
-index fastest: a warp's loads and stores of the ``(num_envs, rows)`` buffers and of Newton's flat arrays are
-contiguous. The few cross-row dependencies are arranged so that no thread reads what another writes:
+Private module. Every kernel is launched over ``dim=(num_envs, rows)``, one thread per (env, row) where a row is one
+controlled joint, with the row index fastest: a warp's loads and stores of the ``(num_envs, rows)`` buffers and of
+Newton's flat arrays are contiguous, and ``wp.tid()`` gives (env, row) without an integer division. The few
+cross-row dependencies are arranged so that no thread reads what another writes:
 
 - ``set_action``: a mimic follower has no thread of its own; the thread of its source row writes it (it only reads
   its source's fresh target). An env whose action holds NaN/Inf is left untouched by all its threads; its lead row
-  (the first non-follower) counts it.
+  (the first non-follower) counts it. Without per-substep work (see ``_Engine.per_substep``) it also writes the drive
+  targets into the Control, and the substep launch is elided.
 - ``before_simulation_step``: an interpolating row keeps its own substep counter in ``(num_envs, rows)``; the
   per-env counter exposed as ManiSkill's ``_step`` is written by row 0 alone and read by no other thread.
 
+The per-env ``step`` array holds ManiSkill's ``_step`` minus ``host_substeps``, the substeps the host counted since the
+last ``set_action`` when the substep launch is elided (0 otherwise): ``_step = step + host_substeps``.
+
 Row parameters are shared by all envs; gains are ``(1 | num_envs, rows)`` arrays indexed with the batch rule
-``env if shape[0] > 1 else 0``. A row's coordinate is ``q_base[env] + q_off[row]`` in ``joint_q``/``joint_target_q``
-and its DOF ``qd_base[env] + qd_off[row]`` in ``joint_qd``/``joint_target_qd``/``joint_f``.
+``env if shape[0] > 1 else 0``. A row's coordinate in ``joint_q``/``joint_target_q`` is ``q_idx[env, row]`` and its DOF
+in ``joint_qd``/``joint_target_qd``/``joint_f`` is ``qd_idx[env, row]`` (flat indices precomputed by the binding: one
+load instead of a chain of table loads).
 
 Parameter naming follows MuJoCo Warp: row and env tables first (no suffix), then ``_in`` inputs, then ``_out``
 outputs (an ``_out`` array that a kernel also reads is marked "in/out").
@@ -65,6 +71,18 @@ def _interp(start: float, target: float, k: int, num_substeps: int):
     return start + step_size * float(wp.min(k, num_substeps))
 
 
+@wp.func
+def _action_finite(action_in: wp.array2d[float], env: int):
+    """Whether every column of ``env``'s action is finite (the "hold the whole env" policy needs all of them).
+
+    Branch-free over the columns: one pass of independent loads of one contiguous action row (cached after the
+    first thread of the env), no early exit that would diverge a warp."""
+    ok = int(1)
+    for c in range(action_in.shape[1]):
+        ok = ok & int(wp.isfinite(action_in[env, c]))
+    return ok != 0
+
+
 @wp.kernel
 def _set_action_kernel(
     # Rows:
@@ -81,10 +99,11 @@ def _set_action_kernel(
     row_follow: wp.array[wp.int32],
     row_mimic_mul: wp.array[float],
     row_mimic_off: wp.array[float],
-    row_q_off: wp.array[wp.int32],
     lead_row: int,
-    # Envs:
-    env_q_base: wp.array[wp.int32],
+    # Envs x rows:
+    q_idx: wp.array2d[wp.int32],
+    qd_idx: wp.array2d[wp.int32],
+    host_substeps: int,
     # In:
     action_in: wp.array2d[float],
     joint_q_in: wp.array[float],
@@ -93,34 +112,35 @@ def _set_action_kernel(
     start_qpos_out: wp.array2d[float],
     target_qpos_out: wp.array2d[float],  # in/out: the previous (virtual) target
     target_qvel_out: wp.array2d[float],
-    step_out: wp.array[wp.int32],
+    step_out: wp.array[wp.int32],  # in/out (held envs)
     row_step_out: wp.array2d[wp.int32],
     bad_action_count_out: wp.array[wp.int32],  # in/out
+    joint_target_q_out: wp.array[float],  # optional: the drive targets, when no substep launch writes them
+    joint_target_qd_out: wp.array[float],  # optional
 ):
-    tid = wp.tid()
-    num_rows = row_kind.shape[0]
-    env = tid // num_rows
-    r = tid - env * num_rows
+    env, r = wp.tid()
     if row_mimic_src[r] >= 0:
         return  # a follower: written by its source row's thread
 
-    # A non-finite action leaves the whole env untouched (targets hold) and is counted once.
-    for c in range(action_in.shape[1]):
-        if not wp.isfinite(action_in[env, c]):
-            if r == lead_row:
-                bad_action_count_out[env] = bad_action_count_out[env] + 1
-            return
+    # A non-finite action leaves the whole env untouched (targets hold) and is counted once; its substep counter
+    # keeps counting from its last accepted action.
+    if not _action_finite(action_in, env):
+        if r == lead_row:
+            bad_action_count_out[env] = bad_action_count_out[env] + 1
+            step_out[env] = step_out[env] + host_substeps
+        return
 
     if r == lead_row:
         step_out[env] = 0
-    row_step_out[env, r] = 0
-    q_base = env_q_base[env]
     kind = row_kind[r]
     flags = row_flags[r]
+    if flags & FLAG_INTERPOLATE:
+        row_step_out[env, r] = 0
     norm = flags & FLAG_NORMALIZE
     col = row_act_col[r]
     if kind == ROW_POS:
-        q = joint_q_in[q_base + row_q_off[r]]
+        qi = q_idx[env, r]
+        q = joint_q_in[qi]
         start_qpos_out[env, r] = q
         t = target_qpos_out[env, r]  # a joint outside the mimic map keeps its target
         if col >= 0:
@@ -133,21 +153,32 @@ def _set_action_kernel(
                 else:
                     t = q + a
             target_qpos_out[env, r] = t
+        if joint_target_q_out:
+            joint_target_q_out[qi] = t
         vcol = row_vel_col[r]
         if vcol >= 0:
             v = _scale(action_in[env, vcol], row_vlo[r], row_vhi[r], norm)
             processed_action_out[env, vcol] = v
             target_qvel_out[env, r] = v
+            if joint_target_qd_out:
+                joint_target_qd_out[qd_idx[env, r]] = v
         # Followers: target[m] = target[source] * multiplier + offset.
         for i in range(row_follow_start[r], row_follow_start[r + 1]):
             m = row_follow[i]
-            start_qpos_out[env, m] = joint_q_in[q_base + row_q_off[m]]
-            target_qpos_out[env, m] = t * row_mimic_mul[m] + row_mimic_off[m]
-            row_step_out[env, m] = 0
+            mi = q_idx[env, m]
+            start_qpos_out[env, m] = joint_q_in[mi]
+            tm = t * row_mimic_mul[m] + row_mimic_off[m]
+            target_qpos_out[env, m] = tm
+            if row_flags[m] & FLAG_INTERPOLATE:
+                row_step_out[env, m] = 0
+            if joint_target_q_out:
+                joint_target_q_out[mi] = tm
     elif kind == ROW_VEL:
         v = _scale(action_in[env, col], row_lo[r], row_hi[r], norm)
         processed_action_out[env, col] = v
         target_qvel_out[env, r] = v
+        if joint_target_qd_out:
+            joint_target_qd_out[qd_idx[env, r]] = v
 
 
 @wp.kernel
@@ -155,11 +186,9 @@ def _substep_kernel(
     # Rows:
     row_kind: wp.array[wp.int32],
     row_flags: wp.array[wp.int32],
-    row_q_off: wp.array[wp.int32],
-    row_qd_off: wp.array[wp.int32],
-    # Envs:
-    env_q_base: wp.array[wp.int32],
-    env_qd_base: wp.array[wp.int32],
+    # Envs x rows:
+    q_idx: wp.array2d[wp.int32],
+    qd_idx: wp.array2d[wp.int32],
     # Gains (1 | num_envs, rows):
     kp: wp.array2d[float],
     kd: wp.array2d[float],
@@ -182,16 +211,13 @@ def _substep_kernel(
     joint_target_qd_out: wp.array[float],
     joint_f_out: wp.array[float],
 ):
-    tid = wp.tid()
-    num_rows = row_kind.shape[0]
-    env = tid // num_rows
-    r = tid - env * num_rows
+    env, r = wp.tid()
     if r == 0:
         step_out[env] = step_out[env] + 1
     kind = row_kind[r]
     flags = row_flags[r]
-    qi = env_q_base[env] + row_q_off[r]
-    di = env_qd_base[env] + row_qd_off[r]
+    qi = q_idx[env, r]
+    di = qd_idx[env, r]
     tq = float(0.0)
     tqd = float(0.0)
     if kind != ROW_POS or (flags & FLAG_VEL_TARGET) != 0:
@@ -234,14 +260,13 @@ def _reset_kernel(
     # Rows:
     row_kind: wp.array[wp.int32],
     row_flags: wp.array[wp.int32],
-    row_q_off: wp.array[wp.int32],
-    row_qd_off: wp.array[wp.int32],
-    # Envs:
-    env_q_base: wp.array[wp.int32],
-    env_qd_base: wp.array[wp.int32],
+    # Envs x rows:
+    q_idx: wp.array2d[wp.int32],
+    qd_idx: wp.array2d[wp.int32],
     first: int,
+    host_substeps: int,
     # In:
-    env_ids_in: wp.array[wp.int32],  # optional: thread block i resets env env_ids_in[i]
+    env_ids_in: wp.array[wp.int32],  # optional: thread row i resets env env_ids_in[i]
     env_mask_in: wp.array[wp.bool],  # optional: reset only where True
     joint_q_in: wp.array[float],
     joint_qd_in: wp.array[float],
@@ -255,10 +280,7 @@ def _reset_kernel(
     joint_target_qd_out: wp.array[float],  # optional
     joint_f_out: wp.array[float],  # optional (explicit actuation only)
 ):
-    tid = wp.tid()
-    num_rows = row_kind.shape[0]
-    env = tid // num_rows
-    r = tid - env * num_rows
+    env, r = wp.tid()
     if env_ids_in:
         env = env_ids_in[env]
         if env < 0 or env >= step_out.shape[0]:
@@ -267,11 +289,11 @@ def _reset_kernel(
         if not env_mask_in[env]:
             return
     if r == 0:
-        step_out[env] = 0
+        step_out[env] = -host_substeps  # ManiSkill's _step = 0
     row_step_out[env, r] = 0
     kind = row_kind[r]
-    qi = env_q_base[env] + row_q_off[r]
-    di = env_qd_base[env] + row_qd_off[r]
+    qi = q_idx[env, r]
+    di = qd_idx[env, r]
     q = joint_q_in[qi]
     start_qpos_out[env, r] = q
     target_qpos_out[env, r] = q
@@ -286,6 +308,44 @@ def _reset_kernel(
         joint_target_qd_out[di] = v
     if joint_f_out:
         joint_f_out[di] = 0.0
+
+
+@wp.kernel
+def _targets_kernel(
+    # Rows:
+    row_kind: wp.array[wp.int32],
+    row_flags: wp.array[wp.int32],
+    # Envs x rows:
+    q_idx: wp.array2d[wp.int32],
+    qd_idx: wp.array2d[wp.int32],
+    # In:
+    target_qpos_in: wp.array2d[float],
+    target_qvel_in: wp.array2d[float],
+    # Out:
+    joint_target_q_out: wp.array[float],
+    joint_target_qd_out: wp.array[float],
+):
+    """The current drive targets [rad, m; rad/s, m/s] of every env into a Control that does not hold them yet (no
+    per-substep work: the first Control seen, or a swapped one). Writes what the substep kernel would write."""
+    env, r = wp.tid()
+    kind = row_kind[r]
+    if kind != ROW_POS or (row_flags[r] & FLAG_VEL_TARGET) != 0:
+        joint_target_qd_out[qd_idx[env, r]] = target_qvel_in[env, r]
+    if kind == ROW_POS:
+        joint_target_q_out[q_idx[env, r]] = target_qpos_in[env, r]
+
+
+@wp.kernel
+def _step_view_kernel(
+    host_substeps: int,
+    # In:
+    step_in: wp.array[wp.int32],
+    # Out:
+    step_out: wp.array[wp.int32],
+):
+    """ManiSkill's ``_step`` per env: the device part plus the substeps the host counted since the last set_action."""
+    env = wp.tid()
+    step_out[env] = step_in[env] + host_substeps
 
 
 @wp.kernel

@@ -1,0 +1,221 @@
+"""Launches per control step, and the elided substep launch of modes without per-substep work.
+
+Counts every kernel launch (``wp.launch`` and recorded ``wp.Launch`` objects) of a control step; checks that the
+drive targets a solver reads at every substep are the ones the substep kernel wrote before the elision (the
+controller's own targets, re-derived in numpy), with one Control, swapped Controls, resets with and without a
+Control, ``set_state`` and graph capture; and ``step_counter`` against ManiSkill's ``_step`` rule.
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+import warp as wp
+from harness import ARM, Harness, delta_arm, gripper
+
+import wpctrl
+
+f32 = np.float32
+
+
+class LaunchCounter:
+    """Counts kernel launches: ``wp.launch`` calls and ``wp.Launch.launch`` (recorded launches)."""
+
+    def __init__(self, monkeypatch):
+        self.kernels: list[str] = []
+        launch, replay = wp.launch, wp.Launch.launch
+
+        def counted_launch(kernel, *args, **kwargs):
+            if not kwargs.get("record_cmd"):  # recording a launch runs nothing
+                self.kernels.append(kernel.key)
+            return launch(kernel, *args, **kwargs)
+
+        def counted_replay(cmd, *args, **kwargs):
+            self.kernels.append(cmd.kernel.key)
+            return replay(cmd, *args, **kwargs)
+
+        monkeypatch.setattr(wp, "launch", counted_launch)
+        monkeypatch.setattr(wp.Launch, "launch", counted_replay)
+
+    def take(self) -> list[str]:
+        out, self.kernels = self.kernels, []
+        return out
+
+
+def _mode(interpolate=False):
+    return {"arm": delta_arm(use_target=True, interpolate=interpolate), "gripper": gripper()}
+
+
+def _control_step(h, action, control=None):
+    h.ctrl.set_action(action, h.state)
+    for _ in range(h.ctrl.num_substeps):
+        h.ctrl.before_simulation_step(h.state, h.control if control is None else control)
+
+
+@pytest.mark.parametrize(
+    "mode, actuation, expected",
+    [
+        (delta_arm(), "implicit", 1),  # pd_joint_delta_pos
+        (_mode(), "implicit", 1),  # pd_joint_target_delta_pos with the mimic gripper
+        (wpctrl.PDJointVelControllerConfig(ARM, -1.0, 1.0, 1e2), "implicit", 1),  # pd_joint_vel
+        (_mode(interpolate=True), "implicit", 1 + 5),  # interpolation: a substep launch each
+        (_mode(), "explicit", 1 + 5),  # explicit torques: a substep launch each
+    ],
+)
+def test_launches_per_control_step(monkeypatch, mode, actuation, expected):
+    h = Harness(copy.deepcopy(mode), num_envs=3, actuation=actuation)
+    h.ctrl.reset(h.state)
+    a = np.zeros((3, h.ctrl.action_dim), np.float32)
+    act = wp.array(a, dtype=wp.float32)
+    counter = LaunchCounter(monkeypatch)
+    _control_step(h, act)  # the first Control seen: the elided mode writes it once, in the first substep
+    first = counter.take()
+    for _ in range(3):
+        _control_step(h, act)
+        launched = counter.take()
+        assert len(launched) == expected, launched
+        assert launched[0].startswith("_set_action_kernel")
+    assert h.ctrl._engine.per_substep == (expected > 1)
+    if expected == 1:
+        assert len(first) == 2 and first[1].startswith("_targets_kernel")
+    # A second Control (double buffering): one small write when it first appears in a step, then nothing.
+    other = h.model.control()
+    _control_step(h, act, other)
+    assert len(counter.take()) == (2 if expected == 1 else expected)
+    _control_step(h, act, other)
+    assert len(counter.take()) == expected
+
+
+def _check_drive(h, control, where):
+    """The Control holds what the substep kernel writes without interpolation: q* = target_qpos on position rows,
+    qd* = target_qvel on rows with a velocity drive."""
+    rows = h.ctrl._engine.rows
+    pos = rows.kind == wpctrl.config.ROW_POS
+    vel = ~pos | ((rows.flags & wpctrl.config.FLAG_VEL_TARGET) != 0)
+    tq, tqd = h.ctrl._engine.target_qpos.numpy(), h.ctrl._engine.target_qvel.numpy()
+    got_q = control.joint_target_q.numpy()[h.coord]
+    got_qd = control.joint_target_qd.numpy()[h.dof]
+    np.testing.assert_array_equal(got_q[:, pos], tq[:, pos], err_msg=f"{where}: joint_target_q")
+    np.testing.assert_array_equal(got_qd[:, vel], tqd[:, vel], err_msg=f"{where}: joint_target_qd")
+
+
+def test_swapped_controls_get_the_targets():
+    n = 4
+    h = Harness(_mode(), num_envs=n)
+    rng = np.random.default_rng(0)
+    h.put(rng.uniform(-1, 1, (n, 9)))
+    h.ctrl.reset(h.state)
+    a, b = h.model.control(), h.model.control()
+    schedule = [[a] * 5, [b] * 5, [a, b, a, b, a], [b, b, a, a, a]]
+    for i, controls in enumerate(schedule):
+        h.ctrl.set_action(rng.uniform(-1, 1, (n, 8)).astype(np.float32), h.state)
+        for k, c in enumerate(controls):
+            h.ctrl.before_simulation_step(h.state, c)
+            _check_drive(h, c, f"step {i} substep {k}")  # the Control the solver steps with holds the targets
+    # A Control whose arrays were replaced in place counts as another Control.
+    a.joint_target_q = wp.zeros_like(a.joint_target_q)
+    h.ctrl.before_simulation_step(h.state, a)
+    _check_drive(h, a, "replaced arrays")
+
+
+def test_reset_set_state_and_invalidate_keep_the_known_control_current():
+    n = 4
+    h = Harness({"arm": delta_arm(use_target=True), "gripper": gripper()}, num_envs=n)
+    rng = np.random.default_rng(1)
+    h.ctrl.reset(h.state)
+    _control_step(h, rng.uniform(-1, 1, (n, 8)).astype(np.float32))
+    # A reset without a Control still updates the known one (the solver's next substep sees the reset pose) ...
+    h.put(rng.uniform(-1, 1, (n, 9)))
+    h.ctrl.reset(h.state, env_ids=[2])
+    _check_drive(h, h.control, "reset without control")
+    np.testing.assert_array_equal(h.drive_q()[2], h.q()[2])
+    # ... a reset with a new Control writes every env into it, not only the reset ones.
+    other = h.model.control()
+    h.ctrl.reset(h.state, env_ids=[1], control=other)
+    _check_drive(h, other, "reset with a new control")
+    # set_state edits the targets on the host: the next substep writes them.
+    h.ctrl.set_state({"arm": {"target_qpos": rng.uniform(-1, 1, (n, 7)).astype(np.float32)}})
+    h.ctrl.before_simulation_step(h.state, other)
+    _check_drive(h, other, "set_state")
+    # Someone else overwrote the targets: invalidate_control makes the next substep rewrite them.
+    other.joint_target_q.zero_()
+    h.ctrl.before_simulation_step(h.state, other)
+    assert not other.joint_target_q.numpy().any()  # not detected (documented) ...
+    h.ctrl.invalidate_control()
+    h.ctrl.before_simulation_step(h.state, other)
+    _check_drive(h, other, "invalidate_control")  # ... until invalidated
+
+
+def test_step_counter_follows_maniskill_step_without_substep_launches():
+    # ManiSkill: _step = 0 at set_action and reset, += 1 per before_simulation_step; a rejected (NaN) action
+    # leaves its env untouched, so that env keeps counting from its last accepted action.
+    n = 3
+    h = Harness(delta_arm(), num_envs=n)
+    assert not h.ctrl._engine.per_substep
+    h.ctrl.reset(h.state)
+    expect = np.zeros(n, np.int64)
+
+    def sub(k):
+        nonlocal expect
+        h.substeps(k)
+        expect = expect + k
+        np.testing.assert_array_equal(h.ctrl.step_counter.numpy(), expect)
+
+    sub(3)
+    a = np.zeros((n, 7), np.float32)
+    a[1, 2] = np.nan
+    h.act(a)
+    expect[[0, 2]] = 0
+    np.testing.assert_array_equal(h.ctrl.step_counter.numpy(), expect)
+    sub(2)
+    h.ctrl.reset(h.state, env_ids=[2])
+    expect[2] = 0
+    sub(1)
+    h.act(np.zeros((n, 7), np.float32))
+    expect[:] = 0
+    sub(5)
+    sub(4)  # past K: keeps counting
+    assert h.ctrl.step_counter.numpy().tolist() == [9, 9, 9]
+
+
+@pytest.mark.parametrize("known_before_capture", [False, True])
+def test_graph_replay_bitwise_without_substep_launches(known_before_capture):
+    n = 8
+    rng = np.random.default_rng(2)
+    acts = rng.uniform(-1, 1, (5, n, 8)).astype(np.float32)
+    acts[2, 3, 4] = np.nan  # a held env during a replay
+    acts[3, 3, 0] = np.inf
+    out = []
+    for captured in (False, True):
+        h = Harness(_mode(), num_envs=n)
+        h.put(np.full((n, 9), 0.1, np.float32))
+        h.ctrl.reset(h.state, control=h.control if known_before_capture else None)
+        act = wp.zeros((n, 8), dtype=wp.float32)
+        mask = wp.array(np.arange(n) % 3 == 0, dtype=wp.bool)
+        graph = None
+        if captured:
+            with wp.ScopedCapture(device="cpu") as cap:
+                _control_step(h, act)
+            graph = cap.graph
+        steps = []
+        for i in range(5):
+            act.assign(acts[i])
+            if graph is not None:
+                wp.capture_launch(graph)
+            else:
+                _control_step(h, act)
+            if i == 1:
+                h.ctrl.reset(h.state, env_ids=mask)
+            steps.append((h.drive_q().copy(), h.ctrl.step_counter.numpy().copy()))
+        out.append((steps, h.ctrl.target_qpos.numpy(), h.ctrl.bad_action_count.numpy()))
+    (eager, t0, b0), (replay, t1, b1) = out
+    np.testing.assert_array_equal(t0, t1)
+    np.testing.assert_array_equal(b0, b1)
+    assert b0.tolist() == [0, 0, 0, 2, 0, 0, 0, 0]
+    for i, ((d0, s0), (d1, s1)) in enumerate(zip(eager, replay)):
+        np.testing.assert_array_equal(d0, d1, err_msg=f"step {i}: drive targets")
+        np.testing.assert_array_equal(s0, s1, err_msg=f"step {i}: step_counter")
+    assert eager[-1][1].tolist() == [5] * n
+    assert eager[3][1][3] == 10  # env 3 held for two steps: counting since its reset after step 1

@@ -67,7 +67,9 @@ def traffic_bytes(mode: dict, num_substeps: int, explicit: bool = True) -> dict:
     with interpolation). Each substep: the target (n) and, with interpolation, the start (n); the written drive target
     ``joint_target_q`` (n); with explicit actuation the measured q and qd (2n) and ``joint_f`` (n). Not counted:
     index tables and per-joint parameters (shared by all envs, cached), a substep counter (a graph can bake k in),
-    and velocity targets (0 for position rows: not read, ``joint_target_qd`` not written).
+    and velocity targets (0 for position rows: not read, ``joint_target_qd`` not written). Implicit actuation without
+    interpolation: the drive targets are constant over the control step, so the floor writes ``joint_target_q``
+    once, in set_action, and the substeps move nothing.
     """
     set_action = {"action": 0, "q": 0, "target_read": 0, "target_write": 0, "start_write": 0}
     substep = {"target_read": 0, "start_read": 0, "joint_target_q": 0, "q": 0, "qd": 0, "joint_f": 0}
@@ -91,6 +93,9 @@ def traffic_bytes(mode: dict, num_substeps: int, explicit: bool = True) -> dict:
             substep["q"] += 4 * n
             substep["qd"] += 4 * n
             substep["joint_f"] += 4 * n
+    if not explicit and not any(cfg.interpolate for cfg in mode.values()):
+        set_action["joint_target_q"] = substep["joint_target_q"]
+        substep = dict.fromkeys(substep, 0)
     total = sum(set_action.values()) + num_substeps * sum(substep.values())
     return {"per_env": total, "set_action": set_action, "substep": substep, "num_substeps": num_substeps}
 

@@ -52,7 +52,9 @@ def _run(device, mode, actuation, acts, qs, resets, graph=False):
                 mask.assign(resets[i])
                 h.ctrl.reset(h.state, env_ids=mask)
             # .numpy() of a CPU array is a view of live memory: copy each step's values
-            out.append((h.ctrl.target_qpos.numpy().copy(), h.drive_q(), h.drive_qd(), h.joint_f()))
+            out.append(
+                (h.ctrl.target_qpos.numpy().copy(), h.drive_q(), h.drive_qd(), h.joint_f(), h.ctrl.step_counter.numpy())
+            )
         return out
 
 
@@ -76,13 +78,15 @@ def test_cpu_cuda_parity(mode, actuation):
             np.testing.assert_allclose(x, y, atol=1e-6, rtol=1e-6)
         # torques [N m]: CUDA contracts Kp * (q* - q) into an FMA; a float32 ulp of q times Kp = 1000 is ~1e-4
         np.testing.assert_allclose(a[3], b[3], atol=2e-4, rtol=1e-5)
+        np.testing.assert_array_equal(a[4], b[4])  # step_counter
 
 
 @pytest.mark.parametrize("actuation", ["implicit", "explicit"])
-def test_cuda_graph_replay_bitwise(actuation):
+@pytest.mark.parametrize("mode", list(MODES))  # "delta" + implicit: the elided substep launch (set_action only)
+def test_cuda_graph_replay_bitwise(mode, actuation):
     acts, qs, resets = _streams(n=1024, seed=1)
-    eager = _run("cuda:0", MODES["target_delta_interp"](), actuation, acts, qs, resets)
-    graph = _run("cuda:0", MODES["target_delta_interp"](), actuation, acts, qs, resets, graph=True)
+    eager = _run("cuda:0", MODES[mode](), actuation, acts, qs, resets)
+    graph = _run("cuda:0", MODES[mode](), actuation, acts, qs, resets, graph=True)
     for a, b in zip(eager, graph):
         for x, y in zip(a, b):
             np.testing.assert_array_equal(x, y)

@@ -100,12 +100,13 @@ def traffic_bytes(mode: dict, num_substeps: int, explicit: bool = True) -> dict:
     return {"per_env": total, "set_action": set_action, "substep": substep, "num_substeps": num_substeps}
 
 
-def wpctrl_bytes_estimate(mode: dict, num_substeps: int, interp: bool) -> int:
-    """Bytes per env that wpctrl's kernels touch (wpctrl/kernels/pd.py as of ab1ab03), for comparison with the floor.
+def wpctrl_bytes_estimate(mode: dict, num_substeps: int, interp: bool, elided: bool = False) -> int:
+    """Bytes per env that wpctrl's kernels touch (wpctrl/kernels/pd.py, issue 12), for comparison with the floor.
 
     set_action: action, q and start snapshot of every row, previous and new target, processed action, the per-env
-    and per-row step counters. Substep: per-env counter read and write, q, qd, target, ``joint_target_q``, ``joint_f``
-    and, with interpolation, the start and the per-row counter read and write.
+    step counter and, with interpolation, the per-row counters. Substep: per-env counter read and write, q, qd,
+    target, ``joint_target_q``, ``joint_f`` and, with interpolation, the start and the per-row counter read and write.
+    Elided substeps (implicit, no interpolation): set_action also writes ``joint_target_q``; the substeps touch nothing.
     """
     n = sum(len(c.joint_names) for c in mode.values())
     d = 0
@@ -115,7 +116,9 @@ def wpctrl_bytes_estimate(mode: dict, num_substeps: int, interp: bool) -> int:
         dc = len({v["joint"] for v in mimic.values()}) if mimic else len(c.joint_names)
         d += dc
         n_src += len(c.joint_names) - (len(mimic) if mimic else 0)
-    sa = 4 * (d + n + n + n_src + n + d + n) + 4
+    sa = 4 * (d + n + n + n_src + n + d + (n if interp else 0)) + 4
+    if elided:
+        return sa + 4 * n
     ss = 8 + 4 * n * 5 + (4 * n * 3 if interp else 0)
     return sa + num_substeps * ss
 
@@ -232,7 +235,9 @@ def run_one(args, setup, mode_name: str, interp: bool, sync: Sync, device) -> li
                 "speedup_vs_torch_eager": (t_torch / t) if t_torch else None,
                 "x_floor": (t / t_floor) if t_floor else None,
                 "floor_bytes_per_env": traffic["per_env"],
-                "wpctrl_bytes_per_env_estimate": wpctrl_bytes_estimate(mode, K, interp),
+                "wpctrl_bytes_per_env_estimate": wpctrl_bytes_estimate(
+                    mode, K, interp, elided=not ctrl._engine.per_substep
+                ),
                 "effective_GBps_at_floor_bytes": floor_bytes / t / 1e9,
                 "iters": times[name]["iters"],
                 "samples_us": [x * 1e6 for x in times[name]["samples_s"]],

@@ -232,8 +232,11 @@ class BaseController:
         With per-substep work (explicit actuation, interpolation) this is the live device counter. Without it no
         substep launch exists to count: the value is the device's per-env part (set by set_action / reset) plus the
         host's count of before_simulation_step calls since the last set_action, refreshed (one launch) at every read
-        of this property. A replayed graph of set_action + K substeps reads K, as eagerly; the host does not see graph
-        replays, so substeps run outside such a graph between replays are not counted by the next replay."""
+        of this property. A graph bakes the host's count at capture, so it is exact when replayed at the point of the
+        control step where it was captured: a graph of set_action + K substeps (+ a reset) replayed back to back
+        reads K, as eagerly, with eager resets between replays too. What it cannot follow: the host does not see
+        replays, so eager substeps run between replays of such a graph (or a graph of substeps alone, replayed) are
+        miscounted."""
         return self._engine.step_counter()
 
     @property
@@ -330,8 +333,10 @@ class BaseController:
         Unlike ManiSkill, only the given envs are touched. The first call initialises every env, as ManiSkill's
         first reset does (PDJointPosVel then takes the measured velocity as its velocity target; later resets set
         it to 0). With ``control``, the reset envs' drive targets are written at once (and explicit torques zeroed);
-        otherwise the next :meth:`before_simulation_step` writes them. ``env_ids``: None, an int, a sequence of ints,
-        a bool mask of shape (num_envs,), or a torch/numpy/wp array of either (device arrays: graph-capturable).
+        otherwise the next :meth:`before_simulation_step` writes them (without per-substep work: they are written at
+        once into the known Control, if any; a ``control`` not known yet gets every env's targets). ``env_ids``: None,
+        an int, a sequence of ints, a bool mask of shape (num_envs,), or a torch/numpy/wp array of either (device
+        arrays: graph-capturable).
         """
         self._require_owner("reset")
         self._check_state(state, "reset")

@@ -219,3 +219,67 @@ def test_graph_replay_bitwise_without_substep_launches(known_before_capture):
         np.testing.assert_array_equal(s0, s1, err_msg=f"step {i}: step_counter")
     assert eager[-1][1].tolist() == [5] * n
     assert eager[3][1][3] == 10  # env 3 held for two steps: counting since its reset after step 1
+
+
+def _uneven_model():
+    """3 Panda worlds, world 1 with an extra free-jointed box first: the robots are not at a constant stride."""
+    import newton
+
+    from wpctrl.robots import panda
+
+    b = newton.ModelBuilder()
+    for w in range(3):
+        b.begin_world()
+        if w == 1:
+            link = b.add_link(mass=1.0, inertia=wp.mat33(np.eye(3) * 0.01))
+            b.add_articulation([b.add_joint_free(link, label="box/free")])
+        b.add_builder(panda())
+        b.end_world()
+    return b.finalize(device="cpu")
+
+
+@pytest.mark.parametrize("actuation, interpolate", [("implicit", False), ("explicit", True)])
+def test_strided_and_flat_index_tables_agree(actuation, interpolate):
+    # Replicated worlds: env 0's indices + env * stride; uneven worlds: a flat (num_envs, rows) table. The same
+    # per-env joint states and actions must give bit-identical targets, drive targets and torques at the robots'
+    # coordinates / DOFs, and leave the box's free joint alone.
+    from conftest import build_panda
+
+    rng = np.random.default_rng(3)
+    q = rng.uniform(-1, 1, (3, 9)).astype(np.float32)
+    qd = rng.uniform(-1, 1, (3, 9)).astype(np.float32)
+    acts = rng.uniform(-1.2, 1.2, (3, 3, 8)).astype(np.float32)
+    results = []
+    for model in (build_panda(3), _uneven_model()):
+        ctrl = wpctrl.build_controller(_mode(interpolate), model, 20, 100, actuation)
+        eng = ctrl._engine
+        b = eng.binding
+        uneven = model.joint_coord_count != 3 * 9
+        assert (eng.q_stride, eng.qd_stride) == ((0, 0) if uneven else (9, 9))
+        assert eng.q_idx.shape == ((3, 9) if uneven else (1, 9))
+        state, control = model.state(), model.control()
+        tq0 = control.joint_target_q.numpy().copy()
+        sq, sqd = state.joint_q.numpy(), state.joint_qd.numpy()
+        sq[b.coord_index], sqd[b.dof_index] = q, qd
+        state.joint_q.assign(sq)
+        state.joint_qd.assign(sqd)
+        ctrl.reset(state)
+        steps = []
+        for a in acts:
+            ctrl.set_action(a, state)
+            for _ in range(ctrl.num_substeps):
+                ctrl.before_simulation_step(state, control)
+                steps.append(
+                    (
+                        control.joint_target_q.numpy()[b.coord_index],
+                        control.joint_f.numpy()[b.dof_index],
+                        ctrl.target_qpos.numpy().copy(),
+                    )
+                )
+        others = np.setdiff1d(np.arange(model.joint_coord_count), b.coord_index.reshape(-1))
+        np.testing.assert_array_equal(control.joint_target_q.numpy()[others], tq0[others])
+        results.append(steps)
+    for k, (x, y) in enumerate(zip(*results)):
+        for u, v in zip(x, y):
+            np.testing.assert_array_equal(u, v, err_msg=f"substep {k}")
+    assert not np.array_equal(results[0][0][0], results[0][-1][0])  # the targets moved

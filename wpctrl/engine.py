@@ -43,6 +43,18 @@ class _Launch:
         self._cmd.launch()
 
 
+def _index_table(index: np.ndarray) -> tuple[np.ndarray, int]:
+    """``(table, stride)`` with ``index[e, r] == table[e or 0, r] + e * stride``: a ``(1, rows)`` table and the stride
+    when every env's indices are env 0's shifted by a constant (replicated worlds), else the full table and 0."""
+    E = index.shape[0]
+    idx = index.astype(np.int64)
+    if E > 1 and index.shape[1] > 0:
+        stride = int(idx[1, 0] - idx[0, 0])
+        if (idx == idx[:1] + stride * np.arange(E)[:, None]).all() and abs(stride) * E < 2**31:
+            return index[:1].astype(np.int32), stride
+    return index.astype(np.int32), 0
+
+
 class _Targets:
     """The drive-target arrays of a Control, shaped like one (``joint_target_q``, ``joint_target_qd``)."""
 
@@ -113,9 +125,12 @@ class _Engine:
         self.row_qd_off = up(binding.qd_off, wp.int32)
         self.env_q_base = up(binding.q_base, wp.int32)
         self.env_qd_base = up(binding.qd_base, wp.int32)
-        # Flat coordinate / DOF index of every (env, row): one load where the kernels would chain table loads.
-        self.q_idx = up(binding.coord_index.reshape(E, R), wp.int32)
-        self.qd_idx = up(binding.dof_index.reshape(E, R), wp.int32)
+        # Coordinate / DOF index of every (env, row) (kernels/pd.py, _at): env 0's row plus env * stride for a
+        # replicated layout, else a flat (num_envs, rows) table; either way no chain of table loads.
+        q_idx, self.q_stride = _index_table(binding.coord_index.reshape(E, R))
+        qd_idx, self.qd_stride = _index_table(binding.dof_index.reshape(E, R))
+        self.q_idx = up(q_idx, wp.int32)
+        self.qd_idx = up(qd_idx, wp.int32)
         self.kp = up(rows.kp[None, :], wp.float32)
         self.kd = up(rows.kd[None, :], wp.float32)
         self.force_limit = up(rows.force_limit[None, :], wp.float32)
@@ -242,6 +257,8 @@ class _Engine:
                     "lead_row": self.lead_row,
                     "q_idx": self.q_idx,
                     "qd_idx": self.qd_idx,
+                    "q_stride": self.q_stride,
+                    "qd_stride": self.qd_stride,
                     "host_substeps": 0,
                     "action_in": action,
                     "joint_q_in": state.joint_q,
@@ -290,6 +307,8 @@ class _Engine:
                     "row_flags": self.row_flags,
                     "q_idx": self.q_idx,
                     "qd_idx": self.qd_idx,
+                    "q_stride": self.q_stride,
+                    "qd_stride": self.qd_stride,
                     "kp": self.kp,
                     "kd": self.kd,
                     "force_limit": self.force_limit,
@@ -340,6 +359,8 @@ class _Engine:
                     "row_flags": self.row_flags,
                     "q_idx": self.q_idx,
                     "qd_idx": self.qd_idx,
+                    "q_stride": self.q_stride,
+                    "qd_stride": self.qd_stride,
                     "target_qpos_in": self.target_qpos,
                     "target_qvel_in": self.target_qvel,
                     "joint_target_q_out": control.joint_target_q,
@@ -391,6 +412,8 @@ class _Engine:
                 self.row_flags,
                 self.q_idx,
                 self.qd_idx,
+                self.q_stride,
+                self.qd_stride,
                 int(first),
                 self._host_substeps(),
                 env_ids,

@@ -1,6 +1,6 @@
 """Warp kernels for ManiSkill-style PD joint control over all envs of a Newton model.
 
-Private module. Every kernel is launched over ``dim=(num_envs, rows)``, one thread per (env, row) where a row is one
+Private module. The PD kernels are launched over ``dim=(num_envs, rows)``, one thread per (env, row) where a row is one
 controlled joint, with the row index fastest: a warp's loads and stores of the ``(num_envs, rows)`` buffers and of
 Newton's flat arrays are contiguous, and ``wp.tid()`` gives (env, row) without an integer division. The few
 cross-row dependencies are arranged so that no thread reads what another writes:
@@ -16,9 +16,10 @@ The per-env ``step`` array holds ManiSkill's ``_step`` minus ``host_substeps``, 
 last ``set_action`` when the substep launch is elided (0 otherwise): ``_step = step + host_substeps``.
 
 Row parameters are shared by all envs; gains are ``(1 | num_envs, rows)`` arrays indexed with the batch rule
-``env if shape[0] > 1 else 0``. A row's coordinate in ``joint_q``/``joint_target_q`` is ``q_idx[env, row]`` and its DOF
-in ``joint_qd``/``joint_target_qd``/``joint_f`` is ``qd_idx[env, row]`` (flat indices precomputed by the binding: one
-load instead of a chain of table loads).
+``env if shape[0] > 1 else 0``. A row's coordinate in ``joint_q``/``joint_target_q`` and its DOF in
+``joint_qd``/``joint_target_qd``/``joint_f`` come from precomputed index tables (:func:`_at`): for a replicated layout a
+``(1, rows)`` table of env 0 plus ``env * stride`` (no per-env load, no index traffic at 1M envs), otherwise a flat
+``(num_envs, rows)`` table (one load instead of a chain of table loads).
 
 Parameter naming follows MuJoCo Warp: row and env tables first (no suffix), then ``_in`` inputs, then ``_out``
 outputs (an ``_out`` array that a kernel also reads is marked "in/out").
@@ -53,6 +54,14 @@ def _bidx(n: int, env: int):
     if n > 1:
         return env
     return 0
+
+
+@wp.func
+def _at(idx: wp.array2d[wp.int32], stride: int, env: int, r: int):
+    """Flat index of (env, row) in a Newton array: ``idx[env, r]`` for a ``(num_envs, rows)`` table, or
+    ``idx[0, r] + env * stride`` for a ``(1, rows)`` table of a constant-stride (replicated) layout: no per-env
+    load."""
+    return idx[_bidx(idx.shape[0], env), r] + env * stride
 
 
 @wp.func
@@ -103,6 +112,8 @@ def _set_action_kernel(
     # Envs x rows:
     q_idx: wp.array2d[wp.int32],
     qd_idx: wp.array2d[wp.int32],
+    q_stride: int,
+    qd_stride: int,
     host_substeps: int,
     # In:
     action_in: wp.array2d[float],
@@ -139,7 +150,7 @@ def _set_action_kernel(
     norm = flags & FLAG_NORMALIZE
     col = row_act_col[r]
     if kind == ROW_POS:
-        qi = q_idx[env, r]
+        qi = _at(q_idx, q_stride, env, r)
         q = joint_q_in[qi]
         start_qpos_out[env, r] = q
         t = target_qpos_out[env, r]  # a joint outside the mimic map keeps its target
@@ -161,11 +172,11 @@ def _set_action_kernel(
             processed_action_out[env, vcol] = v
             target_qvel_out[env, r] = v
             if joint_target_qd_out:
-                joint_target_qd_out[qd_idx[env, r]] = v
+                joint_target_qd_out[_at(qd_idx, qd_stride, env, r)] = v
         # Followers: target[m] = target[source] * multiplier + offset.
         for i in range(row_follow_start[r], row_follow_start[r + 1]):
             m = row_follow[i]
-            mi = q_idx[env, m]
+            mi = _at(q_idx, q_stride, env, m)
             start_qpos_out[env, m] = joint_q_in[mi]
             tm = t * row_mimic_mul[m] + row_mimic_off[m]
             target_qpos_out[env, m] = tm
@@ -178,7 +189,7 @@ def _set_action_kernel(
         processed_action_out[env, col] = v
         target_qvel_out[env, r] = v
         if joint_target_qd_out:
-            joint_target_qd_out[qd_idx[env, r]] = v
+            joint_target_qd_out[_at(qd_idx, qd_stride, env, r)] = v
 
 
 @wp.kernel
@@ -189,6 +200,8 @@ def _substep_kernel(
     # Envs x rows:
     q_idx: wp.array2d[wp.int32],
     qd_idx: wp.array2d[wp.int32],
+    q_stride: int,
+    qd_stride: int,
     # Gains (1 | num_envs, rows):
     kp: wp.array2d[float],
     kd: wp.array2d[float],
@@ -216,8 +229,8 @@ def _substep_kernel(
         step_out[env] = step_out[env] + 1
     kind = row_kind[r]
     flags = row_flags[r]
-    qi = q_idx[env, r]
-    di = qd_idx[env, r]
+    qi = _at(q_idx, q_stride, env, r)
+    di = _at(qd_idx, qd_stride, env, r)
     tq = float(0.0)
     tqd = float(0.0)
     if kind != ROW_POS or (flags & FLAG_VEL_TARGET) != 0:
@@ -263,6 +276,8 @@ def _reset_kernel(
     # Envs x rows:
     q_idx: wp.array2d[wp.int32],
     qd_idx: wp.array2d[wp.int32],
+    q_stride: int,
+    qd_stride: int,
     first: int,
     host_substeps: int,
     # In:
@@ -292,8 +307,8 @@ def _reset_kernel(
         step_out[env] = -host_substeps  # ManiSkill's _step = 0
     row_step_out[env, r] = 0
     kind = row_kind[r]
-    qi = q_idx[env, r]
-    di = qd_idx[env, r]
+    qi = _at(q_idx, q_stride, env, r)
+    di = _at(qd_idx, qd_stride, env, r)
     q = joint_q_in[qi]
     start_qpos_out[env, r] = q
     target_qpos_out[env, r] = q
@@ -318,6 +333,8 @@ def _targets_kernel(
     # Envs x rows:
     q_idx: wp.array2d[wp.int32],
     qd_idx: wp.array2d[wp.int32],
+    q_stride: int,
+    qd_stride: int,
     # In:
     target_qpos_in: wp.array2d[float],
     target_qvel_in: wp.array2d[float],
@@ -330,9 +347,9 @@ def _targets_kernel(
     env, r = wp.tid()
     kind = row_kind[r]
     if kind != ROW_POS or (row_flags[r] & FLAG_VEL_TARGET) != 0:
-        joint_target_qd_out[qd_idx[env, r]] = target_qvel_in[env, r]
+        joint_target_qd_out[_at(qd_idx, qd_stride, env, r)] = target_qvel_in[env, r]
     if kind == ROW_POS:
-        joint_target_q_out[q_idx[env, r]] = target_qpos_in[env, r]
+        joint_target_q_out[_at(q_idx, q_stride, env, r)] = target_qpos_in[env, r]
 
 
 @wp.kernel

@@ -4,9 +4,10 @@ Three trivial kernels over ``envs x 9`` threads (a Panda's 9 rows), each writing
 
 * ``p1``: 1 array parameter;
 * ``p25``: 25 array parameters (wpctrl's substep kernel has ~25), of which it touches only the first;
-* ``chain`` / ``flat``: the same gather ``dst[i] = src[index(i)]`` through wpctrl's former index chain
-  (``env_base[env] + row_off[row]``, a 1-D launch with an integer division) or through one precomputed flat index
-  table on a 2-D launch (what wpctrl does now).
+* ``chain`` / ``flat`` / ``stride``: the same gather ``dst[i] = src[index(i)]`` through wpctrl's former index chain
+  (``env_base[env] + row_off[row]``, a 1-D launch with an integer division), through one precomputed flat
+  ``(envs, rows)`` index table on a 2-D launch (wpctrl, uneven worlds), or through env 0's ``(1, rows)`` table plus
+  ``env * stride`` on a 2-D launch (wpctrl, replicated worlds).
 
 For each: host time of a plain ``wp.launch``, of a recorded launch (``wp.launch(..., record_cmd=True)`` then
 ``Launch.launch()``, what wpctrl's engine does), and per node of a captured graph of ``--nodes`` back-to-back
@@ -73,6 +74,12 @@ def _chain(env_base: wp.array[wp.int32], row_off: wp.array[wp.int32], src: wp.ar
 
 
 @wp.kernel
+def _stride(idx0: wp.array2d[wp.int32], stride: int, src: wp.array[float], dst: wp.array2d[float]):
+    env, r = wp.tid()
+    dst[env, r] = src[idx0[0, r] + env * stride]
+
+
+@wp.kernel
 def _flat(idx: wp.array2d[wp.int32], src: wp.array[float], dst: wp.array2d[float]):
     env, r = wp.tid()
     dst[env, r] = src[idx[env, r]]
@@ -100,6 +107,7 @@ def launches(n_envs: int, device):
             (n_envs, ROWS),
             [wp.array(base[:, None] + off[None, :], dtype=wp.int32, device=device), src, dst],
         ),
+        "stride": (_stride, (n_envs, ROWS), [wp.array(off[None, :], dtype=wp.int32, device=device), stride, src, dst]),
     }
 
 
@@ -145,13 +153,13 @@ def markdown(meta: dict, rows: list[dict], nodes: int) -> str:
         "# Launch cost against parameter count and index chains\n",
         meta_markdown(meta) + "\n",
         f"µs per launch (graph: per node of a {nodes}-node graph, replayed). p1 / p25: a trivial kernel with 1 / 25 "
-        "array parameters; chain / flat: a gather through base[env] + off[row] (1-D launch, integer division) or "
-        "through a flat (env, row) index table (2-D launch).\n",
+        "array parameters; chain / flat / stride: a gather through base[env] + off[row] (1-D launch, integer "
+        "division), through a flat (env, row) index table, or through env 0's row table + env * stride (2-D).\n",
     ]
     hows = ["launch", "recorded", "graph"]
     table = []
     for n in sorted({r["envs"] for r in rows}):
-        for k in ["p1", "p25", "chain", "flat"]:
+        for k in ["p1", "p25", "chain", "flat", "stride"]:
             got = {r["how"]: r for r in rows if r["envs"] == n and r["kernel"] == k}
             if got:
                 table.append(

@@ -280,7 +280,7 @@ class _Engine:
         if not self.per_substep:
             # An env whose action is rejected keeps counting: it carries the substeps since the previous set_action.
             # A captured graph does not know how many substeps preceded it at replay: it assumes a full control step.
-            carry = self.num_substeps if wp.get_device(self.device).is_capturing else self.host_substeps
+            carry = self.num_substeps if self.device.is_capturing else self.host_substeps
             ln.bind("host_substeps", carry)
             known = self._known_control
             ln.bind("joint_target_q_out", None if known is None else known[0])

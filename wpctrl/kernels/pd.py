@@ -14,6 +14,15 @@ Row parameters are shared by all envs; gains are ``(1 | num_envs, rows)`` arrays
 ``env if shape[0] > 1 else 0``. A row's coordinate is ``q_base[env] + q_off[row]`` in ``joint_q``/``joint_target_q``
 and its DOF ``qd_base[env] + qd_off[row]`` in ``joint_qd``/``joint_target_qd``/``joint_f``.
 
+Actuation options (issue 10), all off by default and then costing one branch on a null array:
+
+- per-env drive properties: ``kp``/``kd``/``force_limit`` are ``(num_envs, rows)`` in wpctrl (the batch rule still
+  accepts ``(1, rows)``);
+- command delay: a ring buffer ``delay_q``/``delay_qd`` of shape ``(max_delay + 1, num_envs, rows)`` written by the
+  substep kernel, read ``delay[env]`` substeps back; each row keeps its own ring head (no cross-thread race);
+- effort readout: ``computed_effort``/``applied_effort``/``saturation_count`` written by the substep kernel;
+- target clamping: ``clip_targets`` clamps every stored position target to the joint limits in ``set_action``.
+
 Parameter naming follows MuJoCo Warp: row and env tables first (no suffix), then ``_in`` inputs, then ``_out``
 outputs (an ``_out`` array that a kernel also reads is marked "in/out").
 """
@@ -82,7 +91,10 @@ def _set_action_kernel(
     row_mimic_mul: wp.array[float],
     row_mimic_off: wp.array[float],
     row_q_off: wp.array[wp.int32],
+    row_qlo: wp.array[float],
+    row_qhi: wp.array[float],
     lead_row: int,
+    clip_targets: int,
     # Envs:
     env_q_base: wp.array[wp.int32],
     # In:
@@ -132,6 +144,8 @@ def _set_action_kernel(
                     t = target_qpos_out[env, r] + a
                 else:
                     t = q + a
+            if clip_targets != 0:  # the joint's limits [rad or m]: a virtual target cannot run past them
+                t = wp.clamp(t, row_qlo[r], row_qhi[r])
             target_qpos_out[env, r] = t
         vcol = row_vel_col[r]
         if vcol >= 0:
@@ -142,7 +156,10 @@ def _set_action_kernel(
         for i in range(row_follow_start[r], row_follow_start[r + 1]):
             m = row_follow[i]
             start_qpos_out[env, m] = joint_q_in[q_base + row_q_off[m]]
-            target_qpos_out[env, m] = t * row_mimic_mul[m] + row_mimic_off[m]
+            tm = t * row_mimic_mul[m] + row_mimic_off[m]
+            if clip_targets != 0:
+                tm = wp.clamp(tm, row_qlo[m], row_qhi[m])
+            target_qpos_out[env, m] = tm
             row_step_out[env, m] = 0
     elif kind == ROW_VEL:
         v = _scale(action_in[env, col], row_lo[r], row_hi[r], norm)
@@ -168,6 +185,7 @@ def _substep_kernel(
     num_substeps: int,
     explicit_pd: int,
     dt: float,
+    max_delay: int,
     # In:
     joint_q_in: wp.array[float],
     joint_qd_in: wp.array[float],
@@ -175,12 +193,19 @@ def _substep_kernel(
     start_qpos_in: wp.array2d[float],
     target_qpos_in: wp.array2d[float],
     target_qvel_in: wp.array2d[float],
+    delay_in: wp.array[wp.int32],  # optional (num_envs,) [substeps]; None: no delay
     # Out:
     step_out: wp.array[wp.int32],  # in/out
     row_step_out: wp.array2d[wp.int32],  # in/out
+    delay_head_out: wp.array2d[wp.int32],  # in/out, with delay_in: each row's ring-buffer slot
+    delay_q_out: wp.array3d[float],  # in/out, with delay_in: (max_delay + 1, num_envs, rows) position targets
+    delay_qd_out: wp.array3d[float],  # in/out, optional: velocity targets (only when a row has one)
     joint_target_q_out: wp.array[float],
     joint_target_qd_out: wp.array[float],
     joint_f_out: wp.array[float],
+    computed_effort_out: wp.array2d[float],  # optional [N·m or N]: PD law before the clamp
+    applied_effort_out: wp.array2d[float],  # optional [N·m or N]: after the clamp
+    saturation_count_out: wp.array2d[wp.int32],  # optional, in/out: substeps with |computed| > force limit
 ):
     tid = wp.tid()
     num_rows = row_kind.shape[0]
@@ -192,19 +217,37 @@ def _substep_kernel(
     flags = row_flags[r]
     qi = env_q_base[env] + row_q_off[r]
     di = env_qd_base[env] + row_qd_off[r]
+    vel_target = kind != ROW_POS or (flags & FLAG_VEL_TARGET) != 0
     tq = float(0.0)
     tqd = float(0.0)
-    if kind != ROW_POS or (flags & FLAG_VEL_TARGET) != 0:
+    if vel_target:
         tqd = target_qvel_in[env, r]
-        joint_target_qd_out[di] = tqd
     if kind == ROW_POS:
         tq = target_qpos_in[env, r]
         if flags & FLAG_INTERPOLATE:
             k = row_step_out[env, r] + 1
             row_step_out[env, r] = k
             tq = _interp(start_qpos_in[env, r], tq, k, num_substeps)
+    if delay_in:
+        # Push this substep's command, pop the one from delay[env] substeps ago (a reset filled the ring).
+        h = delay_head_out[env, r] + 1
+        if h > max_delay:
+            h = 0
+        delay_head_out[env, r] = h
+        delay_q_out[h, env, r] = tq
+        if delay_qd_out:
+            delay_qd_out[h, env, r] = tqd
+        s = h - wp.clamp(delay_in[env], 0, max_delay)
+        if s < 0:
+            s = s + max_delay + 1
+        tq = delay_q_out[s, env, r]
+        if delay_qd_out:
+            tqd = delay_qd_out[s, env, r]
+    if vel_target:
+        joint_target_qd_out[di] = tqd
+    if kind == ROW_POS:
         joint_target_q_out[qi] = tq
-    if explicit_pd != 0:
+    if explicit_pd != 0 or computed_effort_out:
         qd = joint_qd_in[di]
         kpe = float(0.0)
         e = float(0.0)
@@ -226,7 +269,14 @@ def _substep_kernel(
         else:
             u = kpe * e + kde * (tqd - qd)
         lim = force_limit[_bidx(force_limit.shape[0], env), r]
-        joint_f_out[di] = wp.clamp(u, -lim, lim)
+        f = wp.clamp(u, -lim, lim)
+        if explicit_pd != 0:
+            joint_f_out[di] = f
+        if computed_effort_out:
+            computed_effort_out[env, r] = u
+            applied_effort_out[env, r] = f
+            if wp.abs(u) > lim:
+                saturation_count_out[env, r] = saturation_count_out[env, r] + 1
 
 
 @wp.kernel
@@ -240,11 +290,15 @@ def _reset_kernel(
     env_q_base: wp.array[wp.int32],
     env_qd_base: wp.array[wp.int32],
     first: int,
+    delay_min: int,
+    delay_max: int,
+    seed: int,
     # In:
     env_ids_in: wp.array[wp.int32],  # optional: thread block i resets env env_ids_in[i]
     env_mask_in: wp.array[wp.bool],  # optional: reset only where True
     joint_q_in: wp.array[float],
     joint_qd_in: wp.array[float],
+    rng_counter_in: wp.array[wp.int32],  # (1,) draws so far; bumped by a separate launch after this one
     # Out:
     start_qpos_out: wp.array2d[float],
     target_qpos_out: wp.array2d[float],
@@ -254,6 +308,13 @@ def _reset_kernel(
     joint_target_q_out: wp.array[float],  # optional (no Control given)
     joint_target_qd_out: wp.array[float],  # optional
     joint_f_out: wp.array[float],  # optional (explicit actuation only)
+    delay_out: wp.array[wp.int32],  # optional (delay on): (num_envs,) drawn in [delay_min, delay_max] [substeps]
+    delay_head_out: wp.array2d[wp.int32],  # optional (delay on)
+    delay_q_out: wp.array3d[float],  # optional (delay on): the env's history, filled with the reset pose
+    delay_qd_out: wp.array3d[float],  # optional
+    computed_effort_out: wp.array2d[float],  # optional (effort tracking): zeroed
+    applied_effort_out: wp.array2d[float],  # optional: zeroed
+    saturation_count_out: wp.array2d[wp.int32],  # optional: zeroed
 ):
     tid = wp.tid()
     num_rows = row_kind.shape[0]
@@ -286,6 +347,23 @@ def _reset_kernel(
         joint_target_qd_out[di] = v
     if joint_f_out:
         joint_f_out[di] = 0.0
+    if delay_q_out:
+        if r == 0:  # one draw per env, by its row-0 thread (no other thread reads delay_out here)
+            d = delay_min
+            if delay_max > delay_min:
+                st = wp.rand_init(seed, rng_counter_in[0])
+                st = wp.rand_init(wp.randi(st), env)
+                d = wp.randi(st, delay_min, delay_max + 1)
+            delay_out[env] = d
+        delay_head_out[env, r] = 0
+        for i in range(delay_q_out.shape[0]):
+            delay_q_out[i, env, r] = q
+            if delay_qd_out:
+                delay_qd_out[i, env, r] = v
+    if computed_effort_out:
+        computed_effort_out[env, r] = 0.0
+        applied_effort_out[env, r] = 0.0
+        saturation_count_out[env, r] = 0
 
 
 @wp.kernel

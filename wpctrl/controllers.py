@@ -253,7 +253,8 @@ class BaseController(ActuationMixin):
 
     def attach_solver(self, solver) -> None:
         """Notify ``solver`` of the drive properties now, and after every per-env gain update (implicit acceleration
-        drives). Use it when the solver is built after the controller (as MuJoCo requires)."""
+        drives, :meth:`set_drive_properties`, :meth:`randomize_drive_properties`). Use it when the solver is built
+        after the controller (as MuJoCo requires)."""
         self._require_owner("attach_solver")
         self._engine.solver = solver
         solver.notify_model_changed(newton.ModelFlags.JOINT_DOF_FORCE_PROPERTIES)

@@ -224,7 +224,7 @@ class _Engine:
             self.update_response(state)
         if self._launch_set_action is None:
             self._launch_set_action = _Launch(
-                K._set_action_kernel,
+                K.set_action_kernel(self.clip_targets),
                 self.dim,
                 {
                     "row_kind": self.row_kind,
@@ -269,7 +269,7 @@ class _Engine:
         joint_f = control.joint_f if self.explicit else None
         if self._launch_substep is None:
             self._launch_substep = _Launch(
-                K._substep_kernel,
+                K.substep_kernel(self.delay is not None, self.computed_effort is not None),
                 self.dim,
                 {
                     "row_kind": self.row_kind,

@@ -55,17 +55,20 @@ def _control_step(h, action, control=None):
 
 
 @pytest.mark.parametrize(
-    "mode, actuation, expected",
+    "mode, actuation, options, expected",
     [
-        (delta_arm(), "implicit", 1),  # pd_joint_delta_pos
-        (_mode(), "implicit", 1),  # pd_joint_target_delta_pos with the mimic gripper
-        (wpctrl.PDJointVelControllerConfig(ARM, -1.0, 1.0, 1e2), "implicit", 1),  # pd_joint_vel
-        (_mode(interpolate=True), "implicit", 1 + 5),  # interpolation: a substep launch each
-        (_mode(), "explicit", 1 + 5),  # explicit torques: a substep launch each
+        (delta_arm(), "implicit", {}, 1),  # pd_joint_delta_pos
+        (_mode(), "implicit", {}, 1),  # pd_joint_target_delta_pos with the mimic gripper
+        (wpctrl.PDJointVelControllerConfig(ARM, -1.0, 1.0, 1e2), "implicit", {}, 1),  # pd_joint_vel
+        (_mode(), "implicit", {"clip_targets": "joint_limits"}, 1),  # clamped in set_action
+        (_mode(interpolate=True), "implicit", {}, 1 + 5),  # interpolation: a substep launch each
+        (_mode(), "explicit", {}, 1 + 5),  # explicit torques: a substep launch each
+        (_mode(), "implicit", {"delay": (1, 2)}, 1 + 5),  # the delay ring shifts every substep
+        (_mode(), "implicit", {"track_effort": True}, 1 + 5),  # the effort readout reads the measured state
     ],
 )
-def test_launches_per_control_step(monkeypatch, mode, actuation, expected):
-    h = Harness(copy.deepcopy(mode), num_envs=3, actuation=actuation)
+def test_launches_per_control_step(monkeypatch, mode, actuation, options, expected):
+    h = Harness(copy.deepcopy(mode), num_envs=3, actuation=actuation, **options)
     h.ctrl.reset(h.state)
     a = np.zeros((3, h.ctrl.action_dim), np.float32)
     act = wp.array(a, dtype=wp.float32)

@@ -36,9 +36,9 @@ class BaseController(ActuationMixin):
     targets are written into the ``Control`` in :meth:`before_simulation_step` (implicit actuation:
     ``joint_target_q``/``joint_target_qd``, the solver's built-in PD acts); explicit actuation also writes
     ``joint_f = clamp(Kp (q* - q) + Kd (qd* - qd), -force_limit, force_limit)`` [N·m or N]. Without per-substep
-    work (implicit actuation, no interpolation) the targets are constant over the control step: :meth:`set_action`
-    writes them into the Control last given to :meth:`before_simulation_step` or :meth:`reset`, and
-    :meth:`before_simulation_step` launches nothing unless it is handed another Control.
+    work (implicit actuation, no interpolation, delay or effort readout) the targets are constant over the control
+    step: :meth:`set_action` writes them into the Control last given to :meth:`before_simulation_step` or
+    :meth:`reset`, and :meth:`before_simulation_step` launches nothing unless it is handed another Control.
     """
 
     sets_target_qpos = False
@@ -331,11 +331,11 @@ class BaseController(ActuationMixin):
         """Call once before every solver substep: writes the (interpolated) drive targets and, for explicit
         actuation, the PD torques into ``control``. One kernel launch.
 
-        Without per-substep work (implicit actuation, no interpolating row) the drive targets do not change between
-        substeps and set_action already wrote them into the known Control (the one last given here or to
-        :meth:`reset`): no launch. A different Control (other ``joint_target_q``/``qd`` arrays: double-buffered
-        controls) gets the targets written (one launch) and becomes the known one. If you overwrite the known
-        Control's targets yourself (e.g. ``Control.clear()``), call :meth:`invalidate_control`."""
+        Without per-substep work (implicit actuation, no interpolating row, delay or effort readout) the drive
+        targets do not change between substeps and set_action already wrote them into the known Control (the one
+        last given here or to :meth:`reset`): no launch. A different Control (other ``joint_target_q``/``qd``
+        arrays: double-buffered controls) gets the targets written (one launch) and becomes the known one. If you
+        overwrite the known Control's targets yourself (e.g. ``Control.clear()``), call :meth:`invalidate_control`."""
         self._require_owner("before_simulation_step")
         self._check_state(state, "before_simulation_step")
         self._check_control(control, "before_simulation_step")

@@ -230,24 +230,23 @@ def chain_funcs(nj: int, n: int, nr: int):
                 wp.float64(Iw32[2, 0]), wp.float64(Iw32[2, 1]), wp.float64(Iw32[2, 2]),
             )  # fmt: skip
             mask = chain_anc[k]
+            jv = MatN3()  # COM velocity per unit rate of each DOF that moves this body [m/s]
+            jw = MatN3()  # angular velocity per unit rate [rad/s]
             for i in range(n_rt):
                 if (mask >> i) & 1:
                     ai = ax[i]
-                    jvi = ai
-                    jwi = wp.vec3d()
                     if isrev[i, 0] > wp.float64(0.0):
-                        jvi = wp.cross(ai, c - pt[i])
-                        jwi = ai
-                    Ijwi = Iw * jwi
+                        jv[i] = wp.cross(ai, c - pt[i])
+                        jw[i] = ai
+                    else:
+                        jv[i] = ai
+            for i in range(n_rt):
+                if (mask >> i) & 1:
+                    jvi = jv[i]
+                    Ijwi = Iw * jw[i]
                     for jj in range(i + 1):
                         if (mask >> jj) & 1:
-                            aj = ax[jj]
-                            jvj = aj
-                            jwj = wp.vec3d()
-                            if isrev[jj, 0] > wp.float64(0.0):
-                                jvj = wp.cross(aj, c - pt[jj])
-                                jwj = aj
-                            H[i, jj] = H[i, jj] + m * wp.dot(jvi, jvj) + wp.dot(Ijwi, jwj)
+                            H[i, jj] = H[i, jj] + m * wp.dot(jvi, jv[jj]) + wp.dot(Ijwi, jw[jj])
         for i in range(n_rt):
             H[i, i] = H[i, i] + wp.float64(joint_armature[db + i])
         # Cholesky H = L L^T in place (lower triangle), pivots floored as in Newton's JointSpaceResponse.

@@ -32,7 +32,6 @@ from bench.common import (  # noqa: E402
     write_results,
 )
 
-
 VARIANTS = (
     # label, drive_mode, actuation, explicit_pd, inertia_update, response path
     ("force, implicit (no update)", "force", "implicit", "naive", "control", "fused"),

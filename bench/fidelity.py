@@ -138,12 +138,15 @@ class Rig:
 
 
 def actuator_force_range_clamp(solver) -> None:
-    """Move MuJoCo-Warp's effort clamp from the joint (``jnt_actfrcrange``) to each actuator's own force range.
+    """Move MuJoCo-Warp's effort clamp from the joint (``jnt_actfrcrange``) to the actuators' own force ranges.
 
     Newton puts a revolute/prismatic joint's ``effort_limit`` on ``jnt_actfrcrange``, which clamps the summed actuator
     force but is invisible to MuJoCo's implicit velocity derivative (``implicitfast`` keeps ``-kv`` in its matrix even
     when the force is clamped). An actuator's own ``forcerange`` is honoured by the derivative (a clamped actuator
-    drops out of it). Each Newton DOF drive is one MuJoCo actuator, so the two clamps bound the same P+D force.
+    drops out of it), but Newton builds a POSITION_VELOCITY drive as *two* MuJoCo actuators (stiffness and damping):
+    their ranges clamp P and D separately (the sum can reach twice the limit), and the damping actuator leaves the
+    implicit solve exactly when its own force saturates, which makes it explicit (``dt kd / I`` up to ~100 on the
+    Panda's wrist): the option diverges at 100 Hz (``bench/fidelity.py``, ``bench/mujoco_clamp.py``).
     """
     m = solver.mjw_model
     rng = m.jnt_actfrcrange.numpy()  # (worlds | 1, njnt) vec2

@@ -53,6 +53,39 @@ def _use_joint_space_response(ctrl, model) -> None:
     eng._jsr = JointSpaceResponse(model)
 
 
+def newton_implicit_actuator(n: int, device):
+    """Newton 1.8's coupled implicit actuator (DrivePD + ClampingMaxEffort, set_effort_mode_implicit) on the same
+    Pandas: per substep JointSpaceResponse.refresh, joint_f.zero_() and Actuator.step. Returns the control step."""
+    import newton
+    from newton.actuators import ClampingMaxEffort, DrivePD, JointSpaceResponse
+
+    from wpctrl.robots import panda
+
+    tmpl = panda(visual_shapes=False)
+    for dof in range(tmpl.joint_dof_count):
+        tmpl.add_actuator(DrivePD, index=dof, clamping=[(ClampingMaxEffort, {"max_effort": 100.0})], kp=1e3, kd=1e2)
+    builder = newton.ModelBuilder()
+    builder.replicate(tmpl, n)
+    model = builder.finalize(device=device)
+    model.set_gravity((0.0, 0.0, 0.0))
+    state, control = model.state(), model.control()
+    control.joint_target_q.assign(model.joint_q.numpy() + 0.05)
+    jsr = JointSpaceResponse(model)
+    acts = list(model.actuators)
+    for a in acts:
+        a.set_effort_mode_implicit(jsr)
+    states = [(a.state(), a.state()) for a in acts]
+
+    def step():
+        for _ in range(5):
+            jsr.refresh(state)
+            control.joint_f.zero_()
+            for a, (cur, nxt) in zip(acts, states, strict=True):
+                a.step(state, control, cur, nxt, 0.01)
+
+    return step
+
+
 def run(n: int, device, repeats: int, sync) -> list[dict]:
     import numpy as np
 
@@ -103,6 +136,22 @@ def run(n: int, device, repeats: int, sync) -> list[dict]:
                     "graph_ns_per_env_step": replay / n * 1e9,
                 }
             )
+    step = newton_implicit_actuator(n, device)
+    step()
+    with wp.ScopedCapture(device=device) as cap:
+        step()
+    eager = measure(step, sync, repeats=repeats)["median_s"]
+    replay = measure(lambda g=cap.graph: wp.capture_launch(g), sync, repeats=repeats)["median_s"]
+    rows.append(
+        {
+            "envs": n,
+            "variant": "Newton actuator, set_effort_mode_implicit (+ JointSpaceResponse.refresh per substep)",
+            "what": "control step",
+            "eager_s": eager,
+            "graph_s": replay,
+            "graph_ns_per_env_step": replay / n * 1e9,
+        }
+    )
     return rows
 
 

@@ -1,15 +1,20 @@
 """Minimal reproduction: MuJoCo-Warp's implicit damping ignores Newton's joint-level effort clamp.
 
 One revolute joint (inertia I about its axis, gravity off) with Newton's built-in PD (ke = 1000, kd = 100,
-effort limit 100 N·m) on ``SolverMuJoCo`` (``implicitfast``), one 10 ms step from rest toward a far target:
+effort limit 100 N·m, POSITION_VELOCITY) on ``SolverMuJoCo`` (``implicitfast``), a few 10 ms steps from rest toward a
+far target:
 
-* the drive force saturates at 100 N·m, so a force-limited drive (PhysX's) gains ``dt * 100 / I`` rad/s;
+* the drive force saturates at 100 N·m, so a force-limited drive (PhysX's) gains ``dt * 100 / I`` rad/s per step;
 * Newton writes ``joint_effort_limit`` to MuJoCo's joint-level ``jnt_actfrcrange``: the force *is* clamped, but the
   implicit integrator still folds ``dt * kd`` into its mass matrix (``qDeriv`` only skips an actuator clamped by its
-  own ``actuator_forcerange``), so the joint gains ``dt * 100 / (I + dt * kd)``: about ``1 / (1 + dt kd / I)`` of it;
-* moving the clamp to each actuator's ``forcerange`` (``bench.fidelity.actuator_force_range_clamp``) restores it.
+  own ``actuator_forcerange``), so the joint gains ``dt * 100 / (I + dt * kd)``: ``1 / (1 + dt kd / I)`` of it
+  (0.99 instead of 100 rad/s at I = 0.01 kg·m²);
+* moving the clamp to the actuators' force ranges (``bench.fidelity.actuator_force_range_clamp``) does not fix it:
+  Newton makes two MuJoCo actuators per DOF (stiffness, damping); the stiffness one saturates, the damping one does
+  not (its force is ``-kd qd``, 0 at rest), so ``kd`` stays in the implicit solve; once the damping actuator
+  saturates it leaves the solve and becomes explicit, which is unstable at ``dt kd / I`` >> 2.
 
-Prints one row per clamp and the expected value. ``python bench/mujoco_clamp.py [--inertia 0.01]``.
+Prints qd after each step per clamp, and the expected value. ``python bench/mujoco_clamp.py [--inertia 0.01]``.
 """
 
 from __future__ import annotations
@@ -24,7 +29,7 @@ import numpy as np  # noqa: E402
 import warp as wp  # noqa: E402
 
 
-def one_step(inertia: float, target: float, actclamp: bool, dt: float = 0.01) -> float:
+def run_steps(inertia: float, target: float, actclamp: bool, steps: int = 3, dt: float = 0.01) -> list[float]:
     import newton
 
     from bench.fidelity import actuator_force_range_clamp
@@ -41,8 +46,12 @@ def one_step(inertia: float, target: float, actclamp: bool, dt: float = 0.01) ->
     if actclamp:
         actuator_force_range_clamp(solver)
     s0, s1, control = model.state(), model.state(), model.control()
-    solver.step(s0, s1, control, None, dt)
-    return float(s1.joint_qd.numpy()[0])
+    out = []
+    for _ in range(steps):
+        solver.step(s0, s1, control, None, dt)
+        s0, s1 = s1, s0
+        out.append(float(s0.joint_qd.numpy()[0]))
+    return out
 
 
 def main(argv=None):
@@ -52,18 +61,17 @@ def main(argv=None):
     wp.config.log_level = wp.LOG_WARNING
     dt, kd, lim, inertia = 0.01, 100.0, 100.0, args.inertia
     for target, what in ((1.0, "saturated (target 1 rad)"), (1e-3, "unsaturated (target 1 mrad)")):
-        joint = one_step(inertia, target, actclamp=False)
-        act = one_step(inertia, target, actclamp=True)
+        joint = run_steps(inertia, target, actclamp=False)
+        act = run_steps(inertia, target, actclamp=True)
         force = min(lim, 1000.0 * target)
-        clamped = dt * force / inertia if force >= lim else float("nan")
-        lin = dt * 1000.0 * target / (inertia + dt * kd + dt * dt * 1000.0)
-        print(f"{what}: qd after one 10 ms step [rad/s]")
-        print(f"  joint-level clamp (Newton's jnt_actfrcrange): {joint:10.4f}")
-        print(f"  actuator force-range clamp:                   {act:10.4f}")
-        if np.isfinite(clamped):
-            print(f"  force-limited drive, dt * limit / I:          {clamped:10.4f}")
+        print(f"{what}: qd after each 10 ms step [rad/s]")
+        print(f"  joint-level clamp (Newton's jnt_actfrcrange): {np.round(joint, 4)}")
+        print(f"  actuator force-range clamps:                  {np.round(act, 4)}")
+        if force >= lim:
+            print(f"  force-limited drive, first step dt * limit / I: {dt * force / inertia:.4f}")
         else:
-            print(f"  unclamped implicit PD, dt kp e / (I + dt kd + dt^2 kp): {lin:10.4f}")
+            lin = dt * 1000.0 * target / (inertia + dt * kd + dt * dt * 1000.0)
+            print(f"  unclamped implicit PD, first step dt kp e / (I + dt kd + dt^2 kp): {lin:.4f}")
 
 
 if __name__ == "__main__":

@@ -37,6 +37,8 @@ from bench.common import DEFAULT_OUT, machine_info, md_table, meta_markdown, wri
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_TRACES = Path(os.environ.get("WPCTRL_SHARED", ROOT.parent / "shared")) / "conformance"
+if not DEFAULT_TRACES.exists() and (ROOT / "shared" / "conformance").exists():
+    DEFAULT_TRACES = ROOT / "shared" / "conformance"  # a copy of ../shared inside the checkout (device machine)
 ARM = 7
 
 # label: (actuation, explicit_pd, substeps per 10 ms, clamp at the MuJoCo actuator's force range)

@@ -71,7 +71,7 @@ def test_fused_response_matches_joint_space_response_and_featherstone():
                 assert np.abs(blk[e] - ref).max() <= 1e-5 * np.abs(ref).max()
 
 
-def _coupled_ctrl(model, force_limit, drive_mode="force", gripper_passive=False, kp=1e3, kd=1e2):
+def _coupled_ctrl(model, force_limit, drive_mode="force", gripper_passive=False, kp=1e3, kd=1e2, **kw):
     arm = wpctrl.PDJointPosControllerConfig(
         PANDA_ARM_JOINTS, None, None, kp, kd, force_limit, normalize_action=False, drive_mode=drive_mode
     )
@@ -81,7 +81,9 @@ def _coupled_ctrl(model, force_limit, drive_mode="force", gripper_passive=False,
         grip = wpctrl.PDJointPosControllerConfig(
             PANDA_GRIPPER_JOINTS, None, None, kp, kd, force_limit, normalize_action=False, drive_mode=drive_mode
         )
-    return wpctrl.build_controller({"arm": arm, "gripper": grip}, model, 100, 100, "explicit", explicit_pd="coupled")
+    return wpctrl.build_controller(
+        {"arm": arm, "gripper": grip}, model, 100, 100, "explicit", explicit_pd="coupled", **kw
+    )
 
 
 def _setup(ctrl, model, rng, spread=0.3):
@@ -130,7 +132,7 @@ def test_coupled_without_active_limits_is_the_linear_implicit_solution():
 def test_coupled_with_limits_satisfies_box_and_kkt():
     model = build_panda(E)
     lim = 30.0
-    ctrl = _coupled_ctrl(model, lim, gripper_passive=True)
+    ctrl = _coupled_ctrl(model, lim, gripper_passive=True, track_effort=True)
     s, c, q, qd, target = _setup(ctrl, model, np.random.default_rng(2), spread=0.5)
     ctrl.set_action(target[:, :7], s)
     ctrl.before_simulation_step(s, c)
@@ -156,6 +158,10 @@ def test_coupled_with_limits_satisfies_box_and_kkt():
             else:
                 assert abs(tau[e, i] - w[i]) <= tol  # free: the law holds exactly
     assert 3 <= saturated < 7 * E  # the case exercises both active and free rows
+    # Effort readout: the solved torque, the law at the predicted state, one saturation count per clamped row.
+    eng = ctrl._engine
+    np.testing.assert_array_equal(eng.applied_effort.numpy(), tau.astype(np.float32))
+    assert int(eng.saturation_count.numpy().sum()) == saturated
     assert ctrl._engine.coupled_iterations.numpy().max() <= 9 + 2  # settled by the active-set iteration
 
 

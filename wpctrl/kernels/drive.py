@@ -143,6 +143,9 @@ def coupled_kernel(nj: int, n: int, nr: int) -> wp.Kernel:
         joint_f_out: wp.array[float],
         response_out: wp.array2d[float],  # optional: (H^-1)_ii of each row [1/(kg m^2) or 1/kg]
         iterations_out: wp.array[wp.int32],  # optional: active-set iterations (rows + 3 + sweeps: not settled)
+        computed_effort_out: wp.array2d[float],  # optional [N·m or N]: the PD law at the predicted state, unclamped
+        applied_effort_out: wp.array2d[float],  # optional [N·m or N]: the solved torque
+        saturation_count_out: wp.array2d[wp.int32],  # optional, in/out: substeps with the row at its limit
     ):
         """Per env: coupled implicit PD torques [N·m or N] of every controlled row, clamped inside the solve."""
         env = wp.tid()
@@ -249,6 +252,15 @@ def coupled_kernel(nj: int, n: int, nr: int) -> wp.Kernel:
         for r in range(nr_rt):
             di = env_qd_base[env] + row_qd_off[r]
             joint_f_out[di] = float(tau[r] * active[r])
+            if computed_effort_out:
+                at = wp.float64(0.0)
+                for c in range(nr_rt):
+                    at += A[r, c] * tau[c]
+                w = (b[r] - d[r] * at) * active[r]
+                computed_effort_out[env, r] = float(w)
+                applied_effort_out[env, r] = float(tau[r] * active[r])
+                if wp.abs(w) > lim[r]:
+                    saturation_count_out[env, r] = saturation_count_out[env, r] + 1
         if iterations_out:
             iterations_out[env] = it
 

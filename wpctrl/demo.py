@@ -17,8 +17,9 @@ Gravity is off, as ManiSkill's Panda runs with ``balance_passive_force`` (gravit
 from __future__ import annotations
 
 import argparse
-import importlib
+import importlib.util
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -26,33 +27,42 @@ from pathlib import Path
 import numpy as np
 
 from . import demo_report as report
-from .controllers import _EXPLICIT_PD
 
+# This module imports only numpy at the top: the compile notice is printed before newton (~4 s) and the kernels load.
 SOLVERS = ("mujoco", "xpbd", "featherstone")
 ACTUATIONS = ("implicit", "explicit")
-EXPLICIT_PD_CHOICES = tuple(_EXPLICIT_PD)  # the controller's own list: a new explicit PD law shows up here
 DEFAULT_OUT = "wpctrl-demo"  # git-ignored in this repository
 STABLE_MIN_SIM_FREQ = 500  # [Hz] stable explicit PD tracks the Panda's 1000/100 gains from here (measured)
 FEATHERSTONE_MIN_SIM_FREQ = 1000  # [Hz] Featherstone's penalty joint limits hold the fingers from here (measured)
 COMPILE_NOTICE = "compiling kernels (first run only: ~1.5 min on a 2-core CPU; later runs load them from the cache)..."
 
 
-def _parser() -> argparse.ArgumentParser:
-    from .robots import PANDA_CONTROL_MODES
+def explicit_pd_choices() -> tuple[str, ...]:
+    """The controller's own list of explicit PD laws (``build_controller(explicit_pd=...)``): a new law shows up
+    in the demo without an edit here."""
+    from .controllers import _EXPLICIT_PD
 
+    return tuple(_EXPLICIT_PD)
+
+
+def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="wpctrl demo", description=__doc__.split("\n\n")[0])
     p.add_argument("--envs", type=int, default=16, help="parallel envs (Pandas), default 16; per rank under torchrun")
     p.add_argument(
         "--device", default="cpu", help="cpu | cuda | cuda:N (default cpu); under torchrun 'cuda' = cuda:LOCAL_RANK"
     )
-    p.add_argument("--control-mode", default="pd_joint_delta_pos", help=f"one of {list(PANDA_CONTROL_MODES)}")
+    p.add_argument(
+        "--control-mode",
+        default="pd_joint_delta_pos",
+        help="a ManiSkill Panda control mode, one of wpctrl.robots.PANDA_CONTROL_MODES (pd_joint_delta_pos, "
+        "pd_joint_pos, pd_joint_target_delta_pos, pd_joint_vel, pd_joint_pos_vel, pd_joint_delta_pos_vel, ...)",
+    )
     p.add_argument("--actuation", default="implicit", choices=ACTUATIONS)
     p.add_argument(
         "--explicit-pd",
         default=None,
-        choices=EXPLICIT_PD_CHOICES,
-        help="explicit PD law with --actuation explicit (default stable; naive is refused: it does not hold the "
-        "Panda's gains)",
+        help="build_controller's explicit_pd with --actuation explicit: stable (default) | naive (refused: does "
+        "not hold the Panda's gains) | ...",
     )
     p.add_argument(
         "--solver",
@@ -144,12 +154,7 @@ def supported_combinations() -> str:
 
 
 def _check_args(parser, args) -> None:
-    import warp as wp
-
-    from .robots import PANDA_CONTROL_MODES
-
-    if args.control_mode not in PANDA_CONTROL_MODES:
-        _fail(parser, f"--control-mode: expected one of {list(PANDA_CONTROL_MODES)}, got {args.control_mode!r}")
+    """Checks that need no heavy import (before the compile notice)."""
     if args.envs < 1:
         _fail(parser, f"--envs: expected >= 1, got {args.envs}")
     if not (args.seconds > 0 and math.isfinite(args.seconds)):
@@ -168,9 +173,21 @@ def _check_args(parser, args) -> None:
     why = unsupported(args.solver, args.actuation, args.explicit_pd, args.sim_freq)
     if why:
         _fail(parser, why)
+    if args.device != "cpu" and not (args.device == "cuda" or args.device.startswith("cuda:")):
+        _fail(parser, f"--device: expected cpu, cuda or cuda:N, got {args.device!r}")
+
+
+def _check_args_loaded(parser, args) -> None:
+    """Checks against what newton / warp / wpctrl know (after the compile notice)."""
+    import warp as wp
+
+    from .robots import PANDA_CONTROL_MODES
+
+    if args.control_mode not in PANDA_CONTROL_MODES:
+        _fail(parser, f"--control-mode: expected one of {list(PANDA_CONTROL_MODES)}, got {args.control_mode!r}")
+    if args.explicit_pd is not None and args.explicit_pd not in explicit_pd_choices():
+        _fail(parser, f"--explicit-pd: expected one of {list(explicit_pd_choices())}, got {args.explicit_pd!r}")
     if args.device != "cpu":
-        if not (args.device == "cuda" or args.device.startswith("cuda:")):
-            _fail(parser, f"--device: expected cpu, cuda or cuda:N, got {args.device!r}")
         if not wp.is_cuda_available():
             _fail(parser, f"--device {args.device}: no CUDA device is available on this machine")
         try:
@@ -188,9 +205,11 @@ def _check_extras(args) -> None:
         needed += [("mujoco", "MuJoCo"), ("mujoco_warp", "MuJoCo-Warp")]
     missing = []
     for module, label in needed:
-        try:
-            importlib.import_module(module)
-        except ImportError:
+        try:  # found without importing it (matplotlib and MuJoCo-Warp take seconds to import)
+            found = importlib.util.find_spec(module) is not None
+        except (ImportError, ValueError):
+            found = False
+        if not found:
             missing.append(label)
     if missing:
         print(
@@ -304,7 +323,6 @@ def run(args, ctx=None) -> dict:
         ctx = DistContext(device=args.device, seed=args.seed)
     device = wp.get_device(ctx.device)
     rng = np.random.default_rng(ctx.seed)
-    _say(ctx, COMPILE_NOTICE)
     t_start = time.perf_counter()
     builder = newton.ModelBuilder()
     builder.replicate(panda(), args.envs)
@@ -581,6 +599,10 @@ def main(argv=None) -> int:
     _check_args(parser, args)
     _check_extras(args)
     from . import distributed
+
+    if not distributed.launched() or os.environ.get("RANK") == "0":
+        print(COMPILE_NOTICE, flush=True)  # within a second or two of the command: newton's import alone takes ~4 s
+    _check_args_loaded(parser, args)
 
     try:
         ctx = distributed.init(device=args.device, seed=args.seed)

@@ -14,10 +14,7 @@ def main(argv=None) -> int:
     if argv[0] != "demo":
         print(f"wpctrl: error: unknown command {argv[0]!r}; expected 'demo'", file=sys.stderr)
         return 2
-    import warp as wp
-
-    wp.config.log_level = wp.LOG_WARNING  # no banner, no "Module ... load" lines: the demo prints its own progress
-    from .demo import main as demo_main
+    from .demo import main as demo_main  # light: warp (~1-3 s to import) loads after the demo's first line
 
     try:
         return demo_main(argv[1:])

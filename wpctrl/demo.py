@@ -602,6 +602,9 @@ def main(argv=None) -> int:
 
     if not distributed.launched() or os.environ.get("RANK") == "0":
         print(COMPILE_NOTICE, flush=True)  # within a second or two of the command: newton's import alone takes ~4 s
+    import warp as wp
+
+    wp.config.log_level = wp.LOG_WARNING  # no banner, no "Module ... load" lines: the demo says what it does
     _check_args_loaded(parser, args)
 
     try:

@@ -289,6 +289,11 @@ class JointTask:
 
 
 def make_task(mode_name: str, ctrl, model, rest, num_envs: int, rng) -> JointTask:
+    """The task for ``mode_name``. A family of modes plugs in here with its own module and an object with the same
+    interface as :class:`JointTask`: ``groups`` ({name: (columns, SI unit, shown unit, scale)}; the first group also
+    feeds the per-env histogram), ``tracking_label``, ``names`` (one per tracked column, for the plot),
+    ``action(t_next, state) -> (num_envs, action_dim) float32`` and ``tracked(t, state, control) -> (measured,
+    desired, drive target)``, each (num_envs, len(names))."""
     return JointTask(mode_name, ctrl, model, rest, num_envs, rng)
 
 

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from . import demo_report as report
+from .demo_tasks import JointTask
 
 # This module imports only numpy at the top: the compile notice is printed before newton (~4 s) and the kernels load.
 SOLVERS = ("mujoco", "xpbd", "featherstone")
@@ -225,69 +226,6 @@ def _check_extras(args) -> None:
 # its own task through make_task (e.g. the end-effector modes in their own module).
 
 
-class JointTask:
-    """Joint-space modes: per-env sinusoids around the rest pose for the arm, a gripper that opens and closes.
-
-    The action comes from the desired trajectory (q_des, qd_des) and the measured state, so every part of the mode
-    is used: absolute, delta from the measured position, delta on the virtual target, velocity and
-    position+velocity actions, normalisation (clipped at the bounds) and the mimic gripper. Tracking is measured on
-    the joint positions against the policy's desired trajectory (not against wpctrl's targets).
-    """
-
-    tracking_label = "measured joint positions vs the policy's desired trajectory"
-    #: group -> (columns of tracked(), SI unit (summary.json), unit shown, scale from SI to the unit shown)
-    groups = {"arm": (slice(0, 7), "rad", "rad", 1.0), "gripper": (slice(7, 9), "m", "mm", 1e3)}
-
-    def __init__(self, mode_name: str, ctrl, model, rest: np.ndarray, num_envs: int, rng: np.random.Generator):
-        self.mode = mode_name
-        self.ctrl = ctrl
-        self.coord = ctrl._engine.binding.coord_index
-        self.rest = rest.astype(np.float64)
-        self.amp = rng.uniform(0.1, 0.3, (num_envs, 7))  # [rad]
-        self.freq = rng.uniform(0.2, 0.6, (num_envs, 7))  # [Hz]: peak speed < 1.2 rad/s, inside every mode's bounds
-        self.phase = rng.uniform(0, 2 * math.pi, (num_envs, 7))
-        self.grip_period = rng.uniform(1.0, 2.0, num_envs)  # [s]
-        self.names = list(ctrl.joint_names)
-
-    def desired(self, t: float):
-        w = 2 * math.pi * self.freq
-        q = self.rest[None, :7] + self.amp * np.sin(w * t + self.phase)
-        qd = self.amp * w * np.cos(w * t + self.phase)
-        closed = (t % self.grip_period) > 0.5 * self.grip_period
-        grip = np.where(closed, 0.0, 0.04)  # finger opening [m]
-        return q, qd, grip
-
-    def action(self, t_next: float, state) -> np.ndarray:
-        """Action for the control step that ends at ``t_next`` [s], from the measured ``state``."""
-        q = state.joint_q.numpy()[self.coord]
-        q_des, qd_des, grip = self.desired(t_next)
-        arm_sp = self.ctrl["arm"]
-        g = np.clip((grip - 0.015) / 0.025, -1, 1)[:, None]  # gripper [-0.01, 0.04] m normalised
-        m = self.mode
-        if m == "pd_joint_pos":
-            arm = q_des
-        elif m == "pd_joint_delta_pos":
-            arm = (q_des - q[:, :7]) / 0.1
-        elif m == "pd_joint_target_delta_pos":
-            arm = (q_des - arm_sp.target_qpos.numpy()) / 0.1
-        elif m == "pd_joint_vel":
-            arm = qd_des + 2.0 * (q_des - q[:, :7])  # [rad/s], normalised by the ±1 rad/s bound
-        elif m == "pd_joint_pos_vel":
-            arm = np.concatenate([q_des, qd_des], axis=1)
-        elif m == "pd_joint_delta_pos_vel":
-            arm = np.concatenate([(q_des - q[:, :7]) / 0.1, qd_des], axis=1)
-        else:  # pragma: no cover - the parser validates the mode
-            raise ValueError(m)
-        return np.concatenate([arm, g], axis=1).astype(np.float32)
-
-    def tracked(self, t: float, state, control):
-        """(measured, desired, drive target) of the tracked quantities, each (num_envs, d), at time ``t``."""
-        q = state.joint_q.numpy()[self.coord]
-        q_des, _, grip = self.desired(t)
-        des = np.concatenate([q_des, grip[:, None], grip[:, None]], axis=1)
-        return q, des, control.joint_target_q.numpy()[self.coord]
-
-
 def make_task(mode_name: str, ctrl, model, rest, num_envs: int, rng) -> JointTask:
     """The task for ``mode_name``. A family of modes plugs in here with its own module and an object with the same
     interface as :class:`JointTask`: ``groups`` ({name: (columns, SI unit, shown unit, scale)}; the first group also
@@ -481,10 +419,10 @@ def run(args, ctx=None) -> dict:
     if progress is not None:
         progress.close()
 
-    ctrl_s, solver_s = _time_parts(controller_part, solver_part, device, args.graph)
+    ctrl_s, solver_s = report.time_parts(controller_part, solver_part, device, args.graph)
     scaling = None
     if ctx.distributed:
-        scaling = _solo_vs_concurrent(ctx, graph, control_step, device, args.envs)
+        scaling = report.solo_vs_concurrent(ctx, graph, control_step, device, args.envs)
 
     env_mean = env_err / np.maximum(env_n, 1)
     env_mean[nonfinite_env] = np.nan
@@ -529,73 +467,6 @@ def run(args, ctx=None) -> dict:
         (out / "summary.json").write_text(report.strict_json(summary))
         report.plot(out / "tracking.png", {k: np.array(v) for k, v in hist.items()}, env_means, task, summary)
     return summary
-
-
-def _time_parts(controller_part, solver_part, device, graph: bool, repeats: int = 10):
-    """Seconds per control step of the controller alone (set_action + K substep calls) and of the K solver steps
-    alone, each captured in a graph when ``graph`` (as the rollout runs) or eager. Run after the rollout: it
-    advances the simulation."""
-    import warp as wp
-
-    out = []
-    for part in (controller_part, solver_part):
-        fn = part
-        if graph:
-            with wp.ScopedCapture(device=device) as cap:
-                part()
-            g = cap.graph
-
-            def fn(g=g):
-                wp.capture_launch(g)
-
-        fn()
-        wp.synchronize_device(device)
-        times = []
-        for _ in range(repeats):
-            t0 = time.perf_counter()
-            fn()
-            wp.synchronize_device(device)
-            times.append(time.perf_counter() - t0)
-        out.append(float(np.median(times)))
-    return out[0], out[1]
-
-
-def _solo_vs_concurrent(ctx, graph, control_step, device, envs: int, repeats: int = 10) -> dict:
-    """Weak scaling inside one run: seconds per control step of rank 0 running alone (the others wait at a
-    barrier) and of every rank running at once. Every rank calls this (collectives)."""
-    import warp as wp
-
-    def step():
-        if graph is not None:
-            wp.capture_launch(graph)
-        else:
-            control_step()
-
-    def timed() -> float:
-        times = []
-        for _ in range(repeats):
-            t0 = time.perf_counter()
-            step()
-            wp.synchronize_device(device)
-            times.append(time.perf_counter() - t0)
-        return float(np.median(times))
-
-    ctx.barrier()
-    solo = timed() if ctx.is_main else 0.0
-    ctx.barrier()
-    concurrent = timed()
-    ctx.barrier()
-    both = ctx.all_gather([solo, concurrent])
-    solo_s = float(both[0, 0])
-    slowest = float(both[:, 1].max())
-    return {
-        "solo_rank0_s_per_step": solo_s,
-        "concurrent_s_per_step": [float(x) for x in both[:, 1]],
-        "solo_env_steps_per_s": envs / solo_s,
-        # Synchronous training waits for the slowest rank: aggregate = all envs / the slowest rank's step time.
-        "concurrent_env_steps_per_s": ctx.world_size * envs / slowest,
-        "efficiency": solo_s / slowest,
-    }
 
 
 def main(argv=None) -> int:

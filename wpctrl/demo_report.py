@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -264,3 +265,74 @@ def plot(path: Path, hist: dict, env_err: np.ndarray, task, summary: dict) -> No
     fig.suptitle("wpctrl demo: env 0 of rank 0, every joint (Panda)", fontsize=11)
     fig.savefig(path, dpi=90)
     plt.close(fig)
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# Timing
+
+
+def time_parts(controller_part, solver_part, device, graph: bool, repeats: int = 10):
+    """Seconds per control step of the controller alone (set_action + K substep calls) and of the K solver steps
+    alone, each captured in a graph when ``graph`` (as the rollout runs) or eager. Run after the rollout: it
+    advances the simulation."""
+    import warp as wp
+
+    out = []
+    for part in (controller_part, solver_part):
+        fn = part
+        if graph:
+            with wp.ScopedCapture(device=device) as cap:
+                part()
+            g = cap.graph
+
+            def fn(g=g):
+                wp.capture_launch(g)
+
+        fn()
+        wp.synchronize_device(device)
+        times = []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            fn()
+            wp.synchronize_device(device)
+            times.append(time.perf_counter() - t0)
+        out.append(float(np.median(times)))
+    return out[0], out[1]
+
+
+def solo_vs_concurrent(ctx, graph, control_step, device, envs: int, repeats: int = 10) -> dict:
+    """Weak scaling inside one run: seconds per control step of rank 0 running alone (the others wait at a
+    barrier) and of every rank running at once. Every rank calls this (collectives)."""
+    import warp as wp
+
+    def step():
+        if graph is not None:
+            wp.capture_launch(graph)
+        else:
+            control_step()
+
+    def timed() -> float:
+        times = []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            step()
+            wp.synchronize_device(device)
+            times.append(time.perf_counter() - t0)
+        return float(np.median(times))
+
+    ctx.barrier()
+    solo = timed() if ctx.is_main else 0.0
+    ctx.barrier()
+    concurrent = timed()
+    ctx.barrier()
+    both = ctx.all_gather([solo, concurrent])
+    solo_s = float(both[0, 0])
+    slowest = float(both[:, 1].max())
+    return {
+        "solo_rank0_s_per_step": solo_s,
+        "concurrent_s_per_step": [float(x) for x in both[:, 1]],
+        "solo_env_steps_per_s": envs / solo_s,
+        # Synchronous training waits for the slowest rank: aggregate = all envs / the slowest rank's step time.
+        "concurrent_env_steps_per_s": ctx.world_size * envs / slowest,
+        "efficiency": solo_s / slowest,
+    }

@@ -43,6 +43,10 @@ if TYPE_CHECKING:
 
 
 def __getattr__(name: str):
+    if name == "distributed":  # wpctrl.distributed: torchrun helpers (torch imported only under torchrun)
+        import importlib
+
+        return importlib.import_module(".distributed", __name__)
     if name in _LAZY:
         from . import controllers
 
@@ -51,7 +55,7 @@ def __getattr__(name: str):
 
 
 def __dir__():
-    return sorted(set(globals()) | _LAZY)
+    return sorted(set(globals()) | _LAZY | {"distributed"})
 
 
 __version__ = "0.1.0"

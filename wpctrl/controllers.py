@@ -19,7 +19,7 @@ from . import config as cfg
 from .actuation import ActuationMixin, check_delay
 from .binding import bind_joints
 from .engine import _Engine
-from .inputs import _action_array, _as_rows_array, _env_selection, _raise_on_nonfinite
+from .inputs import _action_array, _as_rows_array, _claim, _env_selection, _raise_on_nonfinite, _type_name
 
 _ACTUATIONS = ("implicit", "explicit")
 _NAN_POLICIES = ("hold", "raise")
@@ -275,10 +275,11 @@ class BaseController(ActuationMixin):
 
     def _check_state(self, state, what: str) -> None:
         eng = self._engine
-        if state is None or not hasattr(state, "joint_q"):
-            raise TypeError(f"{what}: expected a newton.State, got {type(state).__name__}")
-        if state.joint_q.device != eng.device:
-            raise ValueError(f"{what}: state is on {state.joint_q.device}, the controller on {eng.device}")
+        if not isinstance(state, newton.State):
+            raise TypeError(f"{what}: expected a newton.State (model.state()), got {_type_name(state)}")
+        if state.joint_q is None or state.joint_q.device != eng.device:
+            where = None if state.joint_q is None else state.joint_q.device
+            raise ValueError(f"{what}: state is on {where}, the controller on {eng.device}")
         if (
             state.joint_q.shape[0] != eng.model.joint_coord_count
             or state.joint_qd.shape[0] != eng.model.joint_dof_count
@@ -287,11 +288,12 @@ class BaseController(ActuationMixin):
                 f"{what}: state has {state.joint_q.shape[0]} coordinates / {state.joint_qd.shape[0]} DOFs, the "
                 f"controller's model {eng.model.joint_coord_count} / {eng.model.joint_dof_count}: another model?"
             )
+        _claim(state, eng.model, what, "state")
 
     def _check_control(self, control, what: str) -> None:
         eng = self._engine
-        if control is None or not hasattr(control, "joint_target_q"):
-            raise TypeError(f"{what}: expected a newton.Control, got {type(control).__name__}")
+        if not isinstance(control, newton.Control):
+            raise TypeError(f"{what}: expected a newton.Control (model.control()), got {_type_name(control)}")
         if control.joint_target_q is None or control.joint_target_q.device != eng.device:
             raise ValueError(f"{what}: control is not on the controller's device {eng.device}")
         if control.joint_target_qd.shape[0] != eng.model.joint_dof_count:
@@ -299,6 +301,7 @@ class BaseController(ActuationMixin):
                 f"{what}: control has {control.joint_target_qd.shape[0]} DOFs, the controller's model "
                 f"{eng.model.joint_dof_count}: another model?"
             )
+        _claim(control, eng.model, what, "control")
 
     def set_action(self, action, state: newton.State) -> None:
         """Set this control step's targets from ``action`` (num_envs, action_dim) and the measured ``state``.

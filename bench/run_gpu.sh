@@ -4,15 +4,12 @@
 #
 #   bash bench/run_gpu.sh        # results in $OUT if set (the device machine sets it), else bench/results
 #
-# Writes 8 files (the device machine returns at most 8): controller_step_cuda.md (explicit actuation),
-# controller_step_cuda_implicit.md (implicit, no interpolation: the elided substep launch), profile_overhead_cuda.md,
-# rollout_cuda.md, actuation_cost_cuda.md, inertia_update_cuda.md, run_gpu.log (with the CUDA tests' output and the
-# launch_params table), and json.tar holding the JSON files and launch_params_cuda.md (launch cost vs parameter count
-# and index chains) (tar -xf json.tar -C bench/results). Each stage has a time limit so that a slow stage cannot
-# starve the others.
-# The Nsight Compute profile is a separate call (its own 3 files): bash bench/profile_ncu.sh.
-# Sizes: CTRL_ENVS, IMPLICIT_ENVS, ROLLOUT_ENVS, ROLLOUT_SOLVERS, ACT_ENVS, REPEATS; DEVICE (default cuda:0; "cpu"
-# only to test the script: use the CPU commands of bench/README.md for CPU numbers).
+# Writes 8 files (the device machine returns at most 8): controller_step_cuda.md, profile_overhead_cuda.md,
+# rollout_cuda.md, inertia_update_cuda.md, actuation_cost_cuda.md, fidelity_cuda.md, run_gpu.log (with the CUDA tests' output), and json.tar
+# holding the JSON files
+# (tar -xf json.tar -C bench/results). Each stage has a time limit so that a slow stage cannot starve the others.
+# Sizes: CTRL_ENVS, ROLLOUT_ENVS, ROLLOUT_SOLVERS, REPEATS; DEVICE (default cuda:0; "cpu" only to test
+# the script: use the CPU commands of bench/README.md for CPU numbers).
 set -uo pipefail
 cd "$(dirname "$0")/.."
 OUT=${OUT:-bench/results}
@@ -48,19 +45,16 @@ stage cuda_tests 240 $PY -m pytest -q -p no:cacheprovider tests/test_cuda.py tes
   "tests/test_actuation.py::test_cuda_captured_randomisation_reaches_mujoco"
 stage controller_step 200 $PY bench/controller_step.py --device "$DEVICE" --envs "$CTRL_ENVS" --repeats "$REPEATS" \
   --out "$WORK"
-stage controller_step_implicit 120 $PY bench/controller_step.py --device "$DEVICE" \
-  --envs "${IMPLICIT_ENVS:-1,4k,64k,1M}" --repeats "$REPEATS" --actuation implicit --interpolate off --tag cuda_implicit --out "$WORK"
-stage launch_params 60 $PY bench/launch_params.py --device "$DEVICE" --envs 4k,1M --repeats "$REPEATS" --out "$WORK"
 stage profile_overhead 60 $PY bench/profile_overhead.py --device "$DEVICE" --envs 1,4k --repeats "$REPEATS" \
   --profile-steps 1000 --out "$WORK"
 stage rollout 200 $PY bench/rollout.py --device "$DEVICE" --envs "$ROLLOUT_ENVS" --solver "$ROLLOUT_SOLVERS" --steps 20 \
   --repeats 3 --out "$WORK"
 stage actuation_cost 120 $PY bench/actuation_cost.py --device "$DEVICE" --envs "${ACT_ENVS:-1,4k,64k,1M}" \
   --repeats "$REPEATS" --eager --out "$WORK"
-stage inertia_update 90 $PY bench/inertia_update.py --device "$DEVICE" --envs 1,4k,64k --repeats "$REPEATS" \
+stage inertia_update 150 $PY bench/inertia_update.py --device "$DEVICE" --envs 1,4k,64k --repeats "$REPEATS" \
   --out "$WORK"
-cat "$WORK"/launch_params_*.md >> "$LOG" 2>/dev/null
-(cd "$WORK" && tar -cf "$OUT/json.tar" ./*.json ./launch_params_*.md 2>/dev/null; rm -f ./launch_params_*.md)
+stage fidelity 150 $PY bench/fidelity.py --device "$DEVICE" --out "$WORK"
 cp "$WORK"/*.md "$OUT"/
+(cd "$WORK" && tar -cf "$OUT/json.tar" ./*.json)
 echo "=== done in $(( $(date +%s) - t0 ))s" | tee -a "$LOG"
 ls -la "$OUT" | tee -a "$LOG"

@@ -3,6 +3,8 @@
 Public import path: ``import wpctrl``.
 """
 
+from typing import TYPE_CHECKING
+
 from .config import (
     ConfigError,
     ControllerConfig,
@@ -13,16 +15,48 @@ from .config import (
     PDJointPosVelControllerConfig,
     PDJointVelControllerConfig,
 )
-from .controllers import (
-    BaseController,
-    CombinedController,
-    PassiveController,
-    PDJointPosController,
-    PDJointPosMimicController,
-    PDJointPosVelController,
-    PDJointVelController,
-    build_controller,
-)
+
+# The controllers (which import newton, ~4 s) load on first use, so that ``python -m wpctrl demo`` can say what it is
+# doing before the heavy imports and kernel compilation start.
+_LAZY = {
+    "BaseController",
+    "CombinedController",
+    "PassiveController",
+    "PDJointPosController",
+    "PDJointPosMimicController",
+    "PDJointPosVelController",
+    "PDJointVelController",
+    "build_controller",
+}
+
+if TYPE_CHECKING:
+    from .controllers import (
+        BaseController,
+        CombinedController,
+        PassiveController,
+        PDJointPosController,
+        PDJointPosMimicController,
+        PDJointPosVelController,
+        PDJointVelController,
+        build_controller,
+    )
+
+
+def __getattr__(name: str):
+    if name == "distributed":  # wpctrl.distributed: torchrun helpers (torch imported only under torchrun)
+        import importlib
+
+        return importlib.import_module(".distributed", __name__)
+    if name in _LAZY:
+        from . import controllers
+
+        return getattr(controllers, name)
+    raise AttributeError(f"module 'wpctrl' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | _LAZY | {"distributed"})
+
 
 __version__ = "0.1.0"
 

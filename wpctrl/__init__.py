@@ -13,6 +13,7 @@ from .config import (
     PDJointPosVelControllerConfig,
     PDJointVelControllerConfig,
 )
+from .config_ee import PDEEPosControllerConfig, PDEEPoseControllerConfig
 from .controllers import (
     BaseController,
     CombinedController,
@@ -23,6 +24,7 @@ from .controllers import (
     PDJointVelController,
     build_controller,
 )
+from .controllers_ee import PDEEPosController, PDEEPoseController
 
 __version__ = "0.1.0"
 
@@ -32,6 +34,10 @@ __all__ = [
     "ConfigError",
     "ControllerConfig",
     "MimicJointError",
+    "PDEEPosController",
+    "PDEEPosControllerConfig",
+    "PDEEPoseController",
+    "PDEEPoseControllerConfig",
     "PDJointPosController",
     "PDJointPosControllerConfig",
     "PDJointPosMimicController",

@@ -16,6 +16,7 @@ import numpy as np
 import warp as wp
 
 from . import config as cfg
+from . import config_ee as cfg_ee
 from .binding import bind_joints
 from .engine import _Engine
 from .inputs import _action_array, _as_rows_array, _env_selection, _raise_on_nonfinite
@@ -80,10 +81,15 @@ class BaseController:
             names += cfg._joint_names(c)
         binding = bind_joints(model, names)  # once for the whole mode
         parts: list[tuple[str, Any, cfg.Rows]] = []
+        ee_specs: dict[str, cfg_ee.EESpec] = {}
         r0 = 0
         for uid, c in configs.items():
             n = len(c.joint_names)
-            parts.append((uid, c, cfg.config_rows(c, binding.qlimits[r0 : r0 + n])))
+            if isinstance(c, cfg_ee.EE_CONFIGS):  # end-effector controllers: position rows + an EE launch
+                rows, ee_specs[uid] = cfg_ee.ee_rows(c, binding.qlimits[r0 : r0 + n])
+            else:
+                rows = cfg.config_rows(c, binding.qlimits[r0 : r0 + n])
+            parts.append((uid, c, rows))
             r0 += n
         all_rows = cfg.Rows.concat([p[2] for p in parts])
         self._engine = _Engine(
@@ -99,6 +105,8 @@ class BaseController:
         self._rows = slice(0, all_rows.count)
         self._cols = slice(0, all_rows.action_dim)
         self._owner = True
+        ee_parts = _ee_parts(self._engine, parts, ee_specs)
+        self._ee = ee_parts.get("")
         self.children: dict[str, BaseController] = {}
         if isinstance(config, Mapping):
             r0 = c0 = 0
@@ -106,6 +114,7 @@ class BaseController:
                 child_cls = type(c).controller_cls
                 child = child_cls.__new__(child_cls)
                 child._init_view(c, self, slice(r0, r0 + rows.count), slice(c0, c0 + rows.action_dim), rows)
+                child._ee = ee_parts.get(uid)
                 self.children[uid] = child
                 r0 += rows.count
                 c0 += rows.action_dim
@@ -131,6 +140,8 @@ class BaseController:
                 )
         # Targets start at the model's initial pose (the first reset() re-initialises every env from the state).
         self._engine.reset(model_state, None, None, None, first=False)
+        for part in ee_parts.values():
+            wp.copy(part.target_pose, part.ee_pose)  # a defined target pose before any step
 
     def _init_view(self, config, parent: BaseController, rows_slice: slice, cols_slice: slice, rows: cfg.Rows):
         self.config = config
@@ -357,6 +368,23 @@ class BaseController:
     def __repr__(self) -> str:
         inner = ", ".join(self.joint_names)
         return f"{type(self).__name__}(dof={self.action_dim}, num_envs={self.num_envs}, joints=({inner}))"
+
+
+def _ee_parts(engine: _Engine, parts, ee_specs) -> dict:
+    """Attach the EE launches of a mode's end-effector controllers to its engine; ``{uid: EEPart}``."""
+    if not ee_specs:
+        return {}
+    from .ee import EEPart
+
+    out = {}
+    r0 = c0 = 0
+    for uid, _, rows in parts:
+        if uid in ee_specs:
+            out[uid] = EEPart(ee_specs[uid], engine, r0, c0, rows.count)
+            engine.ee_parts.append(out[uid])
+        r0 += rows.count
+        c0 += rows.action_dim
+    return out
 
 
 class _ModelState:

@@ -124,6 +124,7 @@ class _Engine:
         self._launch_set_action: _Launch | None = None
         self._launch_substep: _Launch | None = None
         self._reset_count = 0
+        self.ee_parts: list = []  # wpctrl.ee.EEPart: end-effector controllers' launches (set_action, reset)
 
     def _init_response(self, model: newton.Model, binding: JointBinding) -> None:
         from newton.actuators import JointSpaceResponse
@@ -215,6 +216,8 @@ class _Engine:
                 },
                 self.device,
             )
+        for part in self.ee_parts:  # EE rows' targets first; the joint launch leaves them alone (act_col -1)
+            part.set_action(action, state)
         ln = self._launch_set_action
         ln.bind("action_in", action)
         ln.bind("joint_q_in", state.joint_q)
@@ -294,6 +297,8 @@ class _Engine:
             ],
             device=self.device,
         )
+        for part in self.ee_parts:
+            part.reset(state, env_ids, env_mask)
 
     # -- model drive properties -----------------------------------------------------------------------------------
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Literal, Optional, Union
+from typing import Literal, Union
 
 import numpy as np
 
@@ -57,7 +57,7 @@ class PDEEPosControllerConfig(ControllerConfig):
     """Optional URDF of the robot; used only where the model lacks ``ee_link``, to find its fixed offset."""
     frame: Literal["body_translation", "root_translation"] = "root_translation"
     """Frame of the position delta: the root link's axes or the EE's own axes."""
-    root_link_name: Optional[str] = None
+    root_link_name: str | None = None
     """The root frame of all EE poses (a body label); None: the articulation root (the world frame for a fixed
     base merged into the world, shifted by each env's own root placement)."""
     use_delta: bool = True
@@ -125,8 +125,8 @@ class EESpec:
     lm_lambda: float
     rot_scale: np.ndarray  # (3,) float32: the processed rotation is r_clipped * rot_scale
     ee_link: str
-    urdf_path: Optional[str]
-    root_link_name: Optional[str]
+    urdf_path: str | None
+    root_link_name: str | None
 
 
 def _name(c) -> str:
@@ -143,7 +143,9 @@ def _vec3(c, fname: str, value, allow_none: bool) -> np.ndarray:
     except (TypeError, ValueError) as e:
         raise ConfigError(f"{_name(c)}.{fname}: expected a number or 3 numbers, got {value!r}") from e
     if a.ndim > 1 or (a.ndim == 1 and a.shape[0] not in (1, 3)):
-        raise ConfigError(f"{_name(c)}.{fname}: expected a scalar or 3 values (x, y, z), got shape {a.shape}: {value!r}")
+        raise ConfigError(
+            f"{_name(c)}.{fname}: expected a scalar or 3 values (x, y, z), got shape {a.shape}: {value!r}"
+        )
     a = np.broadcast_to(a, (3,)).astype(np.float64)
     if np.isnan(a).any():
         raise ConfigError(f"{_name(c)}.{fname}: expected finite numbers, got {value!r}")

@@ -233,7 +233,9 @@ class EEPart:
             ctrl = binding.joint_index[:, self.row0 : self.row0 + self.num_dof]
             ok = ok and (table[:, col >= 0][:, np.argsort(col[col >= 0])] == ctrl).all()
             if not ok:
-                raise ConfigError("ee_link: the EE chain is laid out differently across worlds; every world must hold the same robot")
+                raise ConfigError(
+                    "ee_link: the EE chain is laid out differently across worlds; every world must hold the same robot"
+                )
         else:
             table = chain0[None, :]
         root = np.tile(np.array([0, 0, 0, 0, 0, 0, 1], np.float32), (world_count, 1))
@@ -249,7 +251,7 @@ class EEPart:
                 r = x0 * wp.transform_inverse(xe)
                 root[e] = np.array([*r.p, *r.q], np.float32)
         dev = model.device
-        self.chain_joint = wp.array(table.astype(np.int32).reshape(world_count, max(len(chain), 0)), dtype=wp.int32, device=dev)
+        self.chain_joint = wp.array(table.astype(np.int32).reshape(world_count, len(chain)), dtype=wp.int32, device=dev)
         self.chain_col = wp.array(col, dtype=wp.int32, device=dev)
         self.env_root = wp.array(root, dtype=wp.transform, device=dev)
         self.ee_offset = offset

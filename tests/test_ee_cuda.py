@@ -82,7 +82,7 @@ def test_ee_cpu_cuda_parity(mode):
         np.testing.assert_allclose(a[1], b[1], atol=2e-5)  # target poses (accumulated)
         same = a[2] == b[2]
         assert same.mean() > 0.97  # CLIK success: only envs at the threshold may flip
-        np.testing.assert_allclose(a[3][same], b[3][same], atol=5e-4)  # joint targets (float32 solves)
+        np.testing.assert_allclose(a[3][same], b[3][same], atol=2e-3)  # joint targets: float32 solves, null direction
     graphed = _run("cuda:0", MODES[mode](), qs, acts, graph=True)
     for a, b in zip(gpu, graphed):
         for x, y in zip(a, b):

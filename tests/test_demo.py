@@ -28,7 +28,7 @@ def test_demo_tracks_and_writes_files(tmp_path, capsys):
 @pytest.mark.parametrize(
     "argv, message",
     [
-        (["--control-mode", "pd_ee_delta_pose"], "--control-mode"),
+        (["--control-mode", "pd_ee_delta_twist"], "--control-mode"),
         (["--envs", "0"], "--envs"),
         (["--solver", "physx"], "--solver"),
         (["--sim-freq", "90"], "--sim-freq"),

@@ -171,6 +171,10 @@ def run(args) -> dict:
     dof = ctrl._engine.binding.dof_index
     rest = np.asarray(PANDA_INITIAL_Q, np.float32)
     policy = _Policy(args.control_mode, ctrl, rest, args.envs, rng)
+    if args.control_mode.startswith("pd_ee"):  # end-effector modes: EE actions, EE error and plot (demo_ee.py)
+        from .demo_ee import EEPolicy
+
+        policy = EEPolicy(policy, args.control_mode, ctrl, model)
     action = wp.zeros((args.envs, ctrl.action_dim), dtype=wp.float32, device=device)
     reset_mask = wp.zeros(args.envs, dtype=wp.bool, device=device)
 
@@ -253,6 +257,8 @@ def run(args) -> dict:
         since_reset += 1.0 / args.control_freq
         # Score envs half a second after they (re)started at rest, off the trajectory.
         live = since_reset > 0.5
+        if hasattr(policy, "record"):
+            policy.record(t, s0, live)
         if live.any():
             for group, sl in (("arm", slice(0, 7)), ("gripper", slice(7, 9))):
                 e = err[live][:, sl]
@@ -320,11 +326,15 @@ def run(args) -> dict:
         "bad_actions": int(ctrl.bad_action_count.numpy().sum()),
         "all_finite": bool(finite),
     }
+    if hasattr(policy, "summary"):
+        summary.update(policy.summary())
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     _plot(out / "tracking.png", np.array(hist_t), np.array(hist_q), np.array(hist_des), np.array(hist_tgt),
           env_mean, ctrl.joint_names, summary)  # fmt: skip
+    if hasattr(policy, "plot"):
+        policy.plot(out / "ee_tracking.png", f"wpctrl demo: {args.control_mode}, env 0, TCP position")
     return summary
 
 
@@ -402,6 +412,8 @@ def _plot(path: Path, t, q, des, tgt, env_err, names, summary) -> None:
 
 
 def format_summary(s: dict) -> str:
+    from . import demo_ee
+
     rows = [
         ("envs", f"{s['envs']} on {s['device']}"),
         ("control mode", f"{s['control_mode']} ({s['actuation']}, {s['solver']}, graph={s['graph']})"),
@@ -415,6 +427,7 @@ def format_summary(s: dict) -> str:
             "gripper tracking",
             f"RMS {1e3 * s['tracking_rms']['gripper']:.2f} mm, max {1e3 * s['tracking_max']['gripper']:.2f} mm",
         ),
+        *demo_ee.summary_rows(s),
         ("partial resets", str(s["partial_resets"])),
         ("all values finite", "yes" if s["all_finite"] else "NO"),
         ("setup (build, compile)", f"{s['setup_seconds']:.1f} s"),
@@ -435,5 +448,6 @@ def main(argv=None) -> int:
             "size (MuJoCo with --actuation implicit holds ManiSkill's gains at 100 Hz; see the README)",
             file=sys.stderr,
         )
-    print(f"  wrote {Path(args.out) / 'summary.json'} and {Path(args.out) / 'tracking.png'}")
+    extra = " and ee_tracking.png" if "ee_tracking_rms_m" in summary else ""
+    print(f"  wrote {Path(args.out) / 'summary.json'} and {Path(args.out) / 'tracking.png'}{extra}")
     return 0 if summary["all_finite"] else 1

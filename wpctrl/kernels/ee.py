@@ -181,7 +181,7 @@ def _chain_fk(
 def _jacobian(p: wp.vec3, axes: mat3D, origins: mat3D, kinds: vecD, n: int):
     """Geometric Jacobian about point ``p`` (root frame), rows [v; ω]."""
     jac = mat6D()
-    for c in range(n):
+    for c in range(MAX_DOF):  # constant bound: unrolled; columns >= n have zero axes and stay zero
         a = wp.vec3(axes[0, c], axes[1, c], axes[2, c])
         if kinds[c] > 0.5:
             o = wp.vec3(origins[0, c], origins[1, c], origins[2, c])
@@ -197,29 +197,33 @@ def _jacobian(p: wp.vec3, axes: mat3D, origins: mat3D, kinds: vecD, n: int):
 
 @wp.func
 def _chol_solve6(a: mat66, b: vec6):
-    """Solve a x = b for a symmetric positive definite 6×6 a (Cholesky)."""
+    """Solve a x = b for a symmetric positive definite 6×6 a (Cholesky; constant loop bounds, unrolled)."""
     lo = mat66()
     for i in range(6):
-        for j in range(i + 1):
-            s = a[i, j]
-            for k in range(j):
-                s -= lo[i, k] * lo[j, k]
-            if i == j:
-                lo[i, i] = wp.sqrt(wp.max(s, 1.0e-30))
-            else:
-                lo[i, j] = s / lo[j, j]
+        for j in range(6):
+            if j <= i:
+                s = a[i, j]
+                for k in range(6):
+                    if k < j:
+                        s -= lo[i, k] * lo[j, k]
+                if i == j:
+                    lo[i, i] = wp.sqrt(wp.max(s, 1.0e-30))
+                else:
+                    lo[i, j] = s / lo[j, j]
     y = vec6()
     for i in range(6):
         s = b[i]
-        for k in range(i):
-            s -= lo[i, k] * y[k]
+        for k in range(6):
+            if k < i:
+                s -= lo[i, k] * y[k]
         y[i] = s / lo[i, i]
     x = vec6()
     for ii in range(6):
         i = 5 - ii
         s = y[i]
-        for k in range(i + 1, 6):
-            s -= lo[k, i] * x[k]
+        for k in range(6):
+            if k > i:
+                s -= lo[k, i] * x[k]
         x[i] = s / lo[i, i]
     return x
 
@@ -273,15 +277,16 @@ def _dls(jac: mat6D, dx: vec6, n: int, lam: float, pinv: int):
         return _chol_solveD(a, rhs, n)
     a6 = mat66()
     for i in range(6):
-        for j in range(6):
+        for j in range(i + 1):
             s = float(0.0)
-            for c in range(n):
+            for c in range(MAX_DOF):  # zero columns beyond n add nothing
                 s += jac[i, c] * jac[j, c]
             a6[i, j] = s
+            a6[j, i] = s
         if pinv == 0:
             a6[i, i] = a6[i, i] + lam
     y = _chol_solve6(a6, dx)
-    for c in range(n):
+    for c in range(MAX_DOF):
         s = float(0.0)
         for k in range(6):
             s += jac[k, c] * y[k]

@@ -101,7 +101,17 @@ class TorchEEPose:
         self.child_inv = torch.tensor(
             np.stack([np.linalg.inv(_mat(xc[j])) for j in chain]), dtype=torch.float32, device=device
         )
-        self.axes = torch.tensor(np.stack([ax[qd0[j]] for j in chain]), dtype=torch.float32, device=device)
+        axes = np.stack([ax[qd0[j]] for j in chain]).astype(np.float64)
+        self.axes = torch.tensor(axes, dtype=torch.float32, device=device)
+        skew = np.zeros((len(chain), 3, 3))
+        skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -axes[:, 2], axes[:, 1], -axes[:, 0]
+        skew -= skew.transpose(0, 2, 1)
+        self.skew = torch.tensor(skew, dtype=torch.float32, device=device)
+        self.skew2 = self.skew @ self.skew
+        self.eye3 = torch.eye(3, device=device)
+        self.eye4 = torch.eye(4, device=device)
+        types = model.joint_type.numpy()[chain]
+        assert (types == 1).all(), "the torch baseline ports revolute chains only"
         off = part.ee_offset
         self.tcp = torch.tensor(_mat(np.array([*off.p, *off.q])), dtype=torch.float32, device=device)
         rows = ctrl._engine.rows
@@ -115,24 +125,19 @@ class TorchEEPose:
         self.eye = torch.eye(7, device=device).expand(n, 7, 7)
         self.target_qpos = torch.zeros((n, 7), device=device)
 
-    @staticmethod
-    def _axis_angle(axis: torch.Tensor, q: torch.Tensor) -> torch.Tensor:
-        """Batched 4×4 rotations about a unit axis (Rodrigues), as pytorch_kinematics' revolute frames."""
-        n = q.shape[0]
-        k = torch.zeros((3, 3), device=q.device)
-        k[0, 1], k[0, 2], k[1, 0], k[1, 2], k[2, 0], k[2, 1] = -axis[2], axis[1], axis[2], -axis[0], -axis[1], axis[0]
+    def _axis_angle(self, i: int, q: torch.Tensor) -> torch.Tensor:
+        """Batched 4×4 rotations about joint i's unit axis (Rodrigues with precomputed [a]× and [a]×²)."""
         s, c = torch.sin(q)[:, None, None], torch.cos(q)[:, None, None]
-        r = torch.eye(3, device=q.device) + s * k + (1 - c) * (k @ k)
-        m = torch.eye(4, device=q.device).repeat(n, 1, 1)
-        m[:, :3, :3] = r
+        m = self.eye4.repeat(q.shape[0], 1, 1)
+        m[:, :3, :3] = self.eye3 + s * self.skew[i] + (1 - c) * self.skew2[i]
         return m
 
     def fk_jacobian(self, q: torch.Tensor):
         n = q.shape[0]
-        t = torch.eye(4, device=q.device).repeat(n, 1, 1)
+        t = self.eye4.repeat(n, 1, 1)
         origins, axes = [], []
         for i in range(q.shape[1]):
-            t = t @ self.offsets[i] @ self._axis_angle(self.axes[i], q[:, i])
+            t = t @ self.offsets[i] @ self._axis_angle(i, q[:, i])
             origins.append(t[:, :3, 3])
             axes.append(t[:, :3, :3] @ self.axes[i])
             t = t @ self.child_inv[i]

@@ -465,3 +465,42 @@ def test_demo_runs_an_ee_mode(tmp_path):
     assert (out / "ee_tracking.png").stat().st_size > 10_000
     # The TCP follows a ~0.1-0.3 m sweep with the PD lag of a few cm; a wrong sign or frame diverges by decimetres.
     assert 0 < s["ee_tracking_rms_m"] < 0.05 and s["ee_ik_failures"] == 0
+
+
+def test_bench_torch_baseline_is_the_same_step():
+    """bench/ee_step.py's torch port of ManiSkill's GPU EE path computes the same step as wpctrl (so the benchmark
+    compares equal work): drive targets of the gripper equal, the arm's task-space step within float32 noise."""
+    import sys
+
+    from conftest import ROOT
+
+    torch = pytest.importorskip("torch")
+    if str(ROOT) not in sys.path:
+        sys.path.insert(0, str(ROOT))
+    from bench.ee_step import TorchEEPose
+
+    n = 8
+    model = build_panda(n)
+    ctrl = wpctrl.build_controller(panda_control_modes()["pd_ee_delta_pose"], model)
+    state, control, control_t = model.state(), model.control(), model.control()
+    rig_q = random_q(np.random.default_rng(7), n)
+    q = state.joint_q.numpy()
+    q[ctrl._engine.binding.coord_index[:, :7]] = rig_q
+    state.joint_q.assign(q)
+    ref = TorchEEPose(ctrl, state, control_t, torch.device("cpu"))
+    action = torch.rand((n, 7), generator=torch.Generator().manual_seed(0)) * 2.4 - 1.2
+    ctrl.reset(state)
+    ctrl.set_action(action, state)
+    ctrl.before_simulation_step(state, control)
+    ref.set_action(action)
+    q0 = torch.as_tensor(rig_q)
+    ee, jac = ref.fk_jacobian(q0)
+    np.testing.assert_allclose(ee[:, :3, 3].numpy(), ctrl["arm"].ee_pose.numpy()[:, :3], atol=2e-6)
+    np.testing.assert_allclose(jac.numpy(), ctrl["arm"].fk_jacobian(state)[1].numpy(), atol=2e-6)
+    step_wp = jac @ (wp.to_torch(ctrl["arm"].target_qpos) - q0)[:, :, None]
+    step_t = jac @ (ref.target_qpos - q0)[:, :, None]
+    np.testing.assert_allclose(step_wp.numpy(), step_t.numpy(), atol=2e-5)
+    coord = ctrl._engine.binding.coord_index
+    np.testing.assert_array_equal(
+        control.joint_target_q.numpy()[coord[:, 7:]], control_t.joint_target_q.numpy()[coord[:, 7:]]
+    )

@@ -504,3 +504,32 @@ def test_bench_torch_baseline_is_the_same_step():
     np.testing.assert_array_equal(
         control.joint_target_q.numpy()[coord[:, 7:]], control_t.joint_target_q.numpy()[coord[:, 7:]]
     )
+
+
+@pytest.mark.parametrize("actuation", ["implicit", "explicit"])
+def test_interpolated_drive_targets_and_torques(actuation):
+    n = 3
+    model = build_panda(n)
+    mode = {"arm": pose_cfg(interpolate=True), "gripper": gripper()}
+    ctrl = wpctrl.build_controller(mode, model, actuation=actuation)
+    state, control = model.state(), model.control()
+    coord, dof = ctrl._engine.binding.coord_index, ctrl._engine.binding.dof_index
+    q = state.joint_q.numpy()
+    q[coord[:, :7]] = random_q(np.random.default_rng(8), n)
+    state.joint_q.assign(q)
+    ctrl.reset(state)
+    ctrl.set_action(np.random.default_rng(9).uniform(-1, 1, (n, 7)).astype(np.float32), state)
+    start, target = ctrl.start_qpos.numpy(), ctrl.target_qpos.numpy()
+    assert np.abs(target[:, :7] - start[:, :7]).max() > 1e-3
+    K = ctrl.num_substeps
+    for i in range(1, K + 1):
+        ctrl.before_simulation_step(state, control)
+        drive = control.joint_target_q.numpy()[coord]
+        want = start[:, :7] + ((target[:, :7] - start[:, :7]) / np.float32(K)) * np.float32(i)
+        np.testing.assert_allclose(drive[:, :7], want, atol=1e-6)
+        np.testing.assert_array_equal(drive[:, 7:], target[:, 7:])  # the gripper does not interpolate
+        tau = control.joint_f.numpy()[dof]
+        if actuation == "explicit":  # PD torques on the interpolated targets (qd = 0), clamped at 100 N·m
+            np.testing.assert_allclose(tau, np.clip(1e3 * (drive - state.joint_q.numpy()[coord]), -100, 100), atol=1e-3)
+        else:
+            assert not tau.any()

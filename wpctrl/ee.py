@@ -299,7 +299,8 @@ class EEPart:
                     "ik_success_out": self.ik_success,
                 }
             )
-            self._launch = _Launch(KE._ee_set_action_kernel, eng.num_envs, params, eng.device)
+            kernel = KE._ee_clik_kernel if s.iterations > 1 else KE._ee_set_action_kernel
+            self._launch = _Launch(kernel, eng.num_envs, params, eng.device)
         self._launch.bind("action_in", action)
         self._launch.bind("joint_q_in", state.joint_q)
         self._launch.launch()

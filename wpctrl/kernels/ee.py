@@ -157,7 +157,9 @@ def _chain_fk(
             a = joint_axis[joint_qd_start[j]]
             q = float(0.0)
             if c >= 0:
-                q = qv[c]
+                for cc in range(MAX_DOF):  # constant indices (registers on the GPU), not qv[c]
+                    if cc == c:
+                        q = qv[cc]
             else:
                 q = joint_q[joint_q_start[j]]
             if jt == JOINT_REVOLUTE:
@@ -168,11 +170,13 @@ def _chain_fk(
             if c >= 0:
                 aw = wp.transform_vector(x, a)
                 o = wp.transform_get_translation(x)
-                for k in range(3):
-                    axes[k, c] = aw[k]
-                    origins[k, c] = o[k]
-                if jt == JOINT_REVOLUTE:
-                    kinds[c] = 1.0
+                for cc in range(MAX_DOF):
+                    if cc == c:
+                        for k in range(3):
+                            axes[k, cc] = aw[k]
+                            origins[k, cc] = o[k]
+                        if jt == JOINT_REVOLUTE:
+                            kinds[cc] = 1.0
         t = x * wp.transform_inverse(joint_X_c[j])
     return t * ee_offset, t_joint, axes, origins, kinds
 
@@ -229,30 +233,34 @@ def _chol_solve6(a: mat66, b: vec6):
 
 
 @wp.func
-def _chol_solveD(a: matDD, b: vecD, n: int):
-    """Solve the leading n×n block of a symmetric positive definite a (Cholesky); other entries of x are 0."""
+def _chol_solveD(a: matDD, b: vecD):
+    """Solve a x = b for a symmetric positive definite MAX_DOF × MAX_DOF a (Cholesky; constant loop bounds)."""
     lo = matDD()
-    for i in range(n):
-        for j in range(i + 1):
-            s = a[i, j]
-            for k in range(j):
-                s -= lo[i, k] * lo[j, k]
-            if i == j:
-                lo[i, i] = wp.sqrt(wp.max(s, 1.0e-30))
-            else:
-                lo[i, j] = s / lo[j, j]
+    for i in range(MAX_DOF):
+        for j in range(MAX_DOF):
+            if j <= i:
+                s = a[i, j]
+                for k in range(MAX_DOF):
+                    if k < j:
+                        s -= lo[i, k] * lo[j, k]
+                if i == j:
+                    lo[i, i] = wp.sqrt(wp.max(s, 1.0e-30))
+                else:
+                    lo[i, j] = s / lo[j, j]
     y = vecD()
-    for i in range(n):
+    for i in range(MAX_DOF):
         s = b[i]
-        for k in range(i):
-            s -= lo[i, k] * y[k]
+        for k in range(MAX_DOF):
+            if k < i:
+                s -= lo[i, k] * y[k]
         y[i] = s / lo[i, i]
     x = vecD()
-    for ii in range(n):
-        i = n - 1 - ii
+    for ii in range(MAX_DOF):
+        i = MAX_DOF - 1 - ii
         s = y[i]
-        for k in range(i + 1, n):
-            s -= lo[k, i] * x[k]
+        for k in range(MAX_DOF):
+            if k > i:
+                s -= lo[k, i] * x[k]
         x[i] = s / lo[i, i]
     return x
 
@@ -264,17 +272,19 @@ def _dls(jac: mat6D, dx: vec6, n: int, lam: float, pinv: int):
     if pinv != 0 and n < 6:
         a = matDD()
         rhs = vecD()
-        for i in range(n):
-            for j in range(n):
+        for i in range(MAX_DOF):
+            for j in range(MAX_DOF):
                 s = float(0.0)
                 for k in range(6):
                     s += jac[k, i] * jac[k, j]
                 a[i, j] = s
+            if i >= n:
+                a[i, i] = 1.0  # unused columns: identity, so their dq is 0
             s2 = float(0.0)
             for k in range(6):
                 s2 += jac[k, i] * dx[k]
             rhs[i] = s2
-        return _chol_solveD(a, rhs, n)
+        return _chol_solveD(a, rhs)
     a6 = mat66()
     for i in range(6):
         for j in range(i + 1):
@@ -322,135 +332,92 @@ def _compose(prev: wp.transform, act: vecD, pose: int, use_delta: int, frame_bit
 # Kernels.
 
 
-@wp.kernel
-def _ee_set_action_kernel(
-    # Chain:
-    chain_joint: wp.array2d[wp.int32],
-    chain_col: wp.array[wp.int32],
-    joint_type: wp.array[wp.int32],
-    joint_X_p: wp.array[wp.transform],
-    joint_X_c: wp.array[wp.transform],
-    joint_axis: wp.array[wp.vec3],
-    joint_q_start: wp.array[wp.int32],
-    joint_qd_start: wp.array[wp.int32],
-    env_root: wp.array[wp.transform],
-    ee_offset: wp.transform,
-    # Rows of the EE joints (columns of the Jacobian) and action columns:
-    row_q_off: wp.array[wp.int32],
-    env_q_base: wp.array[wp.int32],
-    row0: int,
-    num_dof: int,
-    col0: int,
-    # Parameters:
-    pose: int,
-    use_delta: int,
-    use_target: int,
-    normalize: int,
-    frame_bits: int,
-    solver: int,
-    alpha: float,
-    lm_lambda: float,
-    iterations: int,
-    tolerance: float,
-    clik_dt: float,
-    clik_damping: float,
-    act_lo: wp.vec3,
-    act_hi: wp.vec3,
-    rot_scale: wp.vec3,
-    # In:
-    action_in: wp.array2d[float],
-    joint_q_in: wp.array[float],
-    # Out:
-    processed_action_out: wp.array2d[float],
-    target_qpos_out: wp.array2d[float],
-    target_pose_out: wp.array2d[float],  # in/out with use_target
-    ee_pose_out: wp.array2d[float],
-    ik_success_out: wp.array[wp.int32],
-):
-    """One control step of one env: processed action, target pose, IK; writes the EE rows' ``target_qpos`` [rad/m].
+def _make_set_action_kernel(clik: bool):
+    """The EE ``set_action`` kernel, specialised at code generation: one DLS step (``clik=False``, ManiSkill's
+    GPU semantics) or the iterative CLIK (``clik=True``, its CPU semantics). Each variant carries only its own
+    path, which keeps the one-step kernel's per-thread state small on the GPU."""
 
-    An env whose action holds NaN/Inf (any column of the whole mode) is left untouched, as the joint kernel does.
-    """
-    env = wp.tid()
-    for c in range(action_in.shape[1]):
-        if not wp.isfinite(action_in[env, c]):
-            return
-    q_base = env_q_base[env]
-    q0 = vecD()
-    for c in range(num_dof):
-        q0[c] = joint_q_in[q_base + row_q_off[c]]
+    @wp.kernel(module="unique", enable_backward=False)
+    def kernel(
+        # Chain:
+        chain_joint: wp.array2d[wp.int32],
+        chain_col: wp.array[wp.int32],
+        joint_type: wp.array[wp.int32],
+        joint_X_p: wp.array[wp.transform],
+        joint_X_c: wp.array[wp.transform],
+        joint_axis: wp.array[wp.vec3],
+        joint_q_start: wp.array[wp.int32],
+        joint_qd_start: wp.array[wp.int32],
+        env_root: wp.array[wp.transform],
+        ee_offset: wp.transform,
+        # Rows of the EE joints (columns of the Jacobian) and action columns:
+        row_q_off: wp.array[wp.int32],
+        env_q_base: wp.array[wp.int32],
+        row0: int,
+        num_dof: int,
+        col0: int,
+        # Parameters:
+        pose: int,
+        use_delta: int,
+        use_target: int,
+        normalize: int,
+        frame_bits: int,
+        solver: int,
+        alpha: float,
+        lm_lambda: float,
+        iterations: int,
+        tolerance: float,
+        clik_dt: float,
+        clik_damping: float,
+        act_lo: wp.vec3,
+        act_hi: wp.vec3,
+        rot_scale: wp.vec3,
+        # In:
+        action_in: wp.array2d[float],
+        joint_q_in: wp.array[float],
+        # Out:
+        processed_action_out: wp.array2d[float],
+        target_qpos_out: wp.array2d[float],
+        target_pose_out: wp.array2d[float],  # in/out with use_target
+        ee_pose_out: wp.array2d[float],
+        ik_success_out: wp.array[wp.int32],
+    ):
+        """One control step of one env: processed action, target pose, IK; writes the EE rows' ``target_qpos`` [rad/m].
 
-    # Processed action (ManiSkill's _preprocess_action).
-    act = vecD()
-    for k in range(3):
-        a = action_in[env, col0 + k]
-        if normalize != 0:
-            a = 0.5 * (act_hi[k] + act_lo[k]) + (0.5 * (act_hi[k] - act_lo[k])) * wp.clamp(a, -1.0, 1.0)
-        act[k] = a
-    if pose != 0:
-        r = wp.vec3(action_in[env, col0 + 3], action_in[env, col0 + 4], action_in[env, col0 + 5])
-        if normalize != 0:
-            nrm = wp.sqrt(r[2] * r[2] + (r[1] * r[1] + r[0] * r[0]))
-            if nrm > 1.0:
-                r = r * (1.0 / nrm)
-            r = wp.cw_mul(r, rot_scale)
-        act[3] = r[0]
-        act[4] = r[1]
-        act[5] = r[2]
-    for k in range(3 + 3 * pose):
-        processed_action_out[env, col0 + k] = act[k]
+        An env whose action holds NaN/Inf (any column of the whole mode) is left untouched, as the joint kernel does.
+        """
+        env = wp.tid()
+        for c in range(action_in.shape[1]):
+            if not wp.isfinite(action_in[env, c]):
+                return
+        q_base = env_q_base[env]
+        q0 = vecD()
+        for c in range(MAX_DOF):
+            if c < num_dof:
+                q0[c] = joint_q_in[q_base + row_q_off[c]]
 
-    t_ee, t_joint, axes, origins, kinds = _chain_fk(
-        env,
-        chain_joint,
-        chain_col,
-        joint_type,
-        joint_X_p,
-        joint_X_c,
-        joint_axis,
-        joint_q_start,
-        joint_qd_start,
-        env_root,
-        ee_offset,
-        joint_q_in,
-        q0,
-    )
-    _write_pose(ee_pose_out, env, t_ee)
+        # Processed action (ManiSkill's _preprocess_action).
+        act = vecD()
+        for k in range(3):
+            a = action_in[env, col0 + k]
+            if normalize != 0:
+                a = 0.5 * (act_hi[k] + act_lo[k]) + (0.5 * (act_hi[k] - act_lo[k])) * wp.clamp(a, -1.0, 1.0)
+            act[k] = a
+        if pose != 0:
+            r = wp.vec3(action_in[env, col0 + 3], action_in[env, col0 + 4], action_in[env, col0 + 5])
+            if normalize != 0:
+                nrm = wp.sqrt(r[2] * r[2] + (r[1] * r[1] + r[0] * r[0]))
+                if nrm > 1.0:
+                    r = r * (1.0 / nrm)
+                r = wp.cw_mul(r, rot_scale)
+            act[3] = r[0]
+            act[4] = r[1]
+            act[5] = r[2]
+        for k in range(6):
+            if k < 3 + 3 * pose:
+                processed_action_out[env, col0 + k] = act[k]
 
-    compose = iterations > 1 or use_target != 0 or use_delta == 0
-    target = t_ee
-    if compose:
-        prev = t_ee
-        if use_target != 0:
-            prev = _read_pose(target_pose_out, env)
-        target = _compose(prev, act, pose, use_delta, frame_bits)
-        _write_pose(target_pose_out, env, target)
-
-    if iterations <= 1:
-        # ManiSkill's GPU path: one damped least-squares step at the measured q.
-        dx = vec6()
-        if not compose:
-            for k in range(3 + 3 * pose):
-                dx[k] = act[k]
-        else:
-            dp = wp.transform_get_translation(target) - wp.transform_get_translation(t_ee)
-            dr = _euler_xyz(_std(wp.transform_get_rotation(target) * wp.quat_inverse(wp.transform_get_rotation(t_ee))))
-            dx = vec6(dp[0], dp[1], dp[2], dr[0], dr[1], dr[2])
-        jac = _jacobian(wp.transform_get_translation(t_ee), axes, origins, kinds, num_dof)
-        dq = _dls(jac, dx, num_dof, lm_lambda, solver)
-        for c in range(num_dof):
-            target_qpos_out[env, row0 + c] = q0[c] + alpha * dq[c]
-        ik_success_out[env] = 1
-        return
-
-    # ManiSkill's CPU path: Pinocchio CLIK on the last moving joint's frame, seeded with the measured q.
-    l2j = wp.transform_inverse(t_joint) * t_ee  # EE frame in the joint frame (constant)
-    des = target * wp.transform_inverse(l2j)
-    des_inv = wp.transform_inverse(des)
-    q = q0
-    success = int(0)
-    for it in range(iterations + 1):
-        te, tj, ax, og, kd = _chain_fk(
+        t_ee, t_joint, axes, origins, kinds = _chain_fk(
             env,
             chain_joint,
             chain_col,
@@ -463,34 +430,94 @@ def _ee_set_action_kernel(
             env_root,
             ee_offset,
             joint_q_in,
-            q,
+            q0,
         )
-        err = _log6(des_inv * tj)
-        if wp.length(err) < tolerance:
-            success = 1
-            break
-        if it >= iterations:
-            break
-        # Local (joint-frame) Jacobian: velocity of the joint origin, rotated into the joint frame.
-        pj = wp.transform_get_translation(tj)
-        jw = _jacobian(pj, ax, og, kd, num_dof)
-        rq = wp.transform_get_rotation(tj)
-        jl = mat6D()
-        for c in range(num_dof):
-            v = wp.quat_rotate_inv(rq, wp.vec3(jw[0, c], jw[1, c], jw[2, c]))
-            w = wp.quat_rotate_inv(rq, wp.vec3(jw[3, c], jw[4, c], jw[5, c]))
-            for k in range(3):
-                jl[k, c] = v[k]
-                jl[k + 3, c] = w[k]
-        step = _dls(jl, err, num_dof, clik_damping, 0)
-        for c in range(num_dof):
-            q[c] = q[c] - clik_dt * step[c]
-    ik_success_out[env] = success
-    for c in range(num_dof):
-        if success != 0:
-            target_qpos_out[env, row0 + c] = q[c]
-        else:
-            target_qpos_out[env, row0 + c] = q0[c]
+        _write_pose(ee_pose_out, env, t_ee)
+
+        compose = iterations > 1 or use_target != 0 or use_delta == 0
+        target = t_ee
+        if compose:
+            prev = t_ee
+            if use_target != 0:
+                prev = _read_pose(target_pose_out, env)
+            target = _compose(prev, act, pose, use_delta, frame_bits)
+            _write_pose(target_pose_out, env, target)
+
+        if not wp.static(clik):
+            # ManiSkill's GPU path: one damped least-squares step at the measured q.
+            dx = vec6()
+            if not compose:
+                for k in range(6):
+                    dx[k] = act[k]  # zero rotation for a position-only controller
+            else:
+                dp = wp.transform_get_translation(target) - wp.transform_get_translation(t_ee)
+                dr = _euler_xyz(
+                    _std(wp.transform_get_rotation(target) * wp.quat_inverse(wp.transform_get_rotation(t_ee)))
+                )
+                dx = vec6(dp[0], dp[1], dp[2], dr[0], dr[1], dr[2])
+            jac = _jacobian(wp.transform_get_translation(t_ee), axes, origins, kinds, num_dof)
+            dq = _dls(jac, dx, num_dof, lm_lambda, solver)
+            for c in range(MAX_DOF):
+                if c < num_dof:
+                    target_qpos_out[env, row0 + c] = q0[c] + alpha * dq[c]
+            ik_success_out[env] = 1
+
+        if wp.static(clik):
+            # ManiSkill's CPU path: Pinocchio CLIK on the last moving joint's frame, seeded with the measured q.
+            l2j = wp.transform_inverse(t_joint) * t_ee  # EE frame in the joint frame (constant)
+            des = target * wp.transform_inverse(l2j)
+            des_inv = wp.transform_inverse(des)
+            q = q0
+            success = int(0)
+            for it in range(iterations + 1):
+                te, tj, ax, og, kd = _chain_fk(
+                    env,
+                    chain_joint,
+                    chain_col,
+                    joint_type,
+                    joint_X_p,
+                    joint_X_c,
+                    joint_axis,
+                    joint_q_start,
+                    joint_qd_start,
+                    env_root,
+                    ee_offset,
+                    joint_q_in,
+                    q,
+                )
+                err = _log6(des_inv * tj)
+                if wp.length(err) < tolerance:
+                    success = 1
+                    break
+                if it >= iterations:
+                    break
+                # Local (joint-frame) Jacobian: velocity of the joint origin, rotated into the joint frame.
+                pj = wp.transform_get_translation(tj)
+                jw = _jacobian(pj, ax, og, kd, num_dof)
+                rq = wp.transform_get_rotation(tj)
+                jl = mat6D()
+                for c in range(MAX_DOF):  # zero columns beyond num_dof stay zero
+                    v = wp.quat_rotate_inv(rq, wp.vec3(jw[0, c], jw[1, c], jw[2, c]))
+                    w = wp.quat_rotate_inv(rq, wp.vec3(jw[3, c], jw[4, c], jw[5, c]))
+                    for k in range(3):
+                        jl[k, c] = v[k]
+                        jl[k + 3, c] = w[k]
+                step = _dls(jl, err, num_dof, clik_damping, 0)
+                for c in range(MAX_DOF):
+                    q[c] = q[c] - clik_dt * step[c]
+            ik_success_out[env] = success
+            for c in range(MAX_DOF):
+                if c < num_dof:
+                    if success != 0:
+                        target_qpos_out[env, row0 + c] = q[c]
+                    else:
+                        target_qpos_out[env, row0 + c] = q0[c]
+
+    return kernel
+
+
+_ee_set_action_kernel = _make_set_action_kernel(False)
+_ee_clik_kernel = _make_set_action_kernel(True)
 
 
 @wp.kernel
@@ -528,8 +555,9 @@ def _ee_reset_kernel(
         if not env_mask_in[env]:
             return
     q0 = vecD()
-    for c in range(num_dof):
-        q0[c] = joint_q_in[env_q_base[env] + row_q_off[c]]
+    for c in range(MAX_DOF):
+        if c < num_dof:
+            q0[c] = joint_q_in[env_q_base[env] + row_q_off[c]]
     t_ee, t_joint, axes, origins, kinds = _chain_fk(
         env,
         chain_joint,
@@ -575,8 +603,9 @@ def _ee_fk_jacobian_kernel(
     """The EE pose (root frame) and its geometric Jacobian (6, num_dof) per env, from ``joint_q``."""
     env = wp.tid()
     q0 = vecD()
-    for c in range(num_dof):
-        q0[c] = joint_q_in[env_q_base[env] + row_q_off[c]]
+    for c in range(MAX_DOF):
+        if c < num_dof:
+            q0[c] = joint_q_in[env_q_base[env] + row_q_off[c]]
     t_ee, t_joint, axes, origins, kinds = _chain_fk(
         env,
         chain_joint,
@@ -595,8 +624,9 @@ def _ee_fk_jacobian_kernel(
     _write_pose(ee_pose_out, env, t_ee)
     jac = _jacobian(wp.transform_get_translation(t_ee), axes, origins, kinds, num_dof)
     for k in range(6):
-        for c in range(num_dof):
-            jacobian_out[env, k, c] = jac[k, c]
+        for c in range(MAX_DOF):
+            if c < num_dof:
+                jacobian_out[env, k, c] = jac[k, c]
 
 
 @wp.kernel

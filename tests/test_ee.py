@@ -112,8 +112,14 @@ def test_fk_matches_newton_eval_fk_and_the_urdf_offset():
         b.replicate(robot, 4)
         urdf = Rig(pose_cfg(urdf_path=str(PANDA_URDF)), 4, model=b.finalize(device="cpu"))
         np.testing.assert_allclose(urdf.fk(q)[0], pose, atol=2e-6)
-        with pytest.raises(wpctrl.ConfigError, match="ee_link"):
-            Rig(pose_cfg(), 1, model=urdf.model)  # no site, no urdf_path: the merged TCP cannot be found
+        # Without a readable urdf_path (ManiSkill configs carry the packaged URDF's name), wpctrl's Panda facts
+        # (robots.PANDA_FRAMES) give the merged TCP; root_link_name="panda_link0" is the base merged into the world.
+        fallback = Rig(pose_cfg(urdf_path="panda_v2.urdf", root_link_name="panda_link0"), 4, model=urdf.model)
+        np.testing.assert_allclose(fallback.fk(q)[0], pose, atol=2e-6)
+        with pytest.raises(wpctrl.ConfigError, match="urdf_path: cannot read 'panda_v2.urdf'"):
+            Rig(pose_cfg(ee_link="gripper_tcp", urdf_path="panda_v2.urdf"), 1, model=urdf.model)
+        with pytest.raises(wpctrl.ConfigError, match="ee_link: 'gripper_tcp' is not a body or site"):
+            Rig(pose_cfg(ee_link="gripper_tcp"), 1, model=urdf.model)
 
 
 def test_jacobian_matches_finite_differences():
@@ -447,7 +453,7 @@ def test_chain_errors():
     with pytest.raises(wpctrl.ConfigError, match=r"'panda/panda_finger_joint1' is not on the kinematic chain"):
         wpctrl.build_controller(cfg, model)
     cfg = pose_cfg(ee_link="panda_hand_tcp", urdf_path="/nonexistent.urdf")
-    cfg.ee_link = "panda_hand"
+    cfg.ee_link = "gripper_tcp"  # neither in the model nor a known Panda frame
     with pytest.raises(wpctrl.ConfigError, match="urdf_path: cannot read"):
         wpctrl.build_controller(cfg, model)
 

@@ -13,7 +13,9 @@ world frame of env 0 moved with each env's own base placement (so every env repo
 from __future__ import annotations
 
 import difflib
+import logging
 import math
+import os
 import xml.etree.ElementTree as ET
 
 import newton
@@ -23,6 +25,8 @@ import warp as wp
 from .config import ConfigError
 from .config_ee import MAX_EE_DOF, EESpec
 from .kernels import ee as KE
+
+logger = logging.getLogger("wpctrl")
 
 _MOVING = (int(newton.JointType.REVOLUTE), int(newton.JointType.PRISMATIC))
 _FIXED = int(newton.JointType.FIXED)
@@ -104,6 +108,36 @@ def _rotate(q, v):
     return v + 2.0 * np.cross(u, np.cross(u, v) + w * v)
 
 
+def _known_frame(link: str, labels, bodies0):
+    """A Panda link merged away (e.g. ``panda_hand_tcp``) from wpctrl.robots' URDF facts: ([body], offset) or None."""
+    from .robots import PANDA_FRAMES
+
+    entry = PANDA_FRAMES.get(link)
+    if entry is None or entry[0] is None:
+        return None
+    cand = _find(labels, bodies0, entry[0])
+    if len(cand) != 1:
+        return None
+    p, q = entry[1]
+    return cand, wp.transform(wp.vec3(*p), wp.quat(*q))
+
+
+def _is_merged_root(spec: EESpec) -> bool:
+    """Whether ``root_link_name`` is the robot's root link (absent from the model: merged into the world)."""
+    name = spec.root_link_name
+    if spec.urdf_path is not None and os.path.exists(spec.urdf_path):
+        try:
+            root = ET.parse(spec.urdf_path).getroot()
+        except (OSError, ET.ParseError):
+            return False
+        children = {j.find("child").get("link") for j in root.findall("joint")}
+        roots = [lk.get("name") for lk in root.findall("link") if lk.get("name") not in children]
+        return roots == [name]
+    from .robots import PANDA_FRAMES
+
+    return name in PANDA_FRAMES and PANDA_FRAMES[name][0] is None
+
+
 class EEPart:
     """The device side of one EE controller inside a control mode's engine."""
 
@@ -163,10 +197,15 @@ class EEPart:
                 cand = [int(sbody[s])]
                 st = model.shape_transform.numpy()[s]
                 offset = wp.transform(wp.vec3(*st[:3]), wp.quat(*st[3:]))
-            elif spec.urdf_path is not None:
+            elif spec.urdf_path is not None and os.path.exists(spec.urdf_path):
                 kept = {_short(labels[b]) for b in bodies0}
                 link, offset = _urdf_offset(spec.urdf_path, spec.ee_link, kept)
                 cand = _find(labels, bodies0, link)
+            elif (known := _known_frame(spec.ee_link, labels, bodies0)) is not None:
+                cand, offset = known
+                logger.info("ee_link %r: using wpctrl.robots.PANDA_FRAMES (not in the model)", spec.ee_link)
+            elif spec.urdf_path is not None:
+                _urdf_offset(spec.urdf_path, spec.ee_link, set())  # raises: cannot read urdf_path
             else:
                 known = sorted({_short(labels[b]) for b in bodies0})
                 close = difflib.get_close_matches(spec.ee_link, known, n=5, cutoff=0.5)
@@ -180,7 +219,10 @@ class EEPart:
         ee_body = cand[0]
 
         root_body = -1
-        if spec.root_link_name is not None:
+        root_name = spec.root_link_name
+        if root_name is not None and not _find(labels, bodies0, root_name) and _is_merged_root(spec):
+            root_name = None  # the URDF's root link, merged into the world (a fixed base): the default root
+        if root_name is not None:
             rc = _find(labels, bodies0, spec.root_link_name)
             if len(rc) != 1:
                 raise ConfigError(
@@ -198,11 +240,11 @@ class EEPart:
                 break
             chain.append(j)
             b = int(jparent[j])
-        if spec.root_link_name is not None and b != root_body:
+        if root_name is not None and b != root_body:
             raise ConfigError(f"root_link_name: {spec.root_link_name!r} is not an ancestor of ee_link {spec.ee_link!r}")
         chain.reverse()
         world_top = False
-        if spec.root_link_name is None and chain:
+        if root_name is None and chain:
             top = chain[0]
             if int(jtype[top]) not in _MOVING:
                 chain = chain[1:]  # a free or fixed base: its child is the root link

@@ -42,6 +42,7 @@ __all__ = [
     "PANDA_ARM_JOINTS",
     "PANDA_BODIES",
     "PANDA_CONTROL_MODES",
+    "PANDA_FRAMES",
     "PANDA_GRIPPER_JOINTS",
     "PANDA_INITIAL_Q",
     "PANDA_JOINTS",
@@ -559,4 +560,17 @@ def panda_control_modes() -> dict[str, dict[str, ControllerConfig]]:
 
 
 PANDA_CONTROL_MODES: dict[str, dict[str, ControllerConfig]] = panda_control_modes()
+
+
+def _panda_frames() -> dict[str, tuple[str | None, tuple[tuple[float, ...], tuple[float, ...]]]]:
+    survivor = _collapse("newton")[2]
+    return {
+        link: (s, (tuple(float(v) for v in x[0]), tuple(float(v) for v in x[1]))) for link, (s, x) in survivor.items()
+    }
+
+
+PANDA_FRAMES = _panda_frames()
+"""Every link of the Panda URDF as ``(kept body or None for the world, (position [m], quaternion xyzw))`` relative to
+the body it is merged into by ``collapse_fixed_joints`` (``panda_hand_tcp`` -> ``panda_link7``). The EE controllers
+fall back on it when a Panda model lacks ``ee_link`` and ``urdf_path`` cannot be read."""
 """ManiSkill's Panda control modes (one shared instance; call :func:`panda_control_modes` for copies)."""

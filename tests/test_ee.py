@@ -539,3 +539,23 @@ def test_interpolated_drive_targets_and_torques(actuation):
             np.testing.assert_allclose(tau, np.clip(1e3 * (drive - state.joint_q.numpy()[coord]), -100, 100), atol=1e-3)
         else:
             assert not tau.any()
+
+
+def test_floating_base_poses_are_relative_to_the_base():
+    if not PANDA_URDF.exists():
+        pytest.skip("../shared is absent")
+    robot = newton.ModelBuilder()
+    robot.add_urdf(str(PANDA_URDF), collapse_fixed_joints=True, floating=True)
+    b = newton.ModelBuilder()
+    b.replicate(robot, 2)
+    model = b.finalize(device="cpu")
+    rig = Rig(pose_cfg(urdf_path=str(PANDA_URDF)), 2, model=model)
+    q = random_q(np.random.default_rng(10), 2)
+    state = model.state()
+    jq = state.joint_q.numpy()
+    jq[rig.arm_coord] = q
+    jq[0:7] = [0.3, -0.2, 0.5, 0.0, 0.0, 0.3826834, 0.9238795]  # env 0's base: moved and yawed 45 degrees
+    state.joint_q.assign(jq)
+    local = rig.arm.fk_jacobian(state)[0].numpy()
+    fixed = Rig(pose_cfg(), 2)  # wpctrl's fixed-base Panda (TCP site)
+    np.testing.assert_allclose(local, fixed.fk(q)[0], atol=2e-6)

@@ -112,19 +112,22 @@ class ControllerSetup:
         )
 
 
-def real_setup(mode: dict, model, *, actuation: str, control_freq: int, sim_freq: int) -> ControllerSetup:
+def real_setup(mode: dict, model, *, actuation: str, control_freq: int, sim_freq: int, **options) -> ControllerSetup:
+    """``options``: further ``build_controller`` keywords (delay, track_effort, clip_targets, ...)."""
     import wpctrl
     from bench.reference_torch import layout_from_model
 
     t0 = time.perf_counter()
-    ctrl = wpctrl.build_controller(mode, model, control_freq=control_freq, sim_freq=sim_freq, actuation=actuation)
+    ctrl = wpctrl.build_controller(
+        mode, model, control_freq=control_freq, sim_freq=sim_freq, actuation=actuation, **options
+    )
     state, control = model.state(), model.control()
     layout = layout_from_model(model, list(ctrl.joint_names))
     return ControllerSetup(int(model.world_count), "real", ctrl, state, control, layout, time.perf_counter() - t0)
 
 
 def synthetic_setup(
-    mode: dict, small_model, num_envs: int, *, actuation: str, control_freq: int, sim_freq: int
+    mode: dict, small_model, num_envs: int, *, actuation: str, control_freq: int, sim_freq: int, **options
 ) -> ControllerSetup:
     """A controller for ``num_envs`` Pandas without building ``num_envs`` of them.
 
@@ -141,7 +144,7 @@ def synthetic_setup(
 
     t0 = time.perf_counter()
     small = wpctrl.build_controller(
-        mode, small_model, control_freq=control_freq, sim_freq=sim_freq, actuation=actuation
+        mode, small_model, control_freq=control_freq, sim_freq=sim_freq, actuation=actuation, **options
     )
     eng0 = small._engine
     b0 = eng0.binding
@@ -172,6 +175,11 @@ def synthetic_setup(
         "explicit_pd": "stable" if getattr(eng0, "explicit_mode", 1) == 2 else "naive",
         "inertia_update": getattr(eng0, "inertia_update", "control"),
         "sim_dt": getattr(eng0, "sim_dt", 1.0 / sim_freq),
+        # issue 10's actuation options, as the small engine holds them
+        "delay": getattr(eng0, "delay_range", None),
+        "track_effort": getattr(eng0, "computed_effort", None) is not None,
+        "clip_targets": getattr(eng0, "clip_targets", False),
+        "seed": getattr(eng0, "seed", 0),
     }
     params = inspect.signature(_Engine).parameters
     extra = {k: v for k, v in extra.items() if k in params}

@@ -17,6 +17,19 @@ Where wpctrl deliberately differs from ManiSkill, this reference follows wpctrl:
 4. An env whose flat action holds any NaN/Inf is left completely untouched and counted.
 5. ``set_state`` copies.
 
+Actuation options (issue 10), also written from their description, not from the kernels:
+
+6. Drive properties are per env ((N, n) arrays, the config's values at construction); ``set_drive`` overwrites the
+   masked envs. Randomised values are drawn by wpctrl on the device and fed in through ``set_drive`` (the reference
+   checks their range, not their draws).
+7. ``delay``: each substep's drive command (position target after interpolation, velocity target) enters a history;
+   the drive (written targets and the explicit law) uses the command of ``d[env]`` substeps ago; a reset fills the
+   env's history with its reset pose and velocity target. The per-env d is an input (drawn by wpctrl at reset).
+8. ``track_effort``: the PD law (the explicit one, or the naive law for implicit actuation) before and after the
+   clamp, and a count of substeps with |law| > limit; reset zeroes them for the reset envs.
+9. ``clip_targets``: position targets set by an action are clamped to the joint limits (commanded joints first, then
+   the mimic followers computed from the clamped source and clamped themselves).
+
 Arrays are float32 throughout and every operation is written in ManiSkill's order, so results agree with wpctrl to
 the last bit (up to the compiler's freedom to fuse multiply-adds).
 
@@ -87,6 +100,8 @@ class RefController:
         self.config = config
         self.names = list(config.joint_names)
         self.cols = robot.cols(self.names)
+        self.qlimits = robot.limits[self.cols].copy()
+        self.clip = False
         self.n = len(self.names)
         self.N = num_envs
         self.K = num_substeps
@@ -96,10 +111,13 @@ class RefController:
         self.target_qvel = np.zeros((num_envs, self.n), F32)
         self.step = np.zeros(num_envs, np.int64)
         n = self.n
-        self.kp = np.zeros(n, F32)
-        self.kd = _bcast(config.damping, n)
-        self.force_limit = _bcast(config.force_limit, n)
-        self.friction = _bcast(config.friction, n)
+        self.kp = np.zeros((num_envs, n), F32)
+        self.kd = np.tile(_bcast(config.damping, n), (num_envs, 1))
+        self.force_limit = np.tile(_bcast(config.force_limit, n), (num_envs, 1))
+        self.friction = np.tile(_bcast(config.friction, n), (num_envs, 1))
+        self.computed_effort = np.zeros((num_envs, n), F32)
+        self.applied_effort = np.zeros((num_envs, n), F32)
+        self.saturation_count = np.zeros((num_envs, n), np.int64)
         mode = getattr(config, "drive_mode", "force")  # ManiSkill's passive drive is always "force"
         modes = [mode] * n if isinstance(mode, str) else list(mode)
         self.accel = np.array([m == "acceleration" for m in modes], bool)
@@ -128,8 +146,16 @@ class RefController:
 
     # -- stages -----------------------------------------------------------------------------------------------------
 
+    def set_drive(self, name: str, values: np.ndarray, mask: np.ndarray) -> None:
+        """Per-env drive property ``name`` (stiffness, damping, force_limit, friction) of the masked envs."""
+        attr = {"stiffness": "kp", "damping": "kd"}.get(name, name)
+        getattr(self, attr)[mask] = np.asarray(values, F32)[mask]
+
     def reset(self, q: np.ndarray, qd: np.ndarray, mask: np.ndarray, first: bool) -> None:
         q = q[:, self.cols]
+        self.computed_effort[mask] = 0
+        self.applied_effort[mask] = 0
+        self.saturation_count[mask] = 0
         self.step[mask] = 0
         self.start_qpos[mask] = q[mask]
         self.target_qpos[mask] = q[mask]
@@ -142,20 +168,30 @@ class RefController:
         """(N, n) position drive target at the current substep counter, or None (no position drive)."""
         return None
 
-    def before_simulation_step(self, q, qd, response, explicit_pd: str | None, dt, writes: dict) -> None:
+    def drive_command(self) -> tuple[np.ndarray | None, np.ndarray]:
+        """This substep's undelayed command: (position target or None, velocity target (zeros without one))."""
+        tqd = self.target_qvel.copy() if self.has_vel_target else np.zeros((self.N, self.n), F32)
+        return self.drive_target_q(), tqd
+
+    def before_simulation_step(
+        self, q, qd, response, explicit_pd: str | None, dt, writes: dict, command=None, track_effort=False
+    ) -> None:
         """One substep: count it, write the drive targets and, with explicit actuation, the clamped PD torque.
 
         ``response``: (N, n) joint-space response r = (H^-1)_ii (an input, as the physics is); acceleration drives
         scale both gains by 1/r; the "stable" law is ``(Kp (e - dt qd) + Kd (qd* - qd)) / (1 + r dt (Kd + dt Kp))``.
+        ``command``: None, or a function mapping this substep's command to the (delayed) one to drive with.
         """
         self.step += 1
         everyone = np.ones(self.N, bool)
-        tq = self.drive_target_q()
+        tq, tqd = self.drive_command()
+        if command is not None:
+            tq, tqd = command(tq, tqd)
         if tq is not None:
             _write(writes, "target_q", everyone, self.cols, tq)
         if self.has_vel_target:
-            _write(writes, "target_qd", everyone, self.cols, self.target_qvel)
-        if explicit_pd is None:
+            _write(writes, "target_qd", everyone, self.cols, tqd)
+        if explicit_pd is None and not track_effort:
             return
         qm, qdm = q[:, self.cols], qd[:, self.cols]
         r = np.asarray(response, F32)
@@ -169,10 +205,16 @@ class RefController:
         kp = np.where(self.accel, kp / r, kp)
         kd = np.where(self.accel, kd / r, kd)
         if explicit_pd == "stable":
-            u = (kp * (e - dt * qdm) + kd * (self.target_qvel - qdm)) / (F32(1) + r * dt * (kd + dt * kp))
+            u = (kp * (e - dt * qdm) + kd * (tqd - qdm)) / (F32(1) + r * dt * (kd + dt * kp))
         else:
-            u = kp * e + kd * (self.target_qvel - qdm)
-        _write(writes, "f", everyone, self.cols, np.clip(u, -self.force_limit, self.force_limit))
+            u = kp * e + kd * (tqd - qdm)
+        f = np.clip(u, -self.force_limit, self.force_limit)
+        if explicit_pd is not None:
+            _write(writes, "f", everyone, self.cols, f)
+        if track_effort:
+            self.computed_effort = u.astype(F32)
+            self.applied_effort = f.astype(F32)
+            self.saturation_count += np.abs(u) > self.force_limit
 
     def reset_writes(self, q: np.ndarray, mask: np.ndarray, explicit: bool, writes: dict) -> None:
         """What ``reset(..., control=c)`` writes for the reset envs."""
@@ -227,7 +269,7 @@ class RefPDJointPos(RefController):
 
     def __init__(self, config, robot, num_envs, num_substeps, q0):
         super().__init__(config, robot, num_envs, num_substeps, q0)
-        self.kp = _bcast(config.stiffness, self.n)
+        self.kp = np.tile(_bcast(config.stiffness, self.n), (num_envs, 1))
         lim = robot.limits[self.cols].copy()  # float32 (n, 2)
         if config.lower is not None:
             lim[:, 0] = config.lower
@@ -256,8 +298,13 @@ class RefPDJointPos(RefController):
     def _pos_dim(self) -> int:
         return self.n
 
+    def _clamp(self, t, idx=slice(None)):
+        if not self.clip:
+            return t
+        return np.clip(t, self.qlimits[idx, 0], self.qlimits[idx, 1]).astype(F32)
+
     def _set_pos_targets(self, a, qm, good):
-        target = self._new_target(a, qm)
+        target = self._clamp(self._new_target(a, qm))
         self.target_qpos[good] = target[good]
 
     def drive_target_q(self):
@@ -298,7 +345,9 @@ class RefPDJointPosMimic(RefPDJointPos):
                 target[:, C] = qm[:, C] + a
         else:
             target[:, C] = a
-        target[:, self.mimic_idx] = target[:, self.mimic_src] * self.mul + self.off
+        target[:, C] = self._clamp(target[:, C], C)
+        M = self.mimic_idx
+        target[:, M] = self._clamp(target[:, self.mimic_src] * self.mul + self.off, M)
         self.target_qpos[good] = target[good]
 
 
@@ -391,6 +440,9 @@ class RefCombined:
         actuation: str = "implicit",
         explicit_pd: str = "naive",
         sim_dt: float = 0.01,
+        delay: tuple[int, int] | None = None,
+        track_effort: bool = False,
+        clip_targets: str = "none",
     ):
         configs = dict(config) if isinstance(config, Mapping) else {"": config}
         configs.pop("balance_passive_force", None)
@@ -405,12 +457,47 @@ class RefCombined:
         col = 0
         for uid, c in configs.items():
             ch = ref_controller_cls(c)(c, robot, num_envs, num_substeps, q0)
+            ch.clip = clip_targets == "joint_limits"
             self.children[uid] = ch
             self.action_mapping[uid] = (col, col + ch.action_dim)
             col += ch.action_dim
         self.action_dim = col
         self.bad_action_count = np.zeros(num_envs, np.int64)
         self.num_resets = 0
+        self.track_effort = bool(track_effort)
+        self.delay_range = delay
+        self.delay = np.zeros(num_envs, np.int64) if delay is None else np.full(num_envs, delay[0], np.int64)
+        # Command history per child: a list (oldest first) of (position or None, velocity) (N, n) commands.
+        self.history: dict[str, list] = {}
+        if delay is not None:
+            everyone = np.ones(num_envs, bool)
+            for uid, ch in self.children.items():
+                self.history[uid] = []
+                self._fill_history(uid, ch, everyone)
+
+    def _delayer(self, uid: str, ch: RefController):
+        """Push a substep's command into the history; return the one of delay[env] substeps ago, per env."""
+
+        def delayed(tq, tqd):
+            hist = self.history[uid]
+            hist.append((np.zeros((self.N, ch.n), F32) if tq is None else tq.copy(), tqd.copy()))
+            del hist[0]
+            back = np.minimum(self.delay, self.delay_range[1])  # hist[-1] is this substep's command
+            cq = np.stack([hist[len(hist) - 1 - int(back[e])][0][e] for e in range(self.N)])
+            cqd = np.stack([hist[len(hist) - 1 - int(back[e])][1][e] for e in range(self.N)])
+            return (None if tq is None else cq), cqd
+
+        return delayed
+
+    def _fill_history(self, uid: str, ch: RefController, mask: np.ndarray) -> None:
+        """The masked envs' whole history becomes the reset pose and velocity target."""
+        size = self.delay_range[1] + 1
+        hist = self.history[uid]
+        while len(hist) < size:
+            hist.append((np.zeros((self.N, ch.n), F32), np.zeros((self.N, ch.n), F32)))
+        for tq, tqd in hist:
+            tq[mask] = ch.start_qpos[mask]  # the reset pose (start = target = q after a reset)
+            tqd[mask] = ch.target_qvel[mask]
 
     @property
     def action_low(self) -> np.ndarray:
@@ -435,10 +522,12 @@ class RefCombined:
         mask = np.ones(self.N, bool) if first else env_mask(env_ids, self.N)
         q, qd = np.asarray(q, F32), np.asarray(qd, F32)
         writes = empty_writes(self.N, len(self.robot.joint_names))
-        for ch in self.children.values():
+        for uid, ch in self.children.items():
             ch.reset(q, qd, mask, first)
             if with_control:
                 ch.reset_writes(q, mask, self.explicit, writes)
+            if self.delay_range is not None:
+                self._fill_history(uid, ch, mask)
         return writes
 
     def set_action(self, action, q) -> None:
@@ -458,7 +547,10 @@ class RefCombined:
         for uid, ch in self.children.items():
             r = (response or {}).get(uid)
             r = np.ones((self.N, ch.n), F32) if r is None else r
-            ch.before_simulation_step(q, qd, r, self.explicit_pd, self.dt, writes)
+            command = None
+            if self.delay_range is not None:
+                command = self._delayer(uid, ch)
+            ch.before_simulation_step(q, qd, r, self.explicit_pd, self.dt, writes, command, self.track_effort)
         return writes
 
     def initial_control_targets(self, q0) -> dict:

@@ -559,3 +559,19 @@ def test_floating_base_poses_are_relative_to_the_base():
     local = rig.arm.fk_jacobian(state)[0].numpy()
     fixed = Rig(pose_cfg(), 2)  # wpctrl's fixed-base Panda (TCP site)
     np.testing.assert_allclose(local, fixed.fk(q)[0], atol=2e-6)
+
+
+def test_clip_targets_clamps_ee_joint_targets():
+    n = 4
+    mode = {"arm": pose_cfg(delta_solver_config=dict(alpha=40.0)), "gripper": gripper()}  # overshooting steps
+    out = {}
+    for clip in ("none", "joint_limits"):
+        model = build_panda(n)
+        ctrl = wpctrl.build_controller(copy.deepcopy(mode), model, clip_targets=clip)
+        state = model.state()
+        ctrl.reset(state)
+        ctrl.set_action(np.random.default_rng(11).uniform(-1, 1, (n, 7)).astype(np.float32), state)
+        out[clip] = ctrl["arm"].target_qpos.numpy()
+    lo, hi = LIMITS[:, 0].astype(np.float32), LIMITS[:, 1].astype(np.float32)
+    assert ((out["none"] < lo) | (out["none"] > hi)).any()
+    np.testing.assert_array_equal(out["joint_limits"], np.clip(out["none"], lo, hi))

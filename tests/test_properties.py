@@ -5,7 +5,12 @@ flag, scalar or per-joint parameters, mimic maps, force/acceleration drive modes
 (implicit; explicit with the naive or the stable PD law), when the joint response r = (H^-1)_ii is refreshed, a NaN
 policy and a seed for an operation stream: random measured states written into the Newton state (also between
 substeps), actions (in range, out of range, NaN/Inf rows; numpy/torch/wp, float32/float64, strided), steps without
-an action, partial resets (ids, masks, torch/wp selections; with or without a Control) and set_state.
+an action, partial resets (ids, masks, torch/wp selections; with or without a Control) and set_state. The actuation
+options of issue 10 are drawn too: a command delay (fixed or per-env ranges; the drawn per-env delays are read back
+after each reset, checked to lie in range and fed to the reference as inputs), effort tracking, target clamping, and
+per-env drive-property edits in the stream (``set_drive_properties`` on a random child with random envs and shapes;
+``randomize_drive_properties``, whose device draws are checked for range and untouched envs, then fed to the
+reference).
 
 After every operation the controller's buffers, the model's drive properties and the whole of Newton's control arrays
 (entries the controller must not write included) are compared with the reference within 1e-6 (torques and model
@@ -235,12 +240,32 @@ def big_mimic(draw, limits_by_name: dict):
     return draw(child_config(names, lim, kind="mimic"))
 
 
+@st.composite
+def actuation_options(draw):
+    """Issue 10's build options: mostly off (the default path stays covered), each on in a good share of examples."""
+    opts = {}
+    d = draw(st.sampled_from([None, None, 0, 2, (0, 3), (1, 2)]))
+    if d is not None:
+        opts["delay"] = d
+    if draw(st.booleans()):
+        opts["track_effort"] = True
+    if draw(st.booleans()):
+        opts["clip_targets"] = "joint_limits"
+    return opts
+
+
+DRIVE = ("stiffness", "damping", "force_limit", "friction")
+
 # ----------------------------------------------------------------------------------------------------------------------
 # The harness.
 
 
 class Harness:
-    def __init__(self, mode, num_envs, num_substeps, actuation, nan_policy, rng, explicit_pd, inertia_update):
+    def __init__(
+        self, mode, num_envs, num_substeps, actuation, nan_policy, rng, explicit_pd, inertia_update, opts=None
+    ):
+        opts = dict(opts or {})
+        self.opts = opts
         self.model, self.layout = model_for(num_envs)
         self.N = num_envs
         self.K = num_substeps
@@ -258,11 +283,28 @@ class Harness:
                 nan_policy=nan_policy,
                 explicit_pd=explicit_pd,
                 inertia_update=inertia_update,
+                **opts,
             )
         robot = RefRobot(PANDA_JOINTS, self.layout.limits)
+        delay = opts.get("delay")
+        delay = (delay, delay) if isinstance(delay, int) else delay
         self.ref = RefCombined(
-            mode, robot, num_envs, num_substeps, self.layout.q0, actuation, explicit_pd, 1.0 / (20 * num_substeps)
+            mode,
+            robot,
+            num_envs,
+            num_substeps,
+            self.layout.q0,
+            actuation,
+            explicit_pd,
+            1.0 / (20 * num_substeps),
+            delay=delay,
+            track_effort=opts.get("track_effort", False),
+            clip_targets=opts.get("clip_targets", "none"),
         )
+        self.nominal = {
+            uid: {f: getattr(self.child(uid), f).numpy()[0].copy() for f in DRIVE} for uid in self.ref.children
+        }
+        self.read_delay()
         self.nan_policy = nan_policy
         self.state = self.model.state()
         self.control = self.model.control()
@@ -313,6 +355,16 @@ class Harness:
 
     def child(self, uid):
         return self.ctrl if self.single else self.ctrl[uid]
+
+    def read_delay(self):
+        """The per-env delays wpctrl drew at the last reset: in range, then an input of the reference."""
+        if self.ref.delay_range is None:
+            assert self.ctrl.delay is None
+            return
+        d = self.ctrl.delay.numpy()
+        lo, hi = self.ref.delay_range
+        assert ((d >= lo) & (d <= hi)).all(), (d, lo, hi)
+        self.ref.delay = d.astype(np.int64).copy()
 
     def response(self) -> dict:
         """{uid: (N, n) r} as wpctrl last computed it (an input of the physics, like the measured state)."""
@@ -371,6 +423,20 @@ class Harness:
                     c.target_qvel.numpy(), rc.target_qvel, atol=TOL, rtol=0, err_msg=f"{w}.target_qvel"
                 )
         self.check_drive_properties(where)
+        for uid, rc in ref.children.items():
+            c = self.child(uid)
+            w = f"{where}: {uid or 'ctrl'}"
+            for f, a in zip(DRIVE, (rc.kp, rc.kd, rc.force_limit, rc.friction)):
+                np.testing.assert_array_equal(getattr(c, f).numpy(), a, err_msg=f"{w}.{f}")
+            if ref.track_effort:
+                for f in ("computed_effort", "applied_effort"):
+                    np.testing.assert_allclose(
+                        getattr(c, f).numpy(), getattr(rc, f), atol=TOL, rtol=1e-6, err_msg=f"{w}.{f}"
+                    )
+                # |u| vs the limit: a float32 rounding at the boundary may flip one count; none were seen
+                np.testing.assert_array_equal(c.saturation_count.numpy(), rc.saturation_count, err_msg=f"{w}.sat")
+            else:
+                assert c.computed_effort is None
         got_state = ctrl.get_state()
         exp_state = ref.get_state(self.single)
         assert _keys(got_state) == _keys(exp_state), where
@@ -432,6 +498,7 @@ class Harness:
         with_control = bool(self.rng.random() < 0.5)
         self.ctrl.reset(self.state, env_ids, control=self.control if with_control else None)
         self.apply(self.ref.reset(self.q, self.qd, env_ids, with_control))
+        self.read_delay()
         self.check(f"reset({env_ids!r}, control={with_control})")
 
     def op_step(self, with_action: bool):
@@ -451,6 +518,74 @@ class Harness:
             self.ctrl.before_simulation_step(self.state, self.control)
             self.apply(self.ref.before_simulation_step(self.q, self.qd, self.response()))
             self.check(f"substep {k + 1}")
+
+    def op_drive(self):
+        """set_drive_properties or randomize_drive_properties on a random child, random envs (no duplicate ids)."""
+        rng, N = self.rng, self.N
+        uid = list(self.ref.children)[int(rng.integers(0, len(self.ref.children)))]
+        c, rc = self.child(uid), self.ref.children[uid]
+        n = rc.n
+        kind = rng.integers(0, 4)
+        env_ids = [None, int(rng.integers(0, N)), rng.random(N) < 0.5, rng.choice(N, rng.integers(1, N + 1), False)][
+            kind
+        ]
+        if kind == 3 and rng.random() < 0.5:
+            env_ids = wp.array(env_ids.astype(np.int32), dtype=wp.int32, device="cpu")
+        mask = np.zeros(N, bool)
+        if env_ids is None:
+            mask[:] = True
+        elif kind == 2:
+            mask = env_ids.copy()
+        else:
+            mask[np.asarray(env_ids.numpy() if isinstance(env_ids, wp.array) else env_ids).reshape(-1)] = True
+        fields = [f for f in DRIVE if rng.random() < 0.5] or ["stiffness"]
+        if rng.random() < 0.5:
+            sel = {0: N, 1: 1, 2: N, 3: int(mask.sum())}[kind]
+            vals = {}
+            for f in fields:
+                shape = (n,) if rng.random() < 0.5 else (sel, n)
+                v = rng.uniform(0.0, 500.0, shape).astype(np.float32)
+                vals[f] = torch.from_numpy(v) if rng.random() < 0.3 else v
+            c.set_drive_properties(env_ids=env_ids, **vals)
+            for f, v in vals.items():
+                v = np.asarray(v, np.float32)
+                full = np.zeros((N, n), np.float32)
+                if v.ndim == 1:
+                    full[:] = v
+                elif kind in (0, 2):
+                    full[:] = v
+                else:
+                    ids = np.asarray(env_ids.numpy() if isinstance(env_ids, wp.array) else env_ids).reshape(-1)
+                    full[ids] = v
+                rc.set_drive(f, full, mask)
+            self.check(f"set_drive_properties({sorted(vals)}, {env_ids!r})")
+            return
+        mode = "scale" if rng.random() < 0.6 else "abs"
+        ranges = {}
+        for f in fields:
+            if rng.random() < 0.3:
+                ranges[f] = (1.0, 1.0) if mode == "scale" else (3.5, 3.5)  # zero range: exact
+            else:
+                lo = float(rng.uniform(0.0, 2.0 if mode == "scale" else 100.0))
+                ranges[f] = (lo, lo + float(rng.uniform(0.0, 2.0 if mode == "scale" else 100.0)))
+        before = {f: getattr(c, f).numpy().copy() for f in DRIVE}
+        c.randomize_drive_properties(env_ids=env_ids, mode=mode, seed=int(rng.integers(0, 1000)), **ranges)
+        for f in DRIVE:
+            got = getattr(c, f).numpy().copy()
+            np.testing.assert_array_equal(got[~mask], before[f][~mask], err_msg=f"randomize {f}: untouched envs")
+            if f not in ranges:
+                np.testing.assert_array_equal(got, before[f], err_msg=f"randomize {f}: not drawn")
+                continue
+            lo, hi = ranges[f]
+            nom = self.nominal[uid][f] if mode == "scale" else np.float32(1.0)
+            g = got[mask]
+            lo_v, hi_v = np.float32(lo) * nom, np.float32(hi) * nom
+            if lo == hi:
+                np.testing.assert_array_equal(g, np.broadcast_to(lo_v, g.shape), err_msg=f"zero range {f}")
+            else:
+                assert ((g >= lo_v * (1 - 1e-6) - 1e-6) & (g <= hi_v * (1 + 1e-6) + 1e-6)).all(), (f, g, lo_v, hi_v)
+            rc.set_drive(f, got, mask)
+        self.check(f"randomize_drive_properties({ranges}, {mode}, {env_ids!r})")
 
     def op_set_state(self):
         exp = self.ref.get_state(self.single)
@@ -503,9 +638,12 @@ _LIMITS = {s: tuple(map(float, lim)) for s, lim in zip(PANDA_JOINTS, model_for(E
     inertia_update=st.sampled_from(["control", "substep"]),
     nan_policy=st.sampled_from(["hold", "hold", "raise"]),
     seed=st.integers(0, 2**32 - 1),
+    opts=actuation_options(),
 )
-def test_matches_reference(mode, num_envs, num_substeps, actuation, explicit_pd, inertia_update, nan_policy, seed):
-    run_stream(mode, num_envs, num_substeps, actuation, explicit_pd, inertia_update, nan_policy, seed)
+def test_matches_reference(
+    mode, num_envs, num_substeps, actuation, explicit_pd, inertia_update, nan_policy, seed, opts
+):
+    run_stream(mode, num_envs, num_substeps, actuation, explicit_pd, inertia_update, nan_policy, seed, opts)
 
 
 @settings(max_examples=max(MAX_EXAMPLES // 5, 10), deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -520,9 +658,9 @@ def test_mimic_matches_reference(mode, num_substeps, actuation, seed):
     run_stream(mode, ENV_COUNTS[0], num_substeps, actuation, "naive", "control", "hold", seed)
 
 
-def run_stream(mode, num_envs, num_substeps, actuation, explicit_pd, inertia_update, nan_policy, seed):
+def run_stream(mode, num_envs, num_substeps, actuation, explicit_pd, inertia_update, nan_policy, seed, opts=None):
     rng = np.random.default_rng(seed)
-    h = Harness(mode, num_envs, num_substeps, actuation, nan_policy, rng, explicit_pd, inertia_update)
+    h = Harness(mode, num_envs, num_substeps, actuation, nan_policy, rng, explicit_pd, inertia_update, opts)
     ref, ctrl = h.ref, h.ctrl
 
     # Metadata: action spaces, mapping, model drive properties.
@@ -545,10 +683,12 @@ def run_stream(mode, num_envs, num_substeps, actuation, explicit_pd, inertia_upd
         r = rng.random()
         if r < 0.2:
             h.op_reset()
-        elif r < 0.8:
+        elif r < 0.7:
             h.op_step(with_action=True)
-        elif r < 0.9:
+        elif r < 0.8:
             h.op_step(with_action=False)
+        elif r < 0.9:
+            h.op_drive()
         else:
             h.op_set_state()
 

@@ -17,6 +17,7 @@ import warp as wp
 
 from . import config as cfg
 from . import config_ee as cfg_ee
+from .actuation import ActuationMixin, check_delay
 from .binding import bind_joints
 from .engine import _Engine
 from .inputs import _action_array, _as_rows_array, _env_selection, _raise_on_nonfinite
@@ -25,9 +26,10 @@ _ACTUATIONS = ("implicit", "explicit")
 _NAN_POLICIES = ("hold", "raise")
 _EXPLICIT_PD = ("naive", "stable")
 _INERTIA_UPDATES = ("control", "substep")
+_CLIP_TARGETS = ("none", "joint_limits")
 
 
-class BaseController:
+class BaseController(ActuationMixin):
     """A ManiSkill-style joint controller over all envs of a Newton model.
 
     Build it with :func:`wpctrl.build_controller` (or ``Config.controller_cls(config, model, ...)``). Per control
@@ -52,6 +54,10 @@ class BaseController:
         nan_policy: str = "hold",
         explicit_pd: str = "naive",
         inertia_update: str = "control",
+        delay=None,
+        track_effort: bool = False,
+        clip_targets: str = "none",
+        seed: int = 0,
     ):
         self.config = config
         self.control_freq = control_freq
@@ -68,6 +74,14 @@ class BaseController:
         if inertia_update not in _INERTIA_UPDATES:
             raise ValueError(f"inertia_update: expected one of {_INERTIA_UPDATES}, got {inertia_update!r}")
         self.explicit_pd = explicit_pd
+        delay_range = check_delay(delay)
+        if not isinstance(track_effort, (bool, np.bool_)):
+            raise ValueError(f"track_effort: expected a bool, got {track_effort!r}")
+        if clip_targets not in _CLIP_TARGETS:
+            raise ValueError(f"clip_targets: expected one of {_CLIP_TARGETS}, got {clip_targets!r}")
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not -(2**31) <= int(seed) < 2**31:
+            raise ValueError(f"seed: expected an int32, got {seed!r}")
+        self.clip_targets = clip_targets
         if isinstance(config, Mapping):
             configs = dict(config)
             configs.pop("balance_passive_force", None)  # a ManiSkill agent option, not a controller
@@ -101,6 +115,10 @@ class BaseController:
             explicit_pd=explicit_pd,
             inertia_update=inertia_update,
             sim_dt=1.0 / sim_freq,
+            delay=delay_range,
+            track_effort=bool(track_effort),
+            clip_targets=clip_targets == "joint_limits",
+            seed=int(seed),
         )
         self._rows = slice(0, all_rows.count)
         self._cols = slice(0, all_rows.action_dim)
@@ -150,6 +168,7 @@ class BaseController:
         self.actuation = parent.actuation
         self.nan_policy = parent.nan_policy
         self.explicit_pd = parent.explicit_pd
+        self.clip_targets = parent.clip_targets
         self._engine = parent._engine
         self._rows = rows_slice
         self._cols = cols_slice
@@ -245,7 +264,8 @@ class BaseController:
 
     def attach_solver(self, solver) -> None:
         """Notify ``solver`` of the drive properties now, and after every per-env gain update (implicit acceleration
-        drives). Use it when the solver is built after the controller (as MuJoCo requires)."""
+        drives, :meth:`set_drive_properties`, :meth:`randomize_drive_properties`). Use it when the solver is built
+        after the controller (as MuJoCo requires)."""
         self._require_owner("attach_solver")
         self._engine.solver = solver
         solver.notify_model_changed(newton.ModelFlags.JOINT_DOF_FORCE_PROPERTIES)
@@ -473,6 +493,10 @@ def build_controller(
     nan_policy: str = "hold",
     explicit_pd: str = "naive",
     inertia_update: str = "control",
+    delay=None,
+    track_effort: bool = False,
+    clip_targets: str = "none",
+    seed: int = 0,
 ) -> BaseController:
     """Build the controller for one config or a ManiSkill control-mode dict ``{uid: config}``.
 
@@ -493,6 +517,15 @@ def build_controller(
             stable at implicit-drive gains).
         inertia_update: When r = (H^-1)_ii is recomputed (acceleration drives, stable PD): once per control step
             in ``set_action`` (``"control"``) or before every substep (``"substep"``).
+        delay: Command latency [substeps]: None (off), an int, or ``(min, max)`` drawn uniformly per env at each
+            reset of that env (device RNG). The drive targets (implicit: ``Control.joint_target_q/qd``; explicit:
+            the PD law's targets, with the current measured state) are those of d substeps ago; a reset fills the
+            env's history with the reset pose. ``ctrl.delay`` reads and writes d. Costs (max + 1) x num_envs x
+            n_joints float32 (twice when a row has a velocity target).
+        track_effort: Write ``computed_effort``/``applied_effort``/``saturation_count`` every substep (off: no bytes).
+        clip_targets: ``"none"`` (ManiSkill) or ``"joint_limits"``: every position target (after delta, virtual
+            target and mimic) is clamped to the joint's limits from the model before it is stored.
+        seed: Seed of the device RNG that draws the delays.
     """
     kw = dict(
         actuation=actuation,
@@ -500,6 +533,10 @@ def build_controller(
         nan_policy=nan_policy,
         explicit_pd=explicit_pd,
         inertia_update=inertia_update,
+        delay=delay,
+        track_effort=track_effort,
+        clip_targets=clip_targets,
+        seed=seed,
     )
     if isinstance(config, Mapping):
         return CombinedController(config, model, control_freq, sim_freq, **kw)

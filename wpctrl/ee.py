@@ -314,6 +314,9 @@ class EEPart:
                 {
                     "row_q_off": self.row_q_off,
                     "env_q_base": eng.env_q_base,
+                    "row_qlo": eng.row_qlo,
+                    "row_qhi": eng.row_qhi,
+                    "clip_targets": int(getattr(eng, "clip_targets", False)),
                     "row0": self.row0,
                     "num_dof": self.num_dof,
                     "col0": self.col0,

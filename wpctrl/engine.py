@@ -2,7 +2,13 @@
 
 One control mode (all rows of a single config or a ManiSkill ``{uid: config}`` dict) is one :class:`_Engine` with
 one kernel launch per stage: ``set_action`` (1 launch), ``substep`` (1 launch per solver substep) and ``reset``
-(1 launch). Launches are recorded once and re-bound only where an argument changed (:class:`_Launch`).
+(1 launch, plus a one-thread counter bump when delays are drawn). Launches are recorded once and re-bound only where
+an argument changed (:class:`_Launch`).
+
+Actuation state (issue 10), owned here: the per-env drive properties ``kp``/``kd``/``force_limit``/``friction``
+(num_envs, rows), initialised from the config and used by the explicit law, the acceleration gains and the model
+mirror; the device RNG counter; the optional delay ring buffer and effort readout (``None`` when off: the kernels
+branch on the null array and move no extra bytes).
 """
 
 from __future__ import annotations
@@ -13,7 +19,11 @@ import warp as wp
 
 from . import config as cfg
 from .binding import JointBinding
+from .kernels import actuation as KA
 from .kernels import pd as K
+
+DRIVE_FIELDS = ("stiffness", "damping", "force_limit", "friction")
+"""The per-env drive properties, in the order of the actuation kernels' property index p."""
 
 
 class _Launch:
@@ -56,6 +66,10 @@ class _Engine:
         explicit_pd: str = "naive",
         inertia_update: str = "control",
         sim_dt: float = 0.01,
+        delay: tuple[int, int] | None = None,
+        track_effort: bool = False,
+        clip_targets: bool = False,
+        seed: int = 0,
     ):
         self.rows = rows
         self.binding = binding
@@ -99,9 +113,35 @@ class _Engine:
         self.row_qd_off = up(binding.qd_off, wp.int32)
         self.env_q_base = up(binding.q_base, wp.int32)
         self.env_qd_base = up(binding.qd_base, wp.int32)
-        self.kp = up(rows.kp[None, :], wp.float32)
-        self.kd = up(rows.kd[None, :], wp.float32)
-        self.force_limit = up(rows.force_limit[None, :], wp.float32)
+        # Per-env drive properties (num_envs, rows), from the config; the nominal (config) values for "scale" draws.
+        self.kp = up(np.tile(rows.kp, (E, 1)), wp.float32)
+        self.kd = up(np.tile(rows.kd, (E, 1)), wp.float32)
+        self.force_limit = up(np.tile(rows.force_limit, (E, 1)), wp.float32)
+        self.friction = up(np.tile(rows.friction, (E, 1)), wp.float32)
+        self.nominal = up(np.stack([rows.kp, rows.kd, rows.force_limit, rows.friction]).reshape(4, R), wp.float32)
+        self.rng_counter = wp.zeros(1, dtype=wp.int32, device=dev)
+        self.seed = int(seed)
+        # Target clamping: the joints' limits [rad or m] (env 0's, as the binding reads them; +-inf: unlimited).
+        self.clip_targets = bool(clip_targets)
+        self.row_qlo = up(binding.qlimits[:, 0].astype(np.float32).reshape(R), wp.float32)
+        self.row_qhi = up(binding.qlimits[:, 1].astype(np.float32).reshape(R), wp.float32)
+        # Command delay: per-env d in [delay_min, delay_max] substeps, a ring of the last max_delay + 1 commands.
+        self.delay_range = delay
+        self.delay = self.delay_head = self.delay_q = self.delay_qd = None
+        if delay is not None:
+            D = int(delay[1])
+            self.delay = wp.full(E, int(delay[0]), dtype=wp.int32, device=dev)
+            self.delay_head = wp.zeros((E, R), dtype=wp.int32, device=dev)
+            self.delay_q = wp.zeros((D + 1, E, R), dtype=wp.float32, device=dev)
+            vel_rows = (rows.kind != cfg.ROW_POS) | ((rows.flags & cfg.FLAG_VEL_TARGET) != 0)
+            if vel_rows.any():  # velocity targets are 0 on plain position rows: no history needed then
+                self.delay_qd = wp.zeros((D + 1, E, R), dtype=wp.float32, device=dev)
+        # Effort readout [N·m or N].
+        self.computed_effort = self.applied_effort = self.saturation_count = None
+        if track_effort:
+            self.computed_effort = wp.zeros((E, R), dtype=wp.float32, device=dev)
+            self.applied_effort = wp.zeros((E, R), dtype=wp.float32, device=dev)
+            self.saturation_count = wp.zeros((E, R), dtype=wp.int32, device=dev)
         self.row_accel = up(rows.accel.astype(np.int32), wp.int32)
         self.has_accel = bool(rows.accel.any())
         # The joint-space response r = (H^-1)_ii per env and row: acceleration drives and stable explicit PD need it.
@@ -185,7 +225,7 @@ class _Engine:
             self.update_response(state)
         if self._launch_set_action is None:
             self._launch_set_action = _Launch(
-                K._set_action_kernel,
+                K.set_action_kernel(self.clip_targets),
                 self.dim,
                 {
                     "row_kind": self.row_kind,
@@ -202,7 +242,10 @@ class _Engine:
                     "row_mimic_mul": self.row_mimic_mul,
                     "row_mimic_off": self.row_mimic_off,
                     "row_q_off": self.row_q_off,
+                    "row_qlo": self.row_qlo,
+                    "row_qhi": self.row_qhi,
                     "lead_row": self.lead_row,
+                    "clip_targets": int(self.clip_targets),
                     "env_q_base": self.env_q_base,
                     "action_in": action,
                     "joint_q_in": state.joint_q,
@@ -229,7 +272,7 @@ class _Engine:
         joint_f = control.joint_f if self.explicit else None
         if self._launch_substep is None:
             self._launch_substep = _Launch(
-                K._substep_kernel,
+                K.substep_kernel(self.delay is not None, self.computed_effort is not None),
                 self.dim,
                 {
                     "row_kind": self.row_kind,
@@ -245,17 +288,25 @@ class _Engine:
                     "num_substeps": self.num_substeps,
                     "explicit_pd": self.explicit_mode,
                     "dt": self.sim_dt,
+                    "max_delay": 0 if self.delay_range is None else int(self.delay_range[1]),
                     "joint_q_in": state.joint_q,
                     "joint_qd_in": state.joint_qd,
                     "response_in": self.response,
                     "start_qpos_in": self.start_qpos,
                     "target_qpos_in": self.target_qpos,
                     "target_qvel_in": self.target_qvel,
+                    "delay_in": self.delay,
                     "step_out": self.step,
                     "row_step_out": self.row_step,
+                    "delay_head_out": self.delay_head,
+                    "delay_q_out": self.delay_q,
+                    "delay_qd_out": self.delay_qd,
                     "joint_target_q_out": control.joint_target_q,
                     "joint_target_qd_out": control.joint_target_qd,
                     "joint_f_out": joint_f,
+                    "computed_effort_out": self.computed_effort,
+                    "applied_effort_out": self.applied_effort,
+                    "saturation_count_out": self.saturation_count,
                 },
                 self.device,
             )
@@ -282,10 +333,14 @@ class _Engine:
                 self.env_q_base,
                 self.env_qd_base,
                 int(first),
+                0 if self.delay_range is None else int(self.delay_range[0]),
+                0 if self.delay_range is None else int(self.delay_range[1]),
+                self.seed,
                 env_ids,
                 env_mask,
                 state.joint_q,
                 state.joint_qd,
+                self.rng_counter,
                 self.start_qpos,
                 self.target_qpos,
                 self.target_qvel,
@@ -294,11 +349,99 @@ class _Engine:
                 None if control is None else control.joint_target_q,
                 None if control is None else control.joint_target_qd,
                 None if (control is None or not self.explicit) else control.joint_f,
+                self.delay,
+                self.delay_head,
+                self.delay_q,
+                self.delay_qd,
+                self.computed_effort,
+                self.applied_effort,
+                self.saturation_count,
             ],
             device=self.device,
         )
+        if self.delay_range is not None and self.delay_range[1] > self.delay_range[0]:
+            wp.launch(KA._bump_counter_kernel, dim=1, inputs=[self.rng_counter], device=self.device)
         for part in self.ee_parts:
             part.reset(state, env_ids, env_mask)
+
+    # -- per-env drive properties ---------------------------------------------------------------------------------
+
+    def _drive_outputs(self) -> list:
+        """The per-env arrays and the model arrays they mirror (gains only with implicit actuation: explicit keeps
+        the built-in drive off)."""
+        m = self.model
+        return [
+            self.kp,
+            self.kd,
+            self.force_limit,
+            self.friction,
+            None if self.explicit else m.joint_target_ke,
+            None if self.explicit else m.joint_target_kd,
+            m.joint_effort_limit,
+            m.joint_friction,
+        ]
+
+    def set_drive(self, values: wp.array, enabled, env_ids, env_mask, row0: int, num_rows: int) -> None:
+        """Copy ``values`` (4, 1 | selected | num_envs, num_rows) into rows [row0, row0 + num_rows) of the selected
+        envs and mirror them into the model; then notify the attached solver."""
+        dim = (self.num_envs if env_ids is None else env_ids.shape[0]) * num_rows
+        if dim:
+            wp.launch(
+                KA._set_drive_kernel,
+                dim=dim,
+                inputs=[
+                    self.row_accel,
+                    self.row_qd_off,
+                    row0,
+                    num_rows,
+                    self.env_qd_base,
+                    wp.vec4i(*enabled),
+                    env_ids,
+                    env_mask,
+                    values,
+                    self.response,
+                    *self._drive_outputs(),
+                ],
+                device=self.device,
+            )
+        self.notify_solver()
+
+    def randomize_drive(self, lo, hi, enabled, mode_abs: bool, seed: int, env_ids, env_mask, row0, num_rows) -> None:
+        """Draw the enabled properties on the device (two launches: the draw, then the counter bump); capturable
+        unless the attached solver's notice is not."""
+        dim = (self.num_envs if env_ids is None else env_ids.shape[0]) * num_rows
+        if dim:
+            wp.launch(
+                KA._randomize_drive_kernel,
+                dim=dim,
+                inputs=[
+                    self.row_accel,
+                    self.row_qd_off,
+                    row0,
+                    num_rows,
+                    self.env_qd_base,
+                    int(seed),
+                    int(mode_abs),
+                    wp.vec4i(*enabled),
+                    wp.vec4(*lo),
+                    wp.vec4(*hi),
+                    env_ids,
+                    env_mask,
+                    self.nominal,
+                    self.rng_counter,
+                    self.response,
+                    *self._drive_outputs(),
+                ],
+                device=self.device,
+            )
+            wp.launch(KA._bump_counter_kernel, dim=1, inputs=[self.rng_counter], device=self.device)
+        self.notify_solver()
+
+    def notify_solver(self) -> None:
+        """Tell the attached solver that per-DOF drive properties changed (MuJoCo, Steel and Kamino copy them into
+        their own model; XPBD, Featherstone and SemiImplicit read Newton's arrays at every step)."""
+        if self.solver is not None:
+            self.solver.notify_model_changed(newton.ModelFlags.JOINT_DOF_FORCE_PROPERTIES)
 
     # -- model drive properties -----------------------------------------------------------------------------------
 

@@ -328,6 +328,22 @@ def _compose(prev: wp.transform, act: vecD, pose: int, use_delta: int, frame_bit
     return wp.transform(p, q)
 
 
+@wp.func
+def _store_target(
+    target_qpos_out: wp.array2d[float],
+    env: int,
+    r: int,
+    t: float,
+    qlo: wp.array[float],
+    qhi: wp.array[float],
+    clip: int,
+):
+    """Store a joint target; with ``clip_targets`` clamped to the joint's limits, as the joint rows are."""
+    if clip != 0:
+        t = wp.clamp(t, qlo[r], qhi[r])
+    target_qpos_out[env, r] = t
+
+
 # ---------------------------------------------------------------------------------------------------------------------
 # Kernels.
 
@@ -353,6 +369,9 @@ def _make_set_action_kernel(clik: bool):
         # Rows of the EE joints (columns of the Jacobian) and action columns:
         row_q_off: wp.array[wp.int32],
         env_q_base: wp.array[wp.int32],
+        row_qlo: wp.array[float],  # the mode's rows (index row0 + c): joint limits [rad or m] for clip_targets
+        row_qhi: wp.array[float],
+        clip_targets: int,
         row0: int,
         num_dof: int,
         col0: int,
@@ -459,7 +478,7 @@ def _make_set_action_kernel(clik: bool):
             dq = _dls(jac, dx, num_dof, lm_lambda, solver)
             for c in range(MAX_DOF):
                 if c < num_dof:
-                    target_qpos_out[env, row0 + c] = q0[c] + alpha * dq[c]
+                    _store_target(target_qpos_out, env, row0 + c, q0[c] + alpha * dq[c], row_qlo, row_qhi, clip_targets)
             ik_success_out[env] = 1
 
         if wp.static(clik):
@@ -508,10 +527,10 @@ def _make_set_action_kernel(clik: bool):
             ik_success_out[env] = success
             for c in range(MAX_DOF):
                 if c < num_dof:
+                    t = q0[c]
                     if success != 0:
-                        target_qpos_out[env, row0 + c] = q[c]
-                    else:
-                        target_qpos_out[env, row0 + c] = q0[c]
+                        t = q[c]
+                    _store_target(target_qpos_out, env, row0 + c, t, row_qlo, row_qhi, clip_targets)
 
     return kernel
 

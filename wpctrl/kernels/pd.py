@@ -14,6 +14,15 @@ Row parameters are shared by all envs; gains are ``(1 | num_envs, rows)`` arrays
 ``env if shape[0] > 1 else 0``. A row's coordinate is ``q_base[env] + q_off[row]`` in ``joint_q``/``joint_target_q``
 and its DOF ``qd_base[env] + qd_off[row]`` in ``joint_qd``/``joint_target_qd``/``joint_f``.
 
+Actuation options (issue 10), all off by default and then costing one branch on a null array:
+
+- per-env drive properties: ``kp``/``kd``/``force_limit`` are ``(num_envs, rows)`` in wpctrl (the batch rule still
+  accepts ``(1, rows)``);
+- command delay: a ring buffer ``delay_q``/``delay_qd`` of shape ``(max_delay + 1, num_envs, rows)`` written by the
+  substep kernel, read ``delay[env]`` substeps back; each row keeps its own ring head (no cross-thread race);
+- effort readout: ``computed_effort``/``applied_effort``/``saturation_count`` written by the substep kernel;
+- target clamping: ``clip_targets`` clamps every stored position target to the joint limits in ``set_action``.
+
 Parameter naming follows MuJoCo Warp: row and env tables first (no suffix), then ``_in`` inputs, then ``_out``
 outputs (an ``_out`` array that a kernel also reads is marked "in/out").
 """
@@ -65,168 +74,240 @@ def _interp(start: float, target: float, k: int, num_substeps: int):
     return start + step_size * float(wp.min(k, num_substeps))
 
 
-@wp.kernel
-def _set_action_kernel(
-    # Rows:
-    row_kind: wp.array[wp.int32],
-    row_flags: wp.array[wp.int32],
-    row_act_col: wp.array[wp.int32],
-    row_vel_col: wp.array[wp.int32],
-    row_lo: wp.array[float],
-    row_hi: wp.array[float],
-    row_vlo: wp.array[float],
-    row_vhi: wp.array[float],
-    row_mimic_src: wp.array[wp.int32],
-    row_follow_start: wp.array[wp.int32],
-    row_follow: wp.array[wp.int32],
-    row_mimic_mul: wp.array[float],
-    row_mimic_off: wp.array[float],
-    row_q_off: wp.array[wp.int32],
-    lead_row: int,
-    # Envs:
-    env_q_base: wp.array[wp.int32],
-    # In:
-    action_in: wp.array2d[float],
-    joint_q_in: wp.array[float],
-    # Out:
-    processed_action_out: wp.array2d[float],
-    start_qpos_out: wp.array2d[float],
-    target_qpos_out: wp.array2d[float],  # in/out: the previous (virtual) target
-    target_qvel_out: wp.array2d[float],
-    step_out: wp.array[wp.int32],
-    row_step_out: wp.array2d[wp.int32],
-    bad_action_count_out: wp.array[wp.int32],  # in/out
-):
-    tid = wp.tid()
-    num_rows = row_kind.shape[0]
-    env = tid // num_rows
-    r = tid - env * num_rows
-    if row_mimic_src[r] >= 0:
-        return  # a follower: written by its source row's thread
+def _make_set_action_kernel(CLIP: bool):
+    """The set_action kernel, specialised at compile time on ``clip_targets`` (the default runs no clamp)."""
 
-    # A non-finite action leaves the whole env untouched (targets hold) and is counted once.
-    for c in range(action_in.shape[1]):
-        if not wp.isfinite(action_in[env, c]):
-            if r == lead_row:
-                bad_action_count_out[env] = bad_action_count_out[env] + 1
-            return
+    def _set_action_kernel(
+        # Rows:
+        row_kind: wp.array[wp.int32],
+        row_flags: wp.array[wp.int32],
+        row_act_col: wp.array[wp.int32],
+        row_vel_col: wp.array[wp.int32],
+        row_lo: wp.array[float],
+        row_hi: wp.array[float],
+        row_vlo: wp.array[float],
+        row_vhi: wp.array[float],
+        row_mimic_src: wp.array[wp.int32],
+        row_follow_start: wp.array[wp.int32],
+        row_follow: wp.array[wp.int32],
+        row_mimic_mul: wp.array[float],
+        row_mimic_off: wp.array[float],
+        row_q_off: wp.array[wp.int32],
+        row_qlo: wp.array[float],
+        row_qhi: wp.array[float],
+        lead_row: int,
+        clip_targets: int,
+        # Envs:
+        env_q_base: wp.array[wp.int32],
+        # In:
+        action_in: wp.array2d[float],
+        joint_q_in: wp.array[float],
+        # Out:
+        processed_action_out: wp.array2d[float],
+        start_qpos_out: wp.array2d[float],
+        target_qpos_out: wp.array2d[float],  # in/out: the previous (virtual) target
+        target_qvel_out: wp.array2d[float],
+        step_out: wp.array[wp.int32],
+        row_step_out: wp.array2d[wp.int32],
+        bad_action_count_out: wp.array[wp.int32],  # in/out
+    ):
+        tid = wp.tid()
+        num_rows = row_kind.shape[0]
+        env = tid // num_rows
+        r = tid - env * num_rows
+        if row_mimic_src[r] >= 0:
+            return  # a follower: written by its source row's thread
 
-    if r == lead_row:
-        step_out[env] = 0
-    row_step_out[env, r] = 0
-    q_base = env_q_base[env]
-    kind = row_kind[r]
-    flags = row_flags[r]
-    norm = flags & FLAG_NORMALIZE
-    col = row_act_col[r]
-    if kind == ROW_POS:
-        q = joint_q_in[q_base + row_q_off[r]]
-        start_qpos_out[env, r] = q
-        t = target_qpos_out[env, r]  # a joint outside the mimic map keeps its target
-        if col >= 0:
-            a = _scale(action_in[env, col], row_lo[r], row_hi[r], norm)
-            processed_action_out[env, col] = a
-            t = a
-            if flags & FLAG_DELTA:
-                if flags & FLAG_TARGET:
-                    t = target_qpos_out[env, r] + a
-                else:
-                    t = q + a
-            target_qpos_out[env, r] = t
-        vcol = row_vel_col[r]
-        if vcol >= 0:
-            v = _scale(action_in[env, vcol], row_vlo[r], row_vhi[r], norm)
-            processed_action_out[env, vcol] = v
-            target_qvel_out[env, r] = v
-        # Followers: target[m] = target[source] * multiplier + offset.
-        for i in range(row_follow_start[r], row_follow_start[r + 1]):
-            m = row_follow[i]
-            start_qpos_out[env, m] = joint_q_in[q_base + row_q_off[m]]
-            target_qpos_out[env, m] = t * row_mimic_mul[m] + row_mimic_off[m]
-            row_step_out[env, m] = 0
-    elif kind == ROW_VEL:
-        v = _scale(action_in[env, col], row_lo[r], row_hi[r], norm)
-        processed_action_out[env, col] = v
-        target_qvel_out[env, r] = v
+        # A non-finite action leaves the whole env untouched (targets hold) and is counted once.
+        for c in range(action_in.shape[1]):
+            if not wp.isfinite(action_in[env, c]):
+                if r == lead_row:
+                    bad_action_count_out[env] = bad_action_count_out[env] + 1
+                return
 
-
-@wp.kernel
-def _substep_kernel(
-    # Rows:
-    row_kind: wp.array[wp.int32],
-    row_flags: wp.array[wp.int32],
-    row_q_off: wp.array[wp.int32],
-    row_qd_off: wp.array[wp.int32],
-    # Envs:
-    env_q_base: wp.array[wp.int32],
-    env_qd_base: wp.array[wp.int32],
-    # Gains (1 | num_envs, rows):
-    kp: wp.array2d[float],
-    kd: wp.array2d[float],
-    force_limit: wp.array2d[float],
-    row_accel: wp.array[wp.int32],
-    num_substeps: int,
-    explicit_pd: int,
-    dt: float,
-    # In:
-    joint_q_in: wp.array[float],
-    joint_qd_in: wp.array[float],
-    response_in: wp.array2d[float],
-    start_qpos_in: wp.array2d[float],
-    target_qpos_in: wp.array2d[float],
-    target_qvel_in: wp.array2d[float],
-    # Out:
-    step_out: wp.array[wp.int32],  # in/out
-    row_step_out: wp.array2d[wp.int32],  # in/out
-    joint_target_q_out: wp.array[float],
-    joint_target_qd_out: wp.array[float],
-    joint_f_out: wp.array[float],
-):
-    tid = wp.tid()
-    num_rows = row_kind.shape[0]
-    env = tid // num_rows
-    r = tid - env * num_rows
-    if r == 0:
-        step_out[env] = step_out[env] + 1
-    kind = row_kind[r]
-    flags = row_flags[r]
-    qi = env_q_base[env] + row_q_off[r]
-    di = env_qd_base[env] + row_qd_off[r]
-    tq = float(0.0)
-    tqd = float(0.0)
-    if kind != ROW_POS or (flags & FLAG_VEL_TARGET) != 0:
-        tqd = target_qvel_in[env, r]
-        joint_target_qd_out[di] = tqd
-    if kind == ROW_POS:
-        tq = target_qpos_in[env, r]
-        if flags & FLAG_INTERPOLATE:
-            k = row_step_out[env, r] + 1
-            row_step_out[env, r] = k
-            tq = _interp(start_qpos_in[env, r], tq, k, num_substeps)
-        joint_target_q_out[qi] = tq
-    if explicit_pd != 0:
-        qd = joint_qd_in[di]
-        kpe = float(0.0)
-        e = float(0.0)
+        if r == lead_row:
+            step_out[env] = 0
+        row_step_out[env, r] = 0
+        q_base = env_q_base[env]
+        kind = row_kind[r]
+        flags = row_flags[r]
+        norm = flags & FLAG_NORMALIZE
+        col = row_act_col[r]
         if kind == ROW_POS:
-            kpe = kp[_bidx(kp.shape[0], env), r]
-            e = tq - joint_q_in[qi]
-        kde = kd[_bidx(kd.shape[0], env), r]
-        resp = float(1.0)
-        if explicit_pd == EXPLICIT_STABLE or row_accel[r] != 0:
-            resp = response_in[_bidx(response_in.shape[0], env), r]
-        if row_accel[r] != 0:  # acceleration drive: gains times the effective inertia 1/r
-            kpe = kpe / resp
-            kde = kde / resp
-        u = float(0.0)
-        if explicit_pd == EXPLICIT_STABLE:
-            # PD on the end-of-step state of a semi-implicit Euler step, solved with the joint's response r:
-            # u = Kp (q* - q - dt qd) + Kd (qd* - qd) over 1 + r dt (Kd + dt Kp)
-            u = (kpe * (e - dt * qd) + kde * (tqd - qd)) / (1.0 + resp * dt * (kde + dt * kpe))
-        else:
-            u = kpe * e + kde * (tqd - qd)
-        lim = force_limit[_bidx(force_limit.shape[0], env), r]
-        joint_f_out[di] = wp.clamp(u, -lim, lim)
+            q = joint_q_in[q_base + row_q_off[r]]
+            start_qpos_out[env, r] = q
+            t = target_qpos_out[env, r]  # a joint outside the mimic map keeps its target
+            if col >= 0:
+                a = _scale(action_in[env, col], row_lo[r], row_hi[r], norm)
+                processed_action_out[env, col] = a
+                t = a
+                if flags & FLAG_DELTA:
+                    if flags & FLAG_TARGET:
+                        t = target_qpos_out[env, r] + a
+                    else:
+                        t = q + a
+                if wp.static(CLIP):  # the joint's limits [rad or m]: a virtual target cannot run past them
+                    t = wp.clamp(t, row_qlo[r], row_qhi[r])
+                target_qpos_out[env, r] = t
+            vcol = row_vel_col[r]
+            if vcol >= 0:
+                v = _scale(action_in[env, vcol], row_vlo[r], row_vhi[r], norm)
+                processed_action_out[env, vcol] = v
+                target_qvel_out[env, r] = v
+            # Followers: target[m] = target[source] * multiplier + offset.
+            for i in range(row_follow_start[r], row_follow_start[r + 1]):
+                m = row_follow[i]
+                start_qpos_out[env, m] = joint_q_in[q_base + row_q_off[m]]
+                tm = t * row_mimic_mul[m] + row_mimic_off[m]
+                if wp.static(CLIP):
+                    tm = wp.clamp(tm, row_qlo[m], row_qhi[m])
+                target_qpos_out[env, m] = tm
+                row_step_out[env, m] = 0
+        elif kind == ROW_VEL:
+            v = _scale(action_in[env, col], row_lo[r], row_hi[r], norm)
+            processed_action_out[env, col] = v
+            target_qvel_out[env, r] = v
+
+    return wp.kernel(_set_action_kernel, name=f"_set_action_kernel_clip{int(CLIP)}")
+
+
+_SET_ACTION_KERNELS = {c: _make_set_action_kernel(c) for c in (False, True)}
+
+
+def set_action_kernel(clip_targets: bool):
+    """The set_action kernel variant (same parameters in both; ``clip_targets`` is also passed as an int)."""
+    return _SET_ACTION_KERNELS[bool(clip_targets)]
+
+
+_set_action_kernel = _SET_ACTION_KERNELS[False]
+
+
+def _make_substep_kernel(DELAY: bool, EFFORT: bool):
+    """The substep kernel, specialised at compile time on whether a delay and the effort readout are on, so that the
+    default build runs none of their branches (on the CPU backend a null-array check per thread cost ~30 %)."""
+
+    def _substep_kernel(
+        # Rows:
+        row_kind: wp.array[wp.int32],
+        row_flags: wp.array[wp.int32],
+        row_q_off: wp.array[wp.int32],
+        row_qd_off: wp.array[wp.int32],
+        # Envs:
+        env_q_base: wp.array[wp.int32],
+        env_qd_base: wp.array[wp.int32],
+        # Gains (1 | num_envs, rows):
+        kp: wp.array2d[float],
+        kd: wp.array2d[float],
+        force_limit: wp.array2d[float],
+        row_accel: wp.array[wp.int32],
+        num_substeps: int,
+        explicit_pd: int,
+        dt: float,
+        max_delay: int,
+        # In:
+        joint_q_in: wp.array[float],
+        joint_qd_in: wp.array[float],
+        response_in: wp.array2d[float],
+        start_qpos_in: wp.array2d[float],
+        target_qpos_in: wp.array2d[float],
+        target_qvel_in: wp.array2d[float],
+        delay_in: wp.array[wp.int32],  # optional (num_envs,) [substeps]; None: no delay
+        # Out:
+        step_out: wp.array[wp.int32],  # in/out
+        row_step_out: wp.array2d[wp.int32],  # in/out
+        delay_head_out: wp.array2d[wp.int32],  # in/out, with delay_in: each row's ring-buffer slot
+        delay_q_out: wp.array3d[float],  # in/out, with delay_in: (max_delay + 1, num_envs, rows) position targets
+        delay_qd_out: wp.array3d[float],  # in/out, optional: velocity targets (only when a row has one)
+        joint_target_q_out: wp.array[float],
+        joint_target_qd_out: wp.array[float],
+        joint_f_out: wp.array[float],
+        computed_effort_out: wp.array2d[float],  # optional [N·m or N]: PD law before the clamp
+        applied_effort_out: wp.array2d[float],  # optional [N·m or N]: after the clamp
+        saturation_count_out: wp.array2d[wp.int32],  # optional, in/out: substeps with |computed| > force limit
+    ):
+        tid = wp.tid()
+        num_rows = row_kind.shape[0]
+        env = tid // num_rows
+        r = tid - env * num_rows
+        if r == 0:
+            step_out[env] = step_out[env] + 1
+        kind = row_kind[r]
+        flags = row_flags[r]
+        qi = env_q_base[env] + row_q_off[r]
+        di = env_qd_base[env] + row_qd_off[r]
+        vel_target = kind != ROW_POS or (flags & FLAG_VEL_TARGET) != 0
+        tq = float(0.0)
+        tqd = float(0.0)
+        if vel_target:
+            tqd = target_qvel_in[env, r]
+        if kind == ROW_POS:
+            tq = target_qpos_in[env, r]
+            if flags & FLAG_INTERPOLATE:
+                k = row_step_out[env, r] + 1
+                row_step_out[env, r] = k
+                tq = _interp(start_qpos_in[env, r], tq, k, num_substeps)
+        if wp.static(DELAY):
+            # Push this substep's command, pop the one from delay[env] substeps ago (a reset filled the ring).
+            h = delay_head_out[env, r] + 1
+            if h > max_delay:
+                h = 0
+            delay_head_out[env, r] = h
+            delay_q_out[h, env, r] = tq
+            if delay_qd_out:
+                delay_qd_out[h, env, r] = tqd
+            s = h - wp.clamp(delay_in[env], 0, max_delay)
+            if s < 0:
+                s = s + max_delay + 1
+            tq = delay_q_out[s, env, r]
+            if delay_qd_out:
+                tqd = delay_qd_out[s, env, r]
+        if vel_target:
+            joint_target_qd_out[di] = tqd
+        if kind == ROW_POS:
+            joint_target_q_out[qi] = tq
+        if explicit_pd != 0 or wp.static(EFFORT):
+            qd = joint_qd_in[di]
+            kpe = float(0.0)
+            e = float(0.0)
+            if kind == ROW_POS:
+                kpe = kp[_bidx(kp.shape[0], env), r]
+                e = tq - joint_q_in[qi]
+            kde = kd[_bidx(kd.shape[0], env), r]
+            resp = float(1.0)
+            if explicit_pd == EXPLICIT_STABLE or row_accel[r] != 0:
+                resp = response_in[_bidx(response_in.shape[0], env), r]
+            if row_accel[r] != 0:  # acceleration drive: gains times the effective inertia 1/r
+                kpe = kpe / resp
+                kde = kde / resp
+            u = float(0.0)
+            if explicit_pd == EXPLICIT_STABLE:
+                # PD on the end-of-step state of a semi-implicit Euler step, solved with the joint's response r:
+                # u = Kp (q* - q - dt qd) + Kd (qd* - qd) over 1 + r dt (Kd + dt Kp)
+                u = (kpe * (e - dt * qd) + kde * (tqd - qd)) / (1.0 + resp * dt * (kde + dt * kpe))
+            else:
+                u = kpe * e + kde * (tqd - qd)
+            lim = force_limit[_bidx(force_limit.shape[0], env), r]
+            f = wp.clamp(u, -lim, lim)
+            if explicit_pd != 0:
+                joint_f_out[di] = f
+            if wp.static(EFFORT):
+                computed_effort_out[env, r] = u
+                applied_effort_out[env, r] = f
+                if wp.abs(u) > lim:
+                    saturation_count_out[env, r] = saturation_count_out[env, r] + 1
+
+    return wp.kernel(_substep_kernel, name=f"_substep_kernel_delay{int(DELAY)}_effort{int(EFFORT)}")
+
+
+_SUBSTEP_KERNELS = {(d, e): _make_substep_kernel(d, e) for d in (False, True) for e in (False, True)}
+
+
+def substep_kernel(delay: bool, effort: bool):
+    """The substep kernel variant for these options (same parameters in all four)."""
+    return _SUBSTEP_KERNELS[(bool(delay), bool(effort))]
+
+
+_substep_kernel = _SUBSTEP_KERNELS[(False, False)]
 
 
 @wp.kernel
@@ -240,11 +321,15 @@ def _reset_kernel(
     env_q_base: wp.array[wp.int32],
     env_qd_base: wp.array[wp.int32],
     first: int,
+    delay_min: int,
+    delay_max: int,
+    seed: int,
     # In:
     env_ids_in: wp.array[wp.int32],  # optional: thread block i resets env env_ids_in[i]
     env_mask_in: wp.array[wp.bool],  # optional: reset only where True
     joint_q_in: wp.array[float],
     joint_qd_in: wp.array[float],
+    rng_counter_in: wp.array[wp.int32],  # (1,) draws so far; bumped by a separate launch after this one
     # Out:
     start_qpos_out: wp.array2d[float],
     target_qpos_out: wp.array2d[float],
@@ -254,6 +339,13 @@ def _reset_kernel(
     joint_target_q_out: wp.array[float],  # optional (no Control given)
     joint_target_qd_out: wp.array[float],  # optional
     joint_f_out: wp.array[float],  # optional (explicit actuation only)
+    delay_out: wp.array[wp.int32],  # optional (delay on): (num_envs,) drawn in [delay_min, delay_max] [substeps]
+    delay_head_out: wp.array2d[wp.int32],  # optional (delay on)
+    delay_q_out: wp.array3d[float],  # optional (delay on): the env's history, filled with the reset pose
+    delay_qd_out: wp.array3d[float],  # optional
+    computed_effort_out: wp.array2d[float],  # optional (effort tracking): zeroed
+    applied_effort_out: wp.array2d[float],  # optional: zeroed
+    saturation_count_out: wp.array2d[wp.int32],  # optional: zeroed
 ):
     tid = wp.tid()
     num_rows = row_kind.shape[0]
@@ -286,6 +378,23 @@ def _reset_kernel(
         joint_target_qd_out[di] = v
     if joint_f_out:
         joint_f_out[di] = 0.0
+    if delay_q_out:
+        if r == 0:  # one draw per env, by its row-0 thread (no other thread reads delay_out here)
+            d = delay_min
+            if delay_max > delay_min:
+                st = wp.rand_init(seed, rng_counter_in[0])
+                st = wp.rand_init(wp.randi(st), env)
+                d = wp.randi(st, delay_min, delay_max + 1)
+            delay_out[env] = d
+        delay_head_out[env, r] = 0
+        for i in range(delay_q_out.shape[0]):
+            delay_q_out[i, env, r] = q
+            if delay_qd_out:
+                delay_qd_out[i, env, r] = v
+    if computed_effort_out:
+        computed_effort_out[env, r] = 0.0
+        applied_effort_out[env, r] = 0.0
+        saturation_count_out[env, r] = 0
 
 
 @wp.kernel

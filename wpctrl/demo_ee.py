@@ -108,7 +108,12 @@ class EEPolicy:
         self.hist_t.append(t)
         self.hist_des.append(des[0, :3])
         self.hist_meas.append(meas[0, :3])
-        self.hist_tgt.append(self.arm.target_pose.numpy()[0, :3].copy())
+        cfg = self.arm.config
+        if cfg.use_target or not cfg.use_delta:  # a composed target pose
+            tgt = self.arm.target_pose.numpy()[0, :3].copy()
+        else:  # one DLS step towards the measured pose plus the increment (root_translation)
+            tgt = self.arm.ee_pose.numpy()[0, :3] + self.arm.processed_action.numpy()[0, :3]
+        self.hist_tgt.append(tgt)
 
     def summary(self) -> dict:
         return {
@@ -128,8 +133,7 @@ class EEPolicy:
         fig, axes = plt.subplots(1, 3, figsize=(13, 3.6), constrained_layout=True)
         for k, ax in enumerate(axes):
             ax.plot(t, des[:, k], "k--", lw=1, label="desired (policy)")
-            if self.arm.config.use_target or not self.arm.config.use_delta:
-                ax.plot(t, np.array(self.hist_tgt)[:, k], color="tab:orange", lw=1, label="target pose (wpctrl)")
+            ax.plot(t, np.array(self.hist_tgt)[:, k], color="tab:orange", lw=1, label="EE target (wpctrl)")
             ax.plot(t, meas[:, k], color="tab:blue", lw=1.5, label="measured")
             ax.set_title(f"TCP {'xyz'[k]} [m]", fontsize=9)
             ax.set_xlabel("t [s]", fontsize=8)

@@ -575,3 +575,44 @@ def test_clip_targets_clamps_ee_joint_targets():
     lo, hi = LIMITS[:, 0].astype(np.float32), LIMITS[:, 1].astype(np.float32)
     assert ((out["none"] < lo) | (out["none"] > hi)).any()
     np.testing.assert_array_equal(out["joint_limits"], np.clip(out["none"], lo, hi))
+
+
+def test_unreachable_target_holds_the_measured_position():
+    n = 2
+    cfg = pose_cfg(
+        pos_lower=None, pos_upper=None, rot_lower=None, rot_upper=None, use_delta=False, normalize_action=False,
+        delta_solver_config=dict(solver_iterations=100, tolerance=1e-4),
+    )  # fmt: skip
+    rig = Rig(cfg, n)
+    q = random_q(np.random.default_rng(12), n)
+    rig.put(q)
+    rig.ctrl.reset(rig.state)
+    action = np.array([[2.0, 0.0, 0.5, np.pi, 0.0, 0.0], [0.5, 0.0, 0.3, np.pi, 0.0, 0.0]], np.float32)  # 2 m: out
+    rig.ctrl.set_action(action, rig.state)
+    assert rig.arm.ik_success.numpy().tolist() == [0, 1]
+    np.testing.assert_array_equal(rig.arm.target_qpos.numpy()[0], q[0])
+    np.testing.assert_allclose(rig.arm.target_pose.numpy()[0, :3], [2.0, 0.0, 0.5], atol=1e-6)  # kept, unreached
+    reached, _ = rig.fk(rig.arm.target_qpos.numpy())
+    np.testing.assert_allclose(reached[1, :3], [0.5, 0.0, 0.3], atol=2e-4)
+
+
+def test_pseudo_inverse_on_a_short_chain_is_least_squares():
+    """4 joints below panda_link3 (fewer than 6): dq = (JᵀJ)⁻¹Jᵀ dx, the least-squares step."""
+    cfg = pose_cfg(root_link_name="panda_link3", delta_solver_config=dict(type="pseudo_inverse"))
+    cfg.joint_names = list(ARM[3:])
+    rig = Rig(cfg, 2)
+    q = random_q(np.random.default_rng(13), 2)
+    from wpctrl.binding import bind_joints
+
+    full = rig.state.joint_q.numpy()
+    full[bind_joints(rig.model, ARM).coord_index] = q
+    rig.state.joint_q.assign(full)
+    action = np.array([[0.5, -0.3, 0.2, 0.4, 0.1, -0.6], [-1.0, 0.2, 0.9, 0.0, 0.7, 0.3]], np.float32)
+    rig.ctrl.set_action(action, rig.state)
+    _, jac = rig.arm.fk_jacobian(rig.state)
+    jac = jac.numpy().astype(np.float64)
+    dx = rig.ctrl.processed_action.numpy().astype(np.float64)
+    dq = rig.arm.target_qpos.numpy() - q[:, 3:]
+    for e in range(2):
+        ref = np.linalg.lstsq(jac[e], dx[e], rcond=None)[0]
+        np.testing.assert_allclose(dq[e], ref, atol=2e-4)

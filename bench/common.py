@@ -14,7 +14,6 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from types import SimpleNamespace
 
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
@@ -75,10 +74,12 @@ def build_panda_model(num_envs: int, device, *, gravity: bool = True, visual_sha
 
     from wpctrl.robots import panda
 
-    g = None if gravity else (0.0, 0.0, 0.0)
-    builder = newton.ModelBuilder() if g is None else newton.ModelBuilder(gravity=g)
+    builder = newton.ModelBuilder()
     builder.replicate(panda(visual_shapes=visual_shapes), num_envs)
-    return builder.finalize(device=device)
+    model = builder.finalize(device=device)
+    if not gravity:  # ModelBuilder(gravity=...) does not reach replicated worlds: they keep panda()'s gravity
+        model.set_gravity((0.0, 0.0, 0.0))
+    return model
 
 
 class _WideModel:
@@ -105,11 +106,15 @@ class ControllerSetup:
     def new_control(self):
         """Another Control with the same initial contents (for the torch baseline, so the two never alias)."""
         c = self.control
-        return SimpleNamespace(
-            joint_target_q=wp.clone(c.joint_target_q),
-            joint_target_qd=wp.clone(c.joint_target_qd),
-            joint_f=wp.clone(c.joint_f),
-        )
+        return _control(wp.clone(c.joint_target_q), wp.clone(c.joint_target_qd), wp.clone(c.joint_f))
+
+
+def _control(joint_target_q, joint_target_qd, joint_f):
+    import newton
+
+    c = newton.Control()
+    c.joint_target_q, c.joint_target_qd, c.joint_f = joint_target_q, joint_target_qd, joint_f
+    return c
 
 
 def real_setup(mode: dict, model, *, actuation: str, control_freq: int, sim_freq: int, **options) -> ControllerSetup:
@@ -193,11 +198,15 @@ def synthetic_setup(
     def tile(arr, per_world):
         return wp.array(np.tile(arr.numpy()[:per_world], num_envs), dtype=wp.float32, device=dev)
 
-    state = SimpleNamespace(joint_q=tile(small_model.joint_q, cs), joint_qd=tile(small_model.joint_qd, ds))
-    control = SimpleNamespace(
-        joint_target_q=tile(small_model.joint_target_q, cs),
-        joint_target_qd=tile(small_model.joint_target_qd, ds),
-        joint_f=wp.zeros(num_envs * ds, dtype=wp.float32, device=dev),
+    import newton
+
+    state = newton.State()  # wpctrl accepts newton.State / newton.Control only: flat arrays in real ones
+    state.joint_q = tile(small_model.joint_q, cs)
+    state.joint_qd = tile(small_model.joint_qd, ds)
+    control = _control(
+        tile(small_model.joint_target_q, cs),
+        tile(small_model.joint_target_qd, ds),
+        wp.zeros(num_envs * ds, dtype=wp.float32, device=dev),
     )
     layout = tile_layout(layout_from_model(small_model, list(small.joint_names)), num_envs)
     return ControllerSetup(num_envs, "synthetic", ctrl, state, control, layout, time.perf_counter() - t0)

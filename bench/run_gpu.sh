@@ -5,7 +5,8 @@
 #   bash bench/run_gpu.sh        # results in $OUT if set (the device machine sets it), else bench/results
 #
 # Writes 8 files (the device machine returns at most 8): controller_step_cuda.md, profile_overhead_cuda.md,
-# rollout_cuda.md, inertia_update_cuda.md, actuation_cost_cuda.md, ee_step_cuda.md, run_gpu.log (with the CUDA tests' output), and json.tar holding the JSON files
+# rollout_cuda.md, inertia_update_cuda.md, actuation_cost_cuda.md, fidelity_cuda.md, run_gpu.log (with the CUDA tests' output), and json.tar
+# holding the JSON files
 # (tar -xf json.tar -C bench/results). Each stage has a time limit so that a slow stage cannot starve the others.
 # Sizes: CTRL_ENVS, ROLLOUT_ENVS, ROLLOUT_SOLVERS, REPEATS; DEVICE (default cuda:0; "cpu" only to test
 # the script: use the CPU commands of bench/README.md for CPU numbers).
@@ -41,7 +42,7 @@ stage() {  # stage NAME LIMIT_S CMD...
 }
 
 stage cuda_tests 240 $PY -m pytest -q -p no:cacheprovider tests/test_cuda.py tests/test_semantics.py \
-  "tests/test_actuation.py::test_cuda_captured_randomisation_reaches_mujoco" tests/test_ee_cuda.py
+  "tests/test_actuation.py::test_cuda_captured_randomisation_reaches_mujoco"
 stage controller_step 200 $PY bench/controller_step.py --device "$DEVICE" --envs "$CTRL_ENVS" --repeats "$REPEATS" \
   --out "$WORK"
 stage profile_overhead 60 $PY bench/profile_overhead.py --device "$DEVICE" --envs 1,4k --repeats "$REPEATS" \
@@ -50,10 +51,9 @@ stage rollout 200 $PY bench/rollout.py --device "$DEVICE" --envs "$ROLLOUT_ENVS"
   --repeats 3 --out "$WORK"
 stage actuation_cost 120 $PY bench/actuation_cost.py --device "$DEVICE" --envs "${ACT_ENVS:-1,4k,64k,1M}" \
   --repeats "$REPEATS" --eager --out "$WORK"
-stage inertia_update 90 $PY bench/inertia_update.py --device "$DEVICE" --envs 1,4k,64k --repeats "$REPEATS" \
+stage inertia_update 150 $PY bench/inertia_update.py --device "$DEVICE" --envs 1,4k,64k --repeats "$REPEATS" \
   --out "$WORK"
-stage ee_step 300 $PY bench/ee_step.py --device "$DEVICE" --envs "${EE_ENVS:-1,64,1k,4k,16k,64k}" \
-  --repeats "$REPEATS" --physics-envs 4096 --out "$WORK"
+stage fidelity 150 $PY bench/fidelity.py --device "$DEVICE" --out "$WORK"
 cp "$WORK"/*.md "$OUT"/
 (cd "$WORK" && tar -cf "$OUT/json.tar" ./*.json)
 echo "=== done in $(( $(date +%s) - t0 ))s" | tee -a "$LOG"

@@ -1,46 +1,177 @@
-"""The demo's entry point with tiny settings: a real MuJoCo-Warp rollout of Pandas through wpctrl."""
+"""The demo's entry point with tiny settings: real MuJoCo-Warp / Featherstone rollouts of Pandas through wpctrl.
+
+Every summary.json is parsed strictly (NaN / Infinity tokens raise). Every solver x actuation (x explicit PD law)
+combination the CLI offers either tracks or is refused up front with exit 2 and a one-line reason.
+"""
 
 from __future__ import annotations
 
 import json
+import math
 
 import pytest
 
+from wpctrl import demo
+from wpctrl.__main__ import main as cli_main
 from wpctrl.demo import main
+
+TINY = ["--envs", "2", "--seconds", "0.75", "--no-progress"]
+
+
+def _no_constant(name):
+    raise ValueError(f"summary.json holds a bare {name} token (not strict JSON)")
+
+
+def load_summary(out) -> dict:
+    return json.loads((out / "summary.json").read_text(), parse_constant=_no_constant)
 
 
 def test_demo_tracks_and_writes_files(tmp_path, capsys):
     out = tmp_path / "demo"
     rc = main(["--envs", "4", "--seconds", "1.5", "--out", str(out), "--no-progress", "--seed", "1"])
     assert rc == 0
-    s = json.loads((out / "summary.json").read_text())
+    s = load_summary(out)
     assert (out / "tracking.png").stat().st_size > 10_000
-    assert s["all_finite"] and s["envs"] == 4 and s["control_steps"] == 30
+    assert s["all_finite"] and s["envs"] == 4 and s["control_steps"] == 30 and s["world_size"] == 1
+    assert s["nonfinite_envs"] == 0 and s["bad_actions"] == 0 and s["diverged_at_s"] is None
+    assert "per_rank" not in s  # a plain run's summary is a single process's
     # A working controller keeps the arm within a few centi-radians of the sinusoid; a broken one (no targets,
     # wrong sign, wrong joints) leaves errors of the trajectory's amplitude (0.1-0.3 rad) or more.
     assert s["tracking_rms"]["arm"] < 0.06
     assert s["tracking_rms"]["gripper"] < 0.015
+    assert s["tracking_rms"]["arm"] <= s["tracking_max"]["arm"] < 0.3
     assert s["env_steps_per_s"] > 0 and 0 < s["controller_share"] < 1
+    assert s["compile_seconds"] <= s["setup_seconds"]
     printed = capsys.readouterr().out
-    assert "env-steps/s" in printed and "arm tracking" in printed
+    lines = printed.splitlines()
+    # The compile notice comes first (before the model is built), then the time it took, then the table.
+    assert lines[0] == demo.COMPILE_NOTICE
+    assert lines[1].startswith("kernels ready in ")
+    for label in ("env-steps/s", "controller / control step", "solver / control step", "bad actions (NaN/Inf)"):
+        assert label in printed
+    assert "vs the policy's desired trajectory" in printed
+
+
+def _combinations():
+    for solver in demo.SOLVERS:
+        for actuation in demo.ACTUATIONS:
+            for pd in demo.explicit_pd_choices() if actuation == "explicit" else (None,):
+                yield solver, actuation, pd
+
+
+@pytest.mark.parametrize("solver, actuation, pd", list(_combinations()))
+def test_every_offered_combination_tracks_or_is_refused(solver, actuation, pd, tmp_path, capsys):
+    out = tmp_path / "demo"
+    argv = [*TINY, "--solver", solver, "--actuation", actuation, "--out", str(out)]
+    if pd is not None:
+        argv += ["--explicit-pd", pd]
+    why = demo.unsupported(solver, actuation, pd or "stable", demo.default_sim_freq(solver, actuation))
+    if why is not None:
+        with pytest.raises(SystemExit) as e:
+            main(argv)
+        assert e.value.code == 2
+        captured = capsys.readouterr()
+        err = captured.err.strip().splitlines()
+        assert err[-1] == f"wpctrl demo: error: {why}"  # one line, the reason, before anything was built
+        assert "use " in why and not out.exists() and demo.COMPILE_NOTICE not in captured.out
+        return
+    assert main(argv) == 0
+    s = load_summary(out)
+    assert s["all_finite"] and s["solver"] == solver and s["actuation"] == actuation
+    assert s["explicit_pd"] == (pd if actuation == "explicit" else None)
+    assert s["tracking_rms"]["arm"] < 0.06 and s["tracking_max"]["arm"] < 0.3
+
+
+def test_explicit_defaults_and_rates_that_do_not_track_are_refused(tmp_path, capsys):
+    out = tmp_path / "demo"
+    assert main([*TINY, "--actuation", "explicit", "--out", str(out)]) == 0
+    s = load_summary(out)
+    assert s["explicit_pd"] == "stable" and s["sim_freq"] == demo.STABLE_MIN_SIM_FREQ
+    for argv, fragment in [
+        (["--actuation", "explicit", "--sim-freq", "100"], "--explicit-pd stable at --sim-freq 100"),
+        (["--solver", "featherstone", "--actuation", "explicit", "--sim-freq", "500"], "--solver featherstone at"),
+        (["--actuation", "explicit", "--explicit-pd", "naive", "--sim-freq", "1000"], "--explicit-pd naive"),
+    ]:
+        with pytest.raises(SystemExit) as e:
+            main([*TINY, *argv, "--out", str(out)])
+        assert e.value.code == 2 and fragment in capsys.readouterr().err
+
+
+def test_divergence_is_reported_as_null_with_the_cause(tmp_path, capsys, monkeypatch):
+    """Force a refused combination through (Featherstone's explicit built-in drive at the Panda's gains): the run
+    stops at the first non-finite step, RMS and max are both null, and the message names the options that hold."""
+    monkeypatch.setattr(demo, "unsupported", lambda *a: None)
+    out = tmp_path / "demo"
+    rc = main([*TINY, "--solver", "featherstone", "--actuation", "implicit", "--sim-freq", "100", "--out", str(out)])
+    assert rc == 1
+    text = (out / "summary.json").read_text()
+    assert "NaN" not in text and "Infinity" not in text
+    s = load_summary(out)
+    assert not s["all_finite"] and s["nonfinite_envs"] >= 1
+    assert s["tracking_rms"] == {"arm": None, "gripper": None}
+    assert s["tracking_max"] == {"arm": None, "gripper": None}
+    assert s["diverged_at_s"] is not None and s["diverged_at_s"] < 0.75
+    captured = capsys.readouterr()
+    assert "RMS n/a rad, max n/a rad" in captured.out and "NO (" in captured.out
+    assert "went non-finite" in captured.err and demo.supported_combinations() in captured.err
+
+
+def test_strict_json_replaces_non_finite_numbers():
+    from wpctrl.demo_report import strict_json
+
+    text = strict_json({"a": math.nan, "b": [1.0, math.inf, -math.inf], "c": {"d": 2}})
+    assert json.loads(text, parse_constant=_no_constant) == {"a": None, "b": [1.0, None, None], "c": {"d": 2}}
+
+
+@pytest.mark.parametrize(
+    "module, label",
+    [("matplotlib", "matplotlib"), ("tqdm", "tqdm"), ("mujoco_warp", "MuJoCo-Warp"), ("mujoco", "MuJoCo")],
+)
+def test_missing_extra_is_one_line_before_any_simulation(module, label, tmp_path, capsys, monkeypatch):
+    # None in sys.modules makes `import module` raise ImportError: the path a base install (no [demo] extra) takes.
+    monkeypatch.setitem(__import__("sys").modules, module, None)
+    out = tmp_path / "demo"
+    rc = cli_main(["demo", "--envs", "2", "--seconds", "0.1", "--out", str(out)])  # the console script's entry
+    assert rc == 2
+    captured = capsys.readouterr()
+    err = captured.err.strip().splitlines()
+    assert len([line for line in err if "wpctrl demo" in line]) == 1 and "Traceback" not in captured.err
+    assert label in err[-1] and 'pip install -e ".[demo]"' in err[-1] and "wpctrl[demo]" in err[-1]
+    assert demo.COMPILE_NOTICE not in captured.out and not out.exists()
+
+
+def test_missing_progress_bar_is_fine_without_progress(tmp_path, monkeypatch):
+    monkeypatch.setitem(__import__("sys").modules, "tqdm", None)
+    ns = demo._parser().parse_args(["--no-progress"])
+    demo._check_extras(ns)  # no SystemExit: tqdm is only needed for the progress bar
 
 
 @pytest.mark.parametrize(
     "argv, message",
     [
-        (["--control-mode", "pd_ee_delta_twist"], "--control-mode"),
+        (["--control-mode", "pd_ee_delta_pose_nope"], "--control-mode"),
         (["--envs", "0"], "--envs"),
         (["--solver", "physx"], "--solver"),
         (["--sim-freq", "90"], "--sim-freq"),
         (["--device", "cuda:0"], "--device"),
+        (["--device", "gpu"], "--device"),
+        (["--explicit-pd", "stable"], "--explicit-pd stable: applies to --actuation explicit only"),
+        (["--actuation", "explicit", "--explicit-pd", "nope"], "--explicit-pd"),
     ],
 )
 def test_demo_bad_arguments_exit_2(argv, message, capsys):
     import warp as wp
 
-    if argv[0] == "--device" and wp.is_cuda_available():
+    if argv[0] == "--device" and argv[1] == "cuda:0" and wp.is_cuda_available():
         pytest.skip("a GPU is present")
     with pytest.raises(SystemExit) as e:
         main(argv)
     assert e.value.code == 2
     assert message in capsys.readouterr().err
+
+
+def test_default_output_is_git_ignored():
+    from conftest import ROOT
+
+    ignored = (ROOT / ".gitignore").read_text().split()
+    assert demo.DEFAULT_OUT + "/" in ignored

@@ -468,9 +468,10 @@ def test_demo_runs_an_ee_mode(tmp_path):
                "--no-progress"])  # fmt: skip
     assert rc == 0
     s = json.loads((out / "summary.json").read_text())
-    assert (out / "ee_tracking.png").stat().st_size > 10_000
+    assert (out / "tracking.png").stat().st_size > 10_000
+    assert s["units"]["ee"] == "m" and "TCP" in s["tracking"]
     # The TCP follows a ~0.1-0.3 m sweep with the PD lag of a few cm; a wrong sign or frame diverges by decimetres.
-    assert 0 < s["ee_tracking_rms_m"] < 0.05 and s["ee_ik_failures"] == 0
+    assert 0 < s["tracking_rms"]["ee"] < 0.05 and s["all_finite"]
 
 
 def test_bench_torch_baseline_is_the_same_step():

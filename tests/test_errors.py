@@ -644,3 +644,85 @@ def test_bad_env_ids_rejected_on_the_first_reset(model):
     ctrl = wpctrl.build_controller(pos(), model)
     with pytest.raises((ValueError, TypeError)):
         ctrl.reset(model.state(), [0.5, 99.0])
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# Wrong kinds of objects, and States/Controls of another model with the same sizes.
+
+
+def test_state_and_control_rejected_by_type(setup):
+    ctrl, state, control = setup
+    model = ctrl._engine.model
+    action = np.zeros((N, 3), np.float32)
+    before = _snapshot(ctrl, control)
+    # A Model has joint_q / joint_qd of the right sizes: only its type tells it apart.
+    with raises(TypeError, "set_action", "expected a newton.State", "got Model"):
+        ctrl.set_action(action, model)
+    with raises(TypeError, "set_action", "expected a newton.State", "got Control"):
+        ctrl.set_action(action, control)
+    with raises(TypeError, "reset", "expected a newton.State", "got Model"):
+        ctrl.reset(model)
+    with raises(TypeError, "before_simulation_step", "expected a newton.Control", "got Model"):
+        ctrl.before_simulation_step(state, model)
+    with raises(TypeError, "reset", "expected a newton.Control", "got State"):
+        ctrl.reset(state, control=state)
+    _assert_same(before, _snapshot(ctrl, control))
+
+
+def test_state_of_another_model_with_the_same_sizes(model):
+    other = build_panda(N)  # same joint counts: shapes cannot tell the States apart
+    assert other.joint_coord_count == model.joint_coord_count
+    ctrl = wpctrl.build_controller(pos(), model)
+    ctrl_other = wpctrl.build_controller(pos(), other)
+    s, c = model.state(), model.control()
+    s_other, c_other = other.state(), other.control()
+    action = np.zeros((N, 3), np.float32)
+    ctrl.reset(s, control=c)
+    ctrl_other.reset(s_other, control=c_other)  # binds s_other / c_other to `other`
+    before = _snapshot(ctrl, c)
+    with raises(ValueError, "set_action", "this state belongs to another newton.Model", "model.state()"):
+        ctrl.set_action(action, s_other)
+    with raises(ValueError, "before_simulation_step", "this state belongs to another newton.Model"):
+        ctrl.before_simulation_step(s_other, c)
+    with raises(ValueError, "before_simulation_step", "this control belongs to another newton.Model"):
+        ctrl.before_simulation_step(s, c_other)
+    with raises(ValueError, "reset", "this state belongs to another newton.Model"):
+        ctrl.reset(s_other)
+    _assert_same(before, _snapshot(ctrl, c))
+    # Each model's own objects keep working, also with a second controller of the same model.
+    ctrl.set_action(action, s)
+    ctrl.before_simulation_step(s, c)
+    wpctrl.build_controller(pos(), model).reset(s, control=c)
+    ctrl_other.set_action(action, s_other)
+
+
+@pytest.mark.parametrize(
+    "field, value, shown",
+    [
+        ("stiffness", "1e3", "'1e3' (str)"),
+        ("damping", [1.0, "2", 3.0], "[1.0, '2', 3.0] (list)"),
+        ("force_limit", True, "True (bool)"),
+        ("stiffness", {"a": 1.0}, "{'a': 1.0} (dict)"),
+    ],
+)
+def test_non_numeric_parameter(model, field, value, shown):
+    with raises(C.ConfigError, f"PDJointPosControllerConfig.{field}", "expected a number or a sequence of 3", shown):
+        wpctrl.build_controller(pos(**{field: value}), model)
+
+
+@pytest.mark.parametrize(
+    "action, shown",
+    [
+        ({"arm": np.zeros(3)}, "got dict"),
+        (None, "got NoneType"),
+        ("0.1 0.2 0.3", "got str"),
+        ([["a", "b", "c"]] * N, "got list holding dtype <U1"),
+        (np.array([object()] * (N * 3), dtype=object).reshape(N, 3), "got ndarray holding dtype object"),
+    ],
+)
+def test_action_not_an_array_names_the_type(setup, action, shown):
+    ctrl, state, control = setup
+    before = _snapshot(ctrl, control)
+    with raises(TypeError, "action", f"expected an array of shape ({N}, 3)", shown):
+        ctrl.set_action(action, state)
+    _assert_same(before, _snapshot(ctrl, control))

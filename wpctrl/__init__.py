@@ -3,6 +3,8 @@
 Public import path: ``import wpctrl``.
 """
 
+from typing import TYPE_CHECKING
+
 from .config import (
     ConfigError,
     ControllerConfig,
@@ -14,17 +16,50 @@ from .config import (
     PDJointVelControllerConfig,
 )
 from .config_ee import PDEEPosControllerConfig, PDEEPoseControllerConfig
-from .controllers import (
-    BaseController,
-    CombinedController,
-    PassiveController,
-    PDJointPosController,
-    PDJointPosMimicController,
-    PDJointPosVelController,
-    PDJointVelController,
-    build_controller,
-)
-from .controllers_ee import PDEEPosController, PDEEPoseController
+
+# The controllers (which import newton, ~4 s) load on first use, so that ``python -m wpctrl demo`` can say what it is
+# doing before the heavy imports and kernel compilation start.
+_LAZY = {
+    "BaseController",
+    "CombinedController",
+    "PassiveController",
+    "PDJointPosController",
+    "PDJointPosMimicController",
+    "PDJointPosVelController",
+    "PDJointVelController",
+    "build_controller",
+}
+_LAZY_EE = {"PDEEPosController", "PDEEPoseController"}  # wpctrl.controllers_ee
+
+if TYPE_CHECKING:
+    from .controllers import (
+        BaseController,
+        CombinedController,
+        PassiveController,
+        PDJointPosController,
+        PDJointPosMimicController,
+        PDJointPosVelController,
+        PDJointVelController,
+        build_controller,
+    )
+    from .controllers_ee import PDEEPosController, PDEEPoseController
+
+
+def __getattr__(name: str):
+    if name == "distributed":  # wpctrl.distributed: torchrun helpers (torch imported only under torchrun)
+        import importlib
+
+        return importlib.import_module(".distributed", __name__)
+    if name in _LAZY or name in _LAZY_EE:
+        from . import controllers, controllers_ee
+
+        return getattr(controllers_ee if name in _LAZY_EE else controllers, name)
+    raise AttributeError(f"module 'wpctrl' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | _LAZY | _LAZY_EE | {"distributed"})
+
 
 __version__ = "0.1.0"
 

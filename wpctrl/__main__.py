@@ -1,4 +1,5 @@
-"""Command line: ``python -m wpctrl demo [options]`` (also the ``wpctrl`` console script)."""
+"""Command line: ``python -m wpctrl demo [options]`` (also the ``wpctrl`` console script; under
+``torchrun --nproc-per-node=N -m wpctrl demo ...`` one process per rank)."""
 
 from __future__ import annotations
 
@@ -13,12 +14,12 @@ def main(argv=None) -> int:
     if argv[0] != "demo":
         print(f"wpctrl: error: unknown command {argv[0]!r}; expected 'demo'", file=sys.stderr)
         return 2
-    import warp as wp
+    from .demo import main as demo_main  # light: warp (~1-3 s to import) loads after the demo's first line
 
-    wp.config.log_level = wp.LOG_WARNING
-    from .demo import main as demo_main
-
-    return demo_main(argv[1:])
+    try:
+        return demo_main(argv[1:])
+    except SystemExit as e:  # argparse and the demo's checks exit 2 with a one-line message
+        return e.code if isinstance(e.code, int) else 1
 
 
 if __name__ == "__main__":

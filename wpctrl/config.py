@@ -227,10 +227,14 @@ def _per_joint(config, field_name: str, value, n: int, *, allow_none: bool = Fal
             return None
         raise ConfigError(f"{_name(config)}.{field_name}: expected a number or a sequence of {n} numbers, got None")
     try:
-        arr = np.asarray(value, dtype=np.float64)
+        raw = np.asarray(value)
+        if raw.dtype.kind not in "iuf":  # strings ("1e3" would parse), bools, None, objects
+            raise TypeError(f"dtype {raw.dtype}")
+        arr = raw.astype(np.float64)
     except (TypeError, ValueError) as e:
         raise ConfigError(
-            f"{_name(config)}.{field_name}: expected a number or a sequence of {n} numbers, got {value!r}"
+            f"{_name(config)}.{field_name}: expected a number or a sequence of {n} numbers, got {value!r} "
+            f"({type(value).__name__})"
         ) from e
     if arr.ndim > 1 or (arr.ndim == 1 and arr.shape[0] not in (1, n)):
         raise ConfigError(

@@ -20,11 +20,11 @@ from . import config_ee as cfg_ee
 from .actuation import ActuationMixin, check_delay
 from .binding import bind_joints
 from .engine import _Engine
-from .inputs import _action_array, _as_rows_array, _env_selection, _raise_on_nonfinite
+from .inputs import _action_array, _as_rows_array, _claim, _env_selection, _raise_on_nonfinite, _type_name
 
 _ACTUATIONS = ("implicit", "explicit")
 _NAN_POLICIES = ("hold", "raise")
-_EXPLICIT_PD = ("naive", "stable")
+_EXPLICIT_PD = ("naive", "stable", "coupled")
 _INERTIA_UPDATES = ("control", "substep")
 _CLIP_TARGETS = ("none", "joint_limits")
 
@@ -286,10 +286,11 @@ class BaseController(ActuationMixin):
 
     def _check_state(self, state, what: str) -> None:
         eng = self._engine
-        if state is None or not hasattr(state, "joint_q"):
-            raise TypeError(f"{what}: expected a newton.State, got {type(state).__name__}")
-        if state.joint_q.device != eng.device:
-            raise ValueError(f"{what}: state is on {state.joint_q.device}, the controller on {eng.device}")
+        if not isinstance(state, newton.State):
+            raise TypeError(f"{what}: expected a newton.State (model.state()), got {_type_name(state)}")
+        if state.joint_q is None or state.joint_q.device != eng.device:
+            where = None if state.joint_q is None else state.joint_q.device
+            raise ValueError(f"{what}: state is on {where}, the controller on {eng.device}")
         if (
             state.joint_q.shape[0] != eng.model.joint_coord_count
             or state.joint_qd.shape[0] != eng.model.joint_dof_count
@@ -298,11 +299,12 @@ class BaseController(ActuationMixin):
                 f"{what}: state has {state.joint_q.shape[0]} coordinates / {state.joint_qd.shape[0]} DOFs, the "
                 f"controller's model {eng.model.joint_coord_count} / {eng.model.joint_dof_count}: another model?"
             )
+        _claim(state, eng.model, what, "state")
 
     def _check_control(self, control, what: str) -> None:
         eng = self._engine
-        if control is None or not hasattr(control, "joint_target_q"):
-            raise TypeError(f"{what}: expected a newton.Control, got {type(control).__name__}")
+        if not isinstance(control, newton.Control):
+            raise TypeError(f"{what}: expected a newton.Control (model.control()), got {_type_name(control)}")
         if control.joint_target_q is None or control.joint_target_q.device != eng.device:
             raise ValueError(f"{what}: control is not on the controller's device {eng.device}")
         if control.joint_target_qd.shape[0] != eng.model.joint_dof_count:
@@ -310,6 +312,7 @@ class BaseController(ActuationMixin):
                 f"{what}: control has {control.joint_target_qd.shape[0]} DOFs, the controller's model "
                 f"{eng.model.joint_dof_count}: another model?"
             )
+        _claim(control, eng.model, what, "control")
 
     def set_action(self, action, state: newton.State) -> None:
         """Set this control step's targets from ``action`` (num_envs, action_dim) and the measured ``state``.
@@ -514,7 +517,11 @@ def build_controller(
         explicit_pd: With ``actuation="explicit"``: ``"naive"`` (``clamp(Kp (q* - q) + Kd (qd* - qd))``) or
             ``"stable"`` (the same law on the predicted end-of-substep state, solved with each joint's response
             r = (H^-1)_ii: ``(Kp (q* - q - dt qd) + Kd (qd* - qd)) / (1 + r dt (Kd + dt Kp))``, then clamped;
-            stable at implicit-drive gains).
+            stable at implicit-drive gains), or ``"coupled"`` (PhysX's articulation drive: the same law solved
+            jointly for all rows with the full inverse-inertia block ``A`` of the articulation, recomputed from
+            ``joint_q`` every substep, and the force limits enforced inside the solve:
+            ``tau = clamp(b - diag(dt Kd + dt^2 Kp) A tau)``; one extra launch per substep; see the README section
+            "PhysX-faithful drive (coupled)").
         inertia_update: When r = (H^-1)_ii is recomputed (acceleration drives, stable PD): once per control step
             in ``set_action`` (``"control"``) or before every substep (``"substep"``).
         delay: Command latency [substeps]: None (off), an int, or ``(min, max)`` drawn uniformly per env at each
@@ -543,3 +550,7 @@ def build_controller(
     if not isinstance(config, cfg.ControllerConfig):
         raise cfg.ConfigError(f"config: expected a controller config or a dict of them, got {type(config).__name__}")
     return type(config).controller_cls(config, model, control_freq, sim_freq, **kw)
+
+
+# The end-effector classes set ``controller_cls`` on their configs (a dict mixing EE and joint configs needs them).
+from . import controllers_ee  # noqa: E402, F401

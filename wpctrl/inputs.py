@@ -6,6 +6,8 @@ a device input is graph-capturable.
 
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 import warp as wp
 
@@ -23,6 +25,31 @@ def _torch():
 def _is_torch(x) -> bool:
     torch = _torch()
     return torch is not None and isinstance(x, torch.Tensor)
+
+
+def _type_name(x) -> str:
+    return type(x).__name__
+
+
+# Which model a State / Control belongs to. Newton's State and Control hold no reference to their model, and two
+# models with the same joint counts give States of identical shapes. So a State (or Control) is bound to the model of
+# the first wpctrl controller that uses it (a weak reference, dropped with the State); a controller of any other
+# model then rejects it. Limit: a State that no controller of its own model has used yet is accepted by a controller
+# of another model of the same sizes (and bound to that model from then on). Cost: one dict lookup per call.
+_OWNER: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _claim(obj, model, what: str, kind: str) -> None:
+    ref = _OWNER.get(obj)
+    owner = None if ref is None else ref()
+    if owner is model:
+        return
+    if owner is not None:
+        raise ValueError(
+            f"{what}: this {kind} belongs to another newton.Model (a controller of that model used it first), not to "
+            f"this controller's model, although the sizes match; create it with this model's model.{kind}()"
+        )
+    _OWNER[obj] = weakref.ref(model)
 
 
 def _check_shape(name: str, shape: tuple, num_envs: int, dim: int) -> None:
@@ -82,7 +109,17 @@ def _action_array(action, num_envs: int, dim: int, device, buffer: wp.array, cac
                 wp.launch(K._cast_f64_kernel, dim=a.shape, inputs=[a, buffer], device=device)
             return buffer
         raise TypeError(f"action: expected a float32 (or float64) wp.array, got dtype {wp.types.type_repr(a.dtype)}")
+    if action is None or isinstance(action, (str, bytes, dict)):
+        raise TypeError(
+            f"action: expected an array of shape ({num_envs}, {dim}) (torch tensor, numpy array, wp.array or nested "
+            f"sequence of floats), got {_type_name(action)}"
+        )
     a = np.asarray(action)
+    if a.dtype.kind not in "biuf":
+        raise TypeError(
+            f"action: expected an array of shape ({num_envs}, {dim}) of floats (torch tensor, numpy array, wp.array "
+            f"or nested sequence of floats), got {_type_name(action)} holding dtype {a.dtype}"
+        )
     if a.ndim == 1 and num_envs == 1:
         a = a[None, :]
     _check_shape("action", a.shape, num_envs, dim)

@@ -75,10 +75,12 @@ def build_panda_model(num_envs: int, device, *, gravity: bool = True, visual_sha
 
     from wpctrl.robots import panda
 
-    g = None if gravity else (0.0, 0.0, 0.0)
-    builder = newton.ModelBuilder() if g is None else newton.ModelBuilder(gravity=g)
+    builder = newton.ModelBuilder()
     builder.replicate(panda(visual_shapes=visual_shapes), num_envs)
-    return builder.finalize(device=device)
+    model = builder.finalize(device=device)
+    if not gravity:  # ModelBuilder(gravity=...) does not reach replicated worlds: they keep panda()'s gravity
+        model.set_gravity((0.0, 0.0, 0.0))
+    return model
 
 
 class _WideModel:

@@ -1,9 +1,11 @@
-"""Cost of the joint-space response update (acceleration drives, stable explicit PD) per env-step.
+"""Cost of the joint-space response update and of the drives that use it, per env-step.
 
-``ctrl`` with ``drive_mode="acceleration"`` on every Panda joint recomputes r = (H^-1)_ii once per control step
-(``inertia_update="control"``: forward kinematics, the articulation mass matrix, its inverse, a gather kernel) and,
-with implicit actuation, writes the per-env solver gains. This times that update alone (eager and graph-captured)
-next to a whole wpctrl control step without it, for a list of N. ``python bench/inertia_update.py --help``.
+Acceleration drives and stable explicit PD need r = (H^-1)_ii of every controlled joint; the coupled drive needs the
+whole controlled block of H^-1 every substep. wpctrl computes them with one fused kernel per env (FK from
+``joint_q``, H by bodies, float64 Cholesky in registers: ``wpctrl/kernels/inertia.py``); Newton's generic path is
+``JointSpaceResponse.refresh`` (FK, mass matrix, block inverse) plus a gather. This times, for a list of N, a whole
+control step (set_action + K substeps) of each variant and the response update alone, eager and graph-replayed,
+both paths side by side, and the coupled drive next to stable. ``python bench/inertia_update.py --help``.
 """
 
 from __future__ import annotations
@@ -30,6 +32,59 @@ from bench.common import (  # noqa: E402
     write_results,
 )
 
+VARIANTS = (
+    # label, drive_mode, actuation, explicit_pd, inertia_update, response path
+    ("force, implicit (no update)", "force", "implicit", "naive", "control", "fused"),
+    ("acceleration, implicit [JointSpaceResponse]", "acceleration", "implicit", "naive", "control", "jsr"),
+    ("acceleration, implicit [fused]", "acceleration", "implicit", "naive", "control", "fused"),
+    ("stable, H per control step [JointSpaceResponse]", "force", "explicit", "stable", "control", "jsr"),
+    ("stable, H per control step [fused]", "force", "explicit", "stable", "control", "fused"),
+    ("stable, H per substep [fused]", "force", "explicit", "stable", "substep", "fused"),
+    ("coupled, H per substep [fused, in the drive kernel]", "force", "explicit", "coupled", "control", "fused"),
+)
+
+
+def _use_joint_space_response(ctrl, model) -> None:
+    """Route the controller's response update through Newton's JointSpaceResponse (the pre-fused path)."""
+    from newton.actuators import JointSpaceResponse
+
+    eng = ctrl._engine
+    eng._fused = None
+    eng._jsr = JointSpaceResponse(model)
+
+
+def newton_implicit_actuator(n: int, device):
+    """Newton 1.8's coupled implicit actuator (DrivePD + ClampingMaxEffort, set_effort_mode_implicit) on the same
+    Pandas: per substep JointSpaceResponse.refresh, joint_f.zero_() and Actuator.step. Returns the control step."""
+    import newton
+    from newton.actuators import ClampingMaxEffort, DrivePD, JointSpaceResponse
+
+    from wpctrl.robots import panda
+
+    tmpl = panda(visual_shapes=False)
+    for dof in range(tmpl.joint_dof_count):
+        tmpl.add_actuator(DrivePD, index=dof, clamping=[(ClampingMaxEffort, {"max_effort": 100.0})], kp=1e3, kd=1e2)
+    builder = newton.ModelBuilder()
+    builder.replicate(tmpl, n)
+    model = builder.finalize(device=device)
+    model.set_gravity((0.0, 0.0, 0.0))
+    state, control = model.state(), model.control()
+    control.joint_target_q.assign(model.joint_q.numpy() + 0.05)
+    jsr = JointSpaceResponse(model)
+    acts = list(model.actuators)
+    for a in acts:
+        a.set_effort_mode_implicit(jsr)
+    states = [(a.state(), a.state()) for a in acts]
+
+    def step():
+        for _ in range(5):
+            jsr.refresh(state)
+            control.joint_f.zero_()
+            for a, (cur, nxt) in zip(acts, states, strict=True):
+                a.step(state, control, cur, nxt, 0.01)
+
+    return step
+
 
 def run(n: int, device, repeats: int, sync) -> list[dict]:
     import numpy as np
@@ -40,18 +95,18 @@ def run(n: int, device, repeats: int, sync) -> list[dict]:
     model = build_panda_model(n, device, gravity=False)
     names = PANDA_ARM_JOINTS + PANDA_GRIPPER_JOINTS
     rows = []
-    for label, drive_mode, actuation, explicit_pd in (
-        ("force, implicit (no update)", "force", "implicit", "naive"),
-        ("acceleration, implicit", "acceleration", "implicit", "naive"),
-        ("acceleration, explicit stable", "acceleration", "explicit", "stable"),
-    ):
+    for label, drive_mode, actuation, explicit_pd, inertia_update, path in VARIANTS:
         cfg = wpctrl.PDJointPosControllerConfig(
             names, None, None, 1e3, 1e2, 100.0, normalize_action=False, drive_mode=drive_mode
         )
-        ctrl = wpctrl.build_controller(cfg, model, 20, 100, actuation=actuation, explicit_pd=explicit_pd)
+        ctrl = wpctrl.build_controller(
+            cfg, model, 20, 100, actuation=actuation, explicit_pd=explicit_pd, inertia_update=inertia_update
+        )
+        if path == "jsr":
+            _use_joint_space_response(ctrl, model)
         state, control = model.state(), model.control()
         ctrl.reset(state)
-        act = wp.array(np.tile(model.joint_q.numpy()[:9], (n, 1)), dtype=wp.float32, device=device)
+        act = wp.array(np.tile(model.joint_q.numpy()[:9] + 0.05, (n, 1)), dtype=wp.float32, device=device)
 
         def step(ctrl=ctrl, act=act, state=state, control=control):
             ctrl.set_action(act, state)
@@ -61,9 +116,11 @@ def run(n: int, device, repeats: int, sync) -> list[dict]:
         def update(ctrl=ctrl, state=state):
             ctrl._engine.update_response(state)
 
-        for what, fn in (("control step", step), ("response update", update)):
-            if what == "response update" and drive_mode == "force":
-                continue
+        timed = [("control step", step)]
+        if ctrl._engine.needs_response and explicit_pd != "coupled":
+            timed.append(("response update", update))
+        for what, fn in timed:
+            fn()  # compile / warm up outside the capture
             with wp.ScopedCapture(device=device) as cap:
                 fn()
             graph = cap.graph
@@ -79,6 +136,22 @@ def run(n: int, device, repeats: int, sync) -> list[dict]:
                     "graph_ns_per_env_step": replay / n * 1e9,
                 }
             )
+    step = newton_implicit_actuator(n, device)
+    step()
+    with wp.ScopedCapture(device=device) as cap:
+        step()
+    eager = measure(step, sync, repeats=repeats)["median_s"]
+    replay = measure(lambda g=cap.graph: wp.capture_launch(g), sync, repeats=repeats)["median_s"]
+    rows.append(
+        {
+            "envs": n,
+            "variant": "Newton actuator, set_effort_mode_implicit (+ JointSpaceResponse.refresh per substep)",
+            "what": "control step",
+            "eager_s": eager,
+            "graph_s": replay,
+            "graph_ns_per_env_step": replay / n * 1e9,
+        }
+    )
     return rows
 
 
@@ -111,10 +184,13 @@ def main(argv=None):
         ],
     )
     md = (
-        "# Joint-space response update (acceleration drives, stable explicit PD)\n"
+        "# Joint-space response update and drive cost (acceleration drives, stable / coupled explicit PD)\n"
         + meta_markdown(meta)
-        + "\nPanda, all 9 joints, K = 5; 'control step' = set_action (which includes the update) + 5 substeps; "
-        "'response update' = the update alone. Wall clock, median of repeats.\n\n" + table + "\n"
+        + "\nPanda, all 9 joints, K = 5; 'control step' = set_action + 5 substeps, including the response update "
+        "where the variant has one (per control step: in set_action; per substep: before each substep; coupled: "
+        "inside its drive kernel, every substep); 'response update' = the update alone. [JointSpaceResponse]: "
+        "Newton's generic path (FK, mass matrix, block inverse, gather); [fused]: wpctrl's one-launch kernel. "
+        "Wall clock, median of repeats.\n\n" + table + "\n"
     )
     stem = f"inertia_update_{'cuda' if device.is_cuda else 'cpu'}"
     write_results(args.out, stem, meta, rows, md)

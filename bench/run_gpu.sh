@@ -4,8 +4,9 @@
 #
 #   bash bench/run_gpu.sh        # results in $OUT if set (the device machine sets it), else bench/results
 #
-# Writes 7 files (the device machine returns at most 8): controller_step_cuda.md, profile_overhead_cuda.md,
-# rollout_cuda.md, inertia_update_cuda.md, actuation_cost_cuda.md, run_gpu.log (with the CUDA tests' output), and json.tar holding the JSON files
+# Writes 8 files (the device machine returns at most 8): controller_step_cuda.md, profile_overhead_cuda.md,
+# rollout_cuda.md, inertia_update_cuda.md, actuation_cost_cuda.md, fidelity_cuda.md, run_gpu.log (with the CUDA tests' output), and json.tar
+# holding the JSON files
 # (tar -xf json.tar -C bench/results). Each stage has a time limit so that a slow stage cannot starve the others.
 # Sizes: CTRL_ENVS, ROLLOUT_ENVS, ROLLOUT_SOLVERS, REPEATS; DEVICE (default cuda:0; "cpu" only to test
 # the script: use the CPU commands of bench/README.md for CPU numbers).
@@ -50,8 +51,9 @@ stage rollout 200 $PY bench/rollout.py --device "$DEVICE" --envs "$ROLLOUT_ENVS"
   --repeats 3 --out "$WORK"
 stage actuation_cost 120 $PY bench/actuation_cost.py --device "$DEVICE" --envs "${ACT_ENVS:-1,4k,64k,1M}" \
   --repeats "$REPEATS" --eager --out "$WORK"
-stage inertia_update 90 $PY bench/inertia_update.py --device "$DEVICE" --envs 1,4k,64k --repeats "$REPEATS" \
+stage inertia_update 150 $PY bench/inertia_update.py --device "$DEVICE" --envs 1,4k,64k --repeats "$REPEATS" \
   --out "$WORK"
+stage fidelity 150 $PY bench/fidelity.py --device "$DEVICE" --out "$WORK"
 cp "$WORK"/*.md "$OUT"/
 (cd "$WORK" && tar -cf "$OUT/json.tar" ./*.json)
 echo "=== done in $(( $(date +%s) - t0 ))s" | tee -a "$LOG"

@@ -23,7 +23,7 @@ from .inputs import _action_array, _as_rows_array, _env_selection, _raise_on_non
 
 _ACTUATIONS = ("implicit", "explicit")
 _NAN_POLICIES = ("hold", "raise")
-_EXPLICIT_PD = ("naive", "stable")
+_EXPLICIT_PD = ("naive", "stable", "coupled")
 _INERTIA_UPDATES = ("control", "substep")
 
 
@@ -476,7 +476,11 @@ def build_controller(
         explicit_pd: With ``actuation="explicit"``: ``"naive"`` (``clamp(Kp (q* - q) + Kd (qd* - qd))``) or
             ``"stable"`` (the same law on the predicted end-of-substep state, solved with each joint's response
             r = (H^-1)_ii: ``(Kp (q* - q - dt qd) + Kd (qd* - qd)) / (1 + r dt (Kd + dt Kp))``, then clamped;
-            stable at implicit-drive gains).
+            stable at implicit-drive gains), or ``"coupled"`` (PhysX's articulation drive: the same law solved
+            jointly for all rows with the full inverse-inertia block ``A`` of the articulation, recomputed from
+            ``joint_q`` every substep, and the force limits enforced inside the solve:
+            ``tau = clamp(b - diag(dt Kd + dt^2 Kp) A tau)``; one extra launch per substep; see the README section
+            "PhysX-faithful drive (coupled)").
         inertia_update: When r = (H^-1)_ii is recomputed (acceleration drives, stable PD): once per control step
             in ``set_action`` (``"control"``) or before every substep (``"substep"``).
         delay: Command latency [substeps]: None (off), an int, or ``(min, max)`` drawn uniformly per env at each

@@ -20,6 +20,8 @@ import warp as wp
 from . import config as cfg
 from .binding import JointBinding
 from .kernels import actuation as KA
+from .kernels import drive as KD
+from .kernels import inertia as KI
 from .kernels import pd as K
 
 DRIVE_FIELDS = ("stiffness", "damping", "force_limit", "friction")
@@ -80,7 +82,8 @@ class _Engine:
         self.action_dim = rows.action_dim
         self.num_substeps = num_substeps
         self.explicit = actuation == "explicit"
-        self.explicit_mode = 0 if not self.explicit else (2 if explicit_pd == "stable" else 1)
+        self.explicit_mode = 0 if not self.explicit else {"stable": 2, "coupled": 3}.get(explicit_pd, 1)
+        self.coupled = self.explicit_mode == 3  # the coupled drive: its own launch after the substep kernel
         self.sim_dt = float(sim_dt)
         self.inertia_update = inertia_update
         self.solver = None  # notified after per-env gain edits (implicit acceleration drive)
@@ -145,9 +148,12 @@ class _Engine:
         self.row_accel = up(rows.accel.astype(np.int32), wp.int32)
         self.has_accel = bool(rows.accel.any())
         # The joint-space response r = (H^-1)_ii per env and row: acceleration drives and stable explicit PD need it.
-        self.needs_response = self.has_accel or self.explicit_mode == 2
+        self.needs_response = self.has_accel or self.explicit_mode >= 2
         self.response = wp.ones((E if self.needs_response else 1, max(R, 1)), dtype=wp.float32, device=dev)
         self._jsr = None
+        self._fused = None  # fused H / Cholesky kernel (wpctrl.kernels.inertia) where the articulation allows it
+        self.coupled_iterations = wp.zeros(E if self.coupled else 1, dtype=wp.int32, device=dev)
+        self._launch_coupled: _Launch | None = None
         if self.needs_response:
             self._init_response(model, binding)
 
@@ -183,20 +189,35 @@ class _Engine:
         self.row_art_off = wp.array((art[0] - base[0]).astype(np.int32), dtype=wp.int32, device=dev)
         self.row_art_dof = wp.array(local[0].astype(np.int32), dtype=wp.int32, device=dev)
         self.env_art_base = wp.array(base.astype(np.int32), dtype=wp.int32, device=dev)
-        self._jsr = JointSpaceResponse(model)
+        layout, why = KI.chain_layout(model, binding.joint_index, binding.dof_index)
+        if layout is not None:
+            self._fused = KI.FusedChain(layout, model)
+        elif self.coupled:
+            raise cfg.ConfigError(f"explicit_pd: 'coupled' needs a fixed-base serial/tree articulation ({why})")
+        else:
+            self._jsr = JointSpaceResponse(model)
 
     def update_response(self, state) -> None:
         """Recompute r = (H^-1)_ii for the current configuration; with an implicit acceleration drive, write the
         per-env solver gains Kp / r, Kd / r into the model (and notify the solver, if one was given)."""
         if not self.needs_response:
             return
-        self._jsr.refresh(state)
+        if self._fused is not None:  # one launch: H from joint_q, its Cholesky factor, diag(H^-1) of the rows
+            self._fused.launch_response(state.joint_q, self.response)
+        else:
+            self._jsr.refresh(state)
+            self._gather_response()
+        self._write_accel_gains()
+
+    def _gather_response(self) -> None:
         wp.launch(
             K._response_kernel,
             dim=self.dim,
             inputs=[self.row_art_off, self.row_art_dof, self.env_art_base, self._jsr.inverse_blocks, self.response],
             device=self.device,
         )
+
+    def _write_accel_gains(self) -> None:
         if self.has_accel and not self.explicit:
             m = self.model
             wp.launch(
@@ -220,7 +241,7 @@ class _Engine:
     # -- stages ---------------------------------------------------------------------------------------------------
 
     def set_action(self, action: wp.array, state) -> None:
-        if self.inertia_update == "control":
+        if self.inertia_update == "control" and not self.coupled:
             self.update_response(state)
         if self._launch_set_action is None:
             self._launch_set_action = _Launch(
@@ -264,12 +285,12 @@ class _Engine:
         ln.launch()
 
     def substep(self, state: newton.State, control: newton.Control) -> None:
-        if self.inertia_update == "substep":
+        if self.inertia_update == "substep" and not self.coupled:
             self.update_response(state)
         joint_f = control.joint_f if self.explicit else None
         if self._launch_substep is None:
             self._launch_substep = _Launch(
-                K.substep_kernel(self.delay is not None, self.computed_effort is not None),
+                K.substep_kernel(self.delay is not None, self.computed_effort is not None and not self.coupled),
                 self.dim,
                 {
                     "row_kind": self.row_kind,
@@ -283,7 +304,7 @@ class _Engine:
                     "force_limit": self.force_limit,
                     "row_accel": self.row_accel,
                     "num_substeps": self.num_substeps,
-                    "explicit_pd": self.explicit_mode,
+                    "explicit_pd": 0 if self.coupled else self.explicit_mode,
                     "dt": self.sim_dt,
                     "max_delay": 0 if self.delay_range is None else int(self.delay_range[1]),
                     "joint_q_in": state.joint_q,
@@ -301,9 +322,10 @@ class _Engine:
                     "joint_target_q_out": control.joint_target_q,
                     "joint_target_qd_out": control.joint_target_qd,
                     "joint_f_out": joint_f,
-                    "computed_effort_out": self.computed_effort,
-                    "applied_effort_out": self.applied_effort,
-                    "saturation_count_out": self.saturation_count,
+                    # the coupled drive writes the effort readout itself
+                    "computed_effort_out": None if self.coupled else self.computed_effort,
+                    "applied_effort_out": None if self.coupled else self.applied_effort,
+                    "saturation_count_out": None if self.coupled else self.saturation_count,
                 },
                 self.device,
             )
@@ -313,6 +335,48 @@ class _Engine:
         ln.bind("joint_target_q_out", control.joint_target_q)
         ln.bind("joint_target_qd_out", control.joint_target_qd)
         ln.bind("joint_f_out", joint_f)
+        ln.launch()
+        if self.coupled:
+            self._coupled(state, control)
+
+    def _coupled(self, state: newton.State, control: newton.Control) -> None:
+        """The coupled drive's launch: reads the targets the substep kernel just wrote, writes joint_f."""
+        if self._launch_coupled is None:
+            fc = self._fused
+            params = fc.chain_args()
+            params.update(
+                {
+                    "row_kind": self.row_kind,
+                    "row_flags": self.row_flags,
+                    "row_q_off": self.row_q_off,
+                    "row_qd_off": self.row_qd_off,
+                    "row_accel": self.row_accel,
+                    "env_q_base": self.env_q_base,
+                    "env_qd_base": self.env_qd_base,
+                    "kp": self.kp,
+                    "kd": self.kd,
+                    "force_limit": self.force_limit,
+                    "dt": self.sim_dt,
+                    "pgs_sweeps": KD.PGS_SWEEPS,
+                    "joint_q_in": state.joint_q,
+                    "joint_qd_in": state.joint_qd,
+                    "joint_target_q_in": control.joint_target_q,
+                    "joint_target_qd_in": control.joint_target_qd,
+                    "joint_f_out": control.joint_f,
+                    "response_out": self.response,
+                    "iterations_out": self.coupled_iterations,
+                    "computed_effort_out": self.computed_effort,
+                    "applied_effort_out": self.applied_effort,
+                    "saturation_count_out": self.saturation_count,
+                }
+            )
+            self._launch_coupled = _Launch(KD.coupled_kernel(*fc.kernel_key()), self.num_envs, params, self.device)
+        ln = self._launch_coupled
+        ln.bind("joint_q_in", state.joint_q)
+        ln.bind("joint_qd_in", state.joint_qd)
+        ln.bind("joint_target_q_in", control.joint_target_q)
+        ln.bind("joint_target_qd_in", control.joint_target_qd)
+        ln.bind("joint_f_out", control.joint_f)
         ln.launch()
 
     def reset(self, state, env_ids, env_mask, control, first: bool) -> None:

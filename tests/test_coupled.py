@@ -1,0 +1,233 @@
+"""The coupled implicit PD drive (``explicit_pd="coupled"``) and the fused joint-space inertia kernel.
+
+References: Newton's ``JointSpaceResponse`` and Featherstone's own mass matrix (for the fused ``H^-1``), the
+closed-form float64 solution of the linear implicit PD system ``(I + D A) tau = b`` and the KKT conditions of its
+box-constrained form (numpy), and the ``stable`` drive (which the coupled one must equal on a single-DOF chain).
+"""
+
+from __future__ import annotations
+
+import newton
+import numpy as np
+import pytest
+import warp as wp
+from conftest import build_panda
+
+import wpctrl
+from wpctrl.robots import PANDA_ARM_JOINTS, PANDA_GRIPPER_JOINTS, PANDA_JOINTS
+
+DT = 0.01
+E = 3
+
+
+def _random_states(model, rng, speed=1.0):
+    lo, hi = model.joint_limit_lower.numpy(), model.joint_limit_upper.numpy()
+    q = rng.uniform(lo, hi).astype(np.float32)
+    qd = rng.normal(0.0, speed, q.shape).astype(np.float32)
+    return q, qd
+
+
+def _block(ctrl, state) -> np.ndarray:
+    """The fused kernel's (rows x rows) block of H^-1 per env, float64."""
+    eng = ctrl._engine
+    resp = wp.zeros((eng.num_envs, eng.num_rows), dtype=wp.float32)
+    blk = wp.zeros((eng.num_envs, eng.num_rows, eng.num_rows), dtype=wp.float32)
+    eng._fused.launch_response(state.joint_q, resp, blk)
+    np.testing.assert_array_equal(resp.numpy(), np.diagonal(blk.numpy(), axis1=1, axis2=2))
+    return blk.numpy().astype(np.float64)
+
+
+def test_fused_response_matches_joint_space_response_and_featherstone():
+    from newton.actuators import JointSpaceResponse
+
+    model = build_panda(E, armature=[0.1, 0.05, 0.02, 0.01, 0.0, 0.0, 0.003, 0.0, 0.0])
+    cfg = wpctrl.PDJointPosControllerConfig(
+        PANDA_JOINTS, None, None, 1e3, 1e2, 100.0, normalize_action=False, drive_mode="acceleration"
+    )
+    ctrl = wpctrl.build_controller(cfg, model, actuation="explicit", explicit_pd="stable")
+    assert ctrl._engine._fused is not None and ctrl._engine._jsr is None  # the fused path is the default
+    jsr = JointSpaceResponse(model)
+    fs = newton.solvers.SolverFeatherstone(model)
+    s0, s1, control = model.state(), model.state(), model.control()
+    rng = np.random.default_rng(7)
+    for _ in range(2):
+        q, qd = _random_states(model, rng)
+        s0.joint_q.assign(q)
+        s0.joint_qd.assign(qd)
+        newton.eval_fk(model, s0.joint_q, s0.joint_qd, s0)
+        blk = _block(ctrl, s0)
+        ctrl._engine.update_response(s0)  # what acceleration drives / stable PD read
+        np.testing.assert_array_equal(ctrl.response.numpy(), np.diagonal(blk, axis1=1, axis2=2).astype(np.float32))
+        jsr.refresh(s0)
+        inv = jsr.inverse_blocks.numpy().astype(np.float64)
+        fs.step(s0, s1, control, None, 1e-5)  # Featherstone assembles H for s0
+        # Featherstone's H is the rigid-body matrix: it adds the armature inside its Cholesky factorisation.
+        Hf = fs.H.numpy()[: E * 81].reshape(E, 9, 9).astype(np.float64)
+        Hf += np.eye(9)[None] * model.joint_armature.numpy().reshape(E, 1, 9)
+        for e in range(E):
+            ref_f = np.linalg.inv(Hf[e])
+            for ref in (inv[e], ref_f):
+                np.testing.assert_allclose(np.diag(blk[e]), np.diag(ref), rtol=1e-5)
+                assert np.abs(blk[e] - ref).max() <= 1e-5 * np.abs(ref).max()
+
+
+def _coupled_ctrl(model, force_limit, drive_mode="force", gripper_passive=False, kp=1e3, kd=1e2, **kw):
+    arm = wpctrl.PDJointPosControllerConfig(
+        PANDA_ARM_JOINTS, None, None, kp, kd, force_limit, normalize_action=False, drive_mode=drive_mode
+    )
+    if gripper_passive:
+        grip = wpctrl.PassiveControllerConfig(PANDA_GRIPPER_JOINTS, damping=0.0)
+    else:
+        grip = wpctrl.PDJointPosControllerConfig(
+            PANDA_GRIPPER_JOINTS, None, None, kp, kd, force_limit, normalize_action=False, drive_mode=drive_mode
+        )
+    return wpctrl.build_controller(
+        {"arm": arm, "gripper": grip}, model, 100, 100, "explicit", explicit_pd="coupled", **kw
+    )
+
+
+def _setup(ctrl, model, rng, spread=0.3):
+    s, c = model.state(), model.control()
+    ctrl.reset(s)
+    q, qd = _random_states(model, rng)
+    s.joint_q.assign(q)
+    s.joint_qd.assign(qd)
+    b = ctrl._engine.binding
+    target = (q[b.coord_index] + rng.normal(0.0, spread, b.coord_index.shape)).astype(np.float32)
+    return s, c, q[b.coord_index].astype(np.float64), qd[b.dof_index].astype(np.float64), target
+
+
+def _system(A, kp, kd, q, qd, tq, accel=False):
+    """b and d = dt Kd + dt^2 Kp of one env (float64); acceleration drives scale the gains by 1 / A_ii."""
+    kp = np.broadcast_to(kp, q.shape).astype(np.float64)
+    kd = np.broadcast_to(kd, q.shape).astype(np.float64)
+    if accel:
+        kp, kd = kp / np.diag(A), kd / np.diag(A)
+    b = kp * (tq - q - DT * qd) + kd * (0.0 - qd)
+    d = DT * kd + DT * DT * kp
+    return b, d
+
+
+def test_coupled_without_active_limits_is_the_linear_implicit_solution():
+    model = build_panda(E)
+    ctrl = _coupled_ctrl(model, 1e9, drive_mode="acceleration")
+    # Per-env gains, as (num_envs, rows) arrays (bound at the first substep).
+    kp = np.array([[1e3] * 9, [400.0] * 9, [2e3] * 9], np.float32)
+    kd = np.array([[1e2] * 9, [40.0] * 9, [50.0] * 9], np.float32)
+    ctrl._engine.kp = wp.array(kp)
+    ctrl._engine.kd = wp.array(kd)
+    s, c, q, qd, target = _setup(ctrl, model, np.random.default_rng(1))
+    ctrl.set_action(target, s)
+    ctrl.before_simulation_step(s, c)
+    tau = c.joint_f.numpy()[ctrl._engine.binding.dof_index].astype(np.float64)
+    np.testing.assert_array_equal(c.joint_target_q.numpy()[ctrl._engine.binding.coord_index], target)
+    A = _block(ctrl, s)
+    for e in range(E):
+        b, d = _system(A[e], kp[e], kd[e], q[e], qd[e], target[e], accel=True)
+        want = np.linalg.solve(np.eye(9) + np.diag(d) @ A[e], b)
+        np.testing.assert_allclose(tau[e], want, rtol=1e-5, atol=1e-5 * np.abs(want).max())
+    assert (ctrl._engine.coupled_iterations.numpy() == 1).all()  # exact after the first active-set iteration
+
+
+def test_coupled_with_limits_satisfies_box_and_kkt():
+    model = build_panda(E)
+    lim = 30.0
+    ctrl = _coupled_ctrl(model, lim, gripper_passive=True, track_effort=True)
+    s, c, q, qd, target = _setup(ctrl, model, np.random.default_rng(2), spread=0.5)
+    ctrl.set_action(target[:, :7], s)
+    ctrl.before_simulation_step(s, c)
+    tau = c.joint_f.numpy()[ctrl._engine.binding.dof_index].astype(np.float64)
+    A = _block(ctrl, s)
+    kp = np.r_[np.full(7, 1e3), 0.0, 0.0]
+    kd = np.r_[np.full(7, 1e2), 0.0, 0.0]
+    tq = np.concatenate([target[:, :7], np.zeros((E, 2))], axis=1)
+    saturated = 0
+    for e in range(E):
+        np.testing.assert_array_equal(tau[e, 7:], 0.0)  # passive rows (Kp = Kd = 0) apply nothing
+        b, d = _system(A[e], kp, kd, q[e], qd[e], tq[e])
+        w = b - d * (A[e] @ tau[e])  # the PD force each row asks for at the predicted end-of-substep state
+        tol = 1e-4 * lim
+        for i in range(7):
+            assert abs(tau[e, i]) <= lim * (1 + 1e-6)
+            if tau[e, i] >= lim * (1 - 1e-6):
+                assert w[i] >= lim - tol  # clamped at +l: the law asks for at least +l
+                saturated += 1
+            elif tau[e, i] <= -lim * (1 - 1e-6):
+                assert w[i] <= -lim + tol
+                saturated += 1
+            else:
+                assert abs(tau[e, i] - w[i]) <= tol  # free: the law holds exactly
+    assert 3 <= saturated < 7 * E  # the case exercises both active and free rows
+    # Effort readout: the solved torque, the law at the predicted state, one saturation count per clamped row.
+    eng = ctrl._engine
+    np.testing.assert_array_equal(eng.applied_effort.numpy(), tau.astype(np.float32))
+    assert int(eng.saturation_count.numpy().sum()) == saturated
+    assert ctrl._engine.coupled_iterations.numpy().max() <= 9 + 2  # settled by the active-set iteration
+
+
+def _one_dof_model():
+    b = newton.ModelBuilder()
+    link = b.add_link(mass=2.0, com=wp.vec3(0.0, 0.1, 0.0), inertia=wp.mat33(0.02, 0, 0, 0, 0.03, 0, 0, 0, 0.04))
+    j = b.add_joint_revolute(-1, link, axis=(0.0, 0.0, 1.0), armature=0.01, label="hinge")
+    b.add_articulation([j])
+    return b.finalize(device="cpu")
+
+
+@pytest.mark.parametrize("limit", [1e6, 20.0])
+def test_coupled_reduces_to_stable_on_one_dof(limit):
+    model = _one_dof_model()
+    cfg = wpctrl.PDJointPosControllerConfig(["hinge"], None, None, 1e3, 1e2, limit, normalize_action=False)
+    out = {}
+    for pd in ("stable", "coupled"):
+        ctrl = wpctrl.build_controller(cfg, model, 100, 100, "explicit", explicit_pd=pd, inertia_update="substep")
+        s, c = model.state(), model.control()
+        ctrl.reset(s)
+        s.joint_q.assign(np.array([0.3], np.float32))
+        s.joint_qd.assign(np.array([-2.0], np.float32))
+        ctrl.set_action(np.array([[1.0]], np.float32), s)
+        ctrl.before_simulation_step(s, c)
+        out[pd] = float(c.joint_f.numpy()[0])
+    np.testing.assert_allclose(out["coupled"], out["stable"], rtol=1e-5)
+    if limit < 1e3:
+        assert out["coupled"] == pytest.approx(limit)
+
+
+def test_coupled_graph_capture_replays_bitwise():
+    model = build_panda(2)
+    ctrl = _coupled_ctrl(model, 50.0)
+    s, c, _, _, target = _setup(ctrl, model, np.random.default_rng(3))
+    act = wp.array(target, dtype=wp.float32)
+    q0, qd0 = wp.clone(s.joint_q), wp.clone(s.joint_qd)
+
+    def step():
+        ctrl.set_action(act, s)
+        for _ in range(ctrl.num_substeps):
+            ctrl.before_simulation_step(s, c)  # the state stays fixed: only the controller's launches replay
+
+    step()
+    eager = c.joint_f.numpy().copy()
+    assert np.abs(eager).max() > 0
+    c.joint_f.zero_()
+    s.joint_q.assign(q0)
+    s.joint_qd.assign(qd0)
+    with wp.ScopedCapture(device="cpu") as cap:
+        step()
+    c.joint_f.zero_()
+    wp.capture_launch(cap.graph)
+    np.testing.assert_array_equal(c.joint_f.numpy(), eager)
+
+
+def test_coupled_rejects_a_floating_base():
+    b = newton.ModelBuilder()
+    body = b.add_link(mass=1.0, inertia=wp.mat33(np.eye(3, dtype=np.float32) * 0.1))
+    j0 = b.add_joint_free(body)
+    link = b.add_link(mass=1.0, inertia=wp.mat33(np.eye(3, dtype=np.float32) * 0.1))
+    j1 = b.add_joint_revolute(body, link, axis=(0.0, 0.0, 1.0), label="hinge")
+    b.add_articulation([j0, j1])
+    model = b.finalize(device="cpu")
+    cfg = wpctrl.PDJointPosControllerConfig(["hinge"], None, None, 1e3, 1e2, 100.0, normalize_action=False)
+    with pytest.raises(wpctrl.ConfigError, match="coupled"):
+        wpctrl.build_controller(cfg, model, actuation="explicit", explicit_pd="coupled")
+    # stable PD falls back to Newton's JointSpaceResponse there
+    ctrl = wpctrl.build_controller(cfg, model, actuation="explicit", explicit_pd="stable")
+    assert ctrl._engine._fused is None and ctrl._engine._jsr is not None

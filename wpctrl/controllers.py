@@ -16,7 +16,7 @@ import numpy as np
 import warp as wp
 
 from . import config as cfg
-from .actuation import ActuationMixin, check_delay
+from .actuation import ActuationMixin, check_actuation_options
 from .binding import bind_joints
 from .engine import _Engine
 from .inputs import _action_array, _as_rows_array, _claim, _env_selection, _raise_on_nonfinite, _type_name
@@ -25,7 +25,6 @@ _ACTUATIONS = ("implicit", "explicit")
 _NAN_POLICIES = ("hold", "raise")
 _EXPLICIT_PD = ("naive", "stable", "coupled")
 _INERTIA_UPDATES = ("control", "substep")
-_CLIP_TARGETS = ("none", "joint_limits")
 
 
 class BaseController(ActuationMixin):
@@ -73,13 +72,7 @@ class BaseController(ActuationMixin):
         if inertia_update not in _INERTIA_UPDATES:
             raise ValueError(f"inertia_update: expected one of {_INERTIA_UPDATES}, got {inertia_update!r}")
         self.explicit_pd = explicit_pd
-        delay_range = check_delay(delay)
-        if not isinstance(track_effort, (bool, np.bool_)):
-            raise ValueError(f"track_effort: expected a bool, got {track_effort!r}")
-        if clip_targets not in _CLIP_TARGETS:
-            raise ValueError(f"clip_targets: expected one of {_CLIP_TARGETS}, got {clip_targets!r}")
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not -(2**31) <= int(seed) < 2**31:
-            raise ValueError(f"seed: expected an int32, got {seed!r}")
+        actuation_options = check_actuation_options(delay, track_effort, clip_targets, seed)
         self.clip_targets = clip_targets
         if isinstance(config, Mapping):
             configs = dict(config)
@@ -109,10 +102,7 @@ class BaseController(ActuationMixin):
             explicit_pd=explicit_pd,
             inertia_update=inertia_update,
             sim_dt=1.0 / sim_freq,
-            delay=delay_range,
-            track_effort=bool(track_effort),
-            clip_targets=clip_targets == "joint_limits",
-            seed=int(seed),
+            **actuation_options,
         )
         self._rows = slice(0, all_rows.count)
         self._cols = slice(0, all_rows.action_dim)

@@ -17,8 +17,9 @@ import warp as wp
 
 from . import config as cfg
 from . import config_ee as cfg_ee
-from .actuation import ActuationMixin, check_delay
+from .actuation import ActuationMixin, check_actuation_options
 from .binding import bind_joints
+from .ee import attach_ee_parts
 from .engine import _Engine
 from .inputs import _action_array, _as_rows_array, _claim, _env_selection, _raise_on_nonfinite, _type_name
 
@@ -26,7 +27,6 @@ _ACTUATIONS = ("implicit", "explicit")
 _NAN_POLICIES = ("hold", "raise")
 _EXPLICIT_PD = ("naive", "stable", "coupled")
 _INERTIA_UPDATES = ("control", "substep")
-_CLIP_TARGETS = ("none", "joint_limits")
 
 
 class BaseController(ActuationMixin):
@@ -74,13 +74,7 @@ class BaseController(ActuationMixin):
         if inertia_update not in _INERTIA_UPDATES:
             raise ValueError(f"inertia_update: expected one of {_INERTIA_UPDATES}, got {inertia_update!r}")
         self.explicit_pd = explicit_pd
-        delay_range = check_delay(delay)
-        if not isinstance(track_effort, (bool, np.bool_)):
-            raise ValueError(f"track_effort: expected a bool, got {track_effort!r}")
-        if clip_targets not in _CLIP_TARGETS:
-            raise ValueError(f"clip_targets: expected one of {_CLIP_TARGETS}, got {clip_targets!r}")
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not -(2**31) <= int(seed) < 2**31:
-            raise ValueError(f"seed: expected an int32, got {seed!r}")
+        actuation_options = check_actuation_options(delay, track_effort, clip_targets, seed)
         self.clip_targets = clip_targets
         if isinstance(config, Mapping):
             configs = dict(config)
@@ -115,15 +109,12 @@ class BaseController(ActuationMixin):
             explicit_pd=explicit_pd,
             inertia_update=inertia_update,
             sim_dt=1.0 / sim_freq,
-            delay=delay_range,
-            track_effort=bool(track_effort),
-            clip_targets=clip_targets == "joint_limits",
-            seed=int(seed),
+            **actuation_options,
         )
         self._rows = slice(0, all_rows.count)
         self._cols = slice(0, all_rows.action_dim)
         self._owner = True
-        ee_parts = _ee_parts(self._engine, parts, ee_specs)
+        ee_parts = attach_ee_parts(self._engine, parts, ee_specs)
         self._ee = ee_parts.get("")
         self.children: dict[str, BaseController] = {}
         if isinstance(config, Mapping):
@@ -391,23 +382,6 @@ class BaseController(ActuationMixin):
     def __repr__(self) -> str:
         inner = ", ".join(self.joint_names)
         return f"{type(self).__name__}(dof={self.action_dim}, num_envs={self.num_envs}, joints=({inner}))"
-
-
-def _ee_parts(engine: _Engine, parts, ee_specs) -> dict:
-    """Attach the EE launches of a mode's end-effector controllers to its engine; ``{uid: EEPart}``."""
-    if not ee_specs:
-        return {}
-    from .ee import EEPart
-
-    out = {}
-    r0 = c0 = 0
-    for uid, _, rows in parts:
-        if uid in ee_specs:
-            out[uid] = EEPart(ee_specs[uid], engine, r0, c0, rows.count)
-            engine.ee_parts.append(out[uid])
-        r0 += rows.count
-        c0 += rows.action_dim
-    return out
 
 
 class _ModelState:

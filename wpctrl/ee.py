@@ -388,4 +388,19 @@ class EEPart:
         return pose, jac
 
 
-__all__ = ["EEPart", "MAX_EE_DOF"]
+def attach_ee_parts(engine, parts, ee_specs: dict) -> dict:
+    """Attach the EE launches of a mode's end-effector controllers to its engine; ``{uid: EEPart}``.
+
+    ``parts`` lists ``(uid, config, rows)`` in the mode's row and action-column order."""
+    out = {}
+    r0 = c0 = 0
+    for uid, _, rows in parts:
+        if uid in ee_specs:
+            out[uid] = EEPart(ee_specs[uid], engine, r0, c0, rows.count)
+            engine.ee_parts.append(out[uid])
+        r0 += rows.count
+        c0 += rows.action_dim
+    return out
+
+
+__all__ = ["EEPart", "MAX_EE_DOF", "attach_ee_parts"]

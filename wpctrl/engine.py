@@ -7,8 +7,8 @@ an argument changed (:class:`_Launch`).
 
 Actuation state (issue 10), owned here: the per-env drive properties ``kp``/``kd``/``force_limit``/``friction``
 (num_envs, rows), initialised from the config and used by the explicit law, the acceleration gains and the model
-mirror; the device RNG counter; the optional delay ring buffer and effort readout (``None`` when off: the kernels
-branch on the null array and move no extra bytes).
+mirror; the device RNG counter; the optional delay ring buffer and effort readout (``None`` when off: the substep
+kernel variant compiled without them runs, moving no extra bytes).
 """
 
 from __future__ import annotations

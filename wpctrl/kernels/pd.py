@@ -14,10 +14,10 @@ Row parameters are shared by all envs; gains are ``(1 | num_envs, rows)`` arrays
 ``env if shape[0] > 1 else 0``. A row's coordinate is ``q_base[env] + q_off[row]`` in ``joint_q``/``joint_target_q``
 and its DOF ``qd_base[env] + qd_off[row]`` in ``joint_qd``/``joint_target_qd``/``joint_f``.
 
-Actuation options (issue 10), all off by default and then costing one branch on a null array:
+Actuation (issue 10): the drive properties ``kp``/``kd``/``force_limit`` are ``(num_envs, rows)`` in wpctrl (the
+batch rule still accepts ``(1, rows)``). The three options below are off by default and then compiled out
+(``wp.static`` variants of the set_action and substep kernels, all with the same parameters):
 
-- per-env drive properties: ``kp``/``kd``/``force_limit`` are ``(num_envs, rows)`` in wpctrl (the batch rule still
-  accepts ``(1, rows)``);
 - command delay: a ring buffer ``delay_q``/``delay_qd`` of shape ``(max_delay + 1, num_envs, rows)`` written by the
   substep kernel, read ``delay[env]`` substeps back; each row keeps its own ring head (no cross-thread race);
 - effort readout: ``computed_effort``/``applied_effort``/``saturation_count`` written by the substep kernel;

@@ -42,7 +42,7 @@ stage() {  # stage NAME LIMIT_S CMD...
 }
 
 stage cuda_tests 240 $PY -m pytest -q -p no:cacheprovider tests/test_cuda.py tests/test_semantics.py \
-  "tests/test_actuation.py::test_cuda_captured_randomisation_reaches_mujoco"
+  "tests/test_actuation.py::test_cuda_captured_randomisation_reaches_mujoco" tests/test_ee_cuda.py
 stage controller_step 200 $PY bench/controller_step.py --device "$DEVICE" --envs "$CTRL_ENVS" --repeats "$REPEATS" \
   --out "$WORK"
 stage profile_overhead 60 $PY bench/profile_overhead.py --device "$DEVICE" --envs 1,4k --repeats "$REPEATS" \

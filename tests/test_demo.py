@@ -65,7 +65,7 @@ def test_every_offered_combination_tracks_or_is_refused(solver, actuation, pd, t
     argv = [*TINY, "--solver", solver, "--actuation", actuation, "--out", str(out)]
     if pd is not None:
         argv += ["--explicit-pd", pd]
-    why = demo.unsupported(solver, actuation, pd or "stable", demo.default_sim_freq(solver, actuation))
+    why = demo.unsupported(solver, actuation, pd, demo.default_sim_freq(solver, actuation, pd))
     if why is not None:
         with pytest.raises(SystemExit) as e:
             main(argv)
@@ -86,9 +86,12 @@ def test_explicit_defaults_and_rates_that_do_not_track_are_refused(tmp_path, cap
     out = tmp_path / "demo"
     assert main([*TINY, "--actuation", "explicit", "--out", str(out)]) == 0
     s = load_summary(out)
-    assert s["explicit_pd"] == "stable" and s["sim_freq"] == demo.STABLE_MIN_SIM_FREQ
+    assert s["explicit_pd"] == "coupled" and s["sim_freq"] == 100
     for argv, fragment in [
-        (["--actuation", "explicit", "--sim-freq", "100"], "--explicit-pd stable at --sim-freq 100"),
+        (
+            ["--actuation", "explicit", "--explicit-pd", "stable", "--sim-freq", "100"],
+            "--explicit-pd stable at --sim-freq 100",
+        ),
         (["--solver", "featherstone", "--actuation", "explicit", "--sim-freq", "500"], "--solver featherstone at"),
         (["--actuation", "explicit", "--explicit-pd", "naive", "--sim-freq", "1000"], "--explicit-pd naive"),
     ]:

@@ -698,7 +698,7 @@ def test_strategies_cover_every_config_type():
     """The config strategy produces every config type and both mimic forms (a guard against a narrowed search)."""
     seen = set()
 
-    @settings(max_examples=200, deadline=None, database=None)
+    @settings(max_examples=200, deadline=None, database=None, derandomize=True)
     @given(control_mode(_LIMITS))
     def collect(mode):
         for c in mode.values() if isinstance(mode, dict) else [mode]:

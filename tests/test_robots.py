@@ -240,11 +240,12 @@ def test_invalid_arguments():
 
 def test_visual_shapes_are_massless_and_never_collide():
     with_shapes, without = panda(), panda(visual_shapes=False)
-    assert len(without.shape_type) == 0
-    assert len(with_shapes.shape_type) > 0
+    site = int(newton.ShapeFlags.SITE)
+    assert [f & site for f in without.shape_flags] == [site]  # only the panda_hand_tcp site
+    assert len(with_shapes.shape_type) > 1
     collide = int(newton.ShapeFlags.COLLIDE_SHAPES) | int(newton.ShapeFlags.COLLIDE_PARTICLES)
     assert all(flags & collide == 0 for flags in with_shapes.shape_flags)
-    assert all(flags & int(newton.ShapeFlags.VISIBLE) for flags in with_shapes.shape_flags)
+    assert all(flags & int(newton.ShapeFlags.VISIBLE) for flags in with_shapes.shape_flags if not flags & site)
     assert with_shapes.body_mass == without.body_mass
     for a, b in zip(with_shapes.body_com, without.body_com, strict=True):
         assert tuple(a) == tuple(b)
@@ -264,11 +265,12 @@ MODES = [
     "pd_joint_pos_vel",
     "pd_joint_delta_pos_vel",
 ]
+EE_MODES = ["pd_ee_delta_pos", "pd_ee_delta_pose", "pd_ee_pose", "pd_ee_target_delta_pos", "pd_ee_target_delta_pose"]
 
 
 def test_control_modes_numbers():
     modes = panda_control_modes()
-    assert list(modes) == MODES
+    assert list(modes) == MODES + EE_MODES  # the EE modes' numbers: tests/test_ee.py
     for mode, children in modes.items():
         assert list(children) == ["arm", "gripper"], mode
         g = children["gripper"]

@@ -15,6 +15,7 @@ from .config import (
     PDJointPosVelControllerConfig,
     PDJointVelControllerConfig,
 )
+from .config_ee import PDEEPosControllerConfig, PDEEPoseControllerConfig
 
 # The controllers (which import newton, ~4 s) load on first use, so that ``python -m wpctrl demo`` can say what it is
 # doing before the heavy imports and kernel compilation start.
@@ -28,6 +29,7 @@ _LAZY = {
     "PDJointVelController",
     "build_controller",
 }
+_LAZY_EE = {"PDEEPosController", "PDEEPoseController"}  # wpctrl.controllers_ee
 
 if TYPE_CHECKING:
     from .controllers import (
@@ -40,6 +42,7 @@ if TYPE_CHECKING:
         PDJointVelController,
         build_controller,
     )
+    from .controllers_ee import PDEEPosController, PDEEPoseController
 
 
 def __getattr__(name: str):
@@ -47,15 +50,15 @@ def __getattr__(name: str):
         import importlib
 
         return importlib.import_module(".distributed", __name__)
-    if name in _LAZY:
-        from . import controllers
+    if name in _LAZY or name in _LAZY_EE:
+        from . import controllers, controllers_ee
 
-        return getattr(controllers, name)
+        return getattr(controllers_ee if name in _LAZY_EE else controllers, name)
     raise AttributeError(f"module 'wpctrl' has no attribute {name!r}")
 
 
 def __dir__():
-    return sorted(set(globals()) | _LAZY | {"distributed"})
+    return sorted(set(globals()) | _LAZY | _LAZY_EE | {"distributed"})
 
 
 __version__ = "0.1.0"
@@ -66,6 +69,10 @@ __all__ = [
     "ConfigError",
     "ControllerConfig",
     "MimicJointError",
+    "PDEEPosController",
+    "PDEEPosControllerConfig",
+    "PDEEPoseController",
+    "PDEEPoseControllerConfig",
     "PDJointPosController",
     "PDJointPosControllerConfig",
     "PDJointPosMimicController",

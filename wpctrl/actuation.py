@@ -27,6 +27,7 @@ from .engine import DRIVE_FIELDS
 from .inputs import _env_selection, _is_torch
 
 _RAND_MODES = ("scale", "abs")
+_CLIP_TARGETS = ("none", "joint_limits")
 _F32_MAX = float(np.finfo(np.float32).max)
 
 
@@ -45,6 +46,23 @@ def check_delay(delay) -> tuple[int, int] | None:
     if hi > 1024:
         raise ValueError(f"delay: expected at most 1024 substeps (the history holds max + 1 targets), got {hi}")
     return lo, hi
+
+
+def check_actuation_options(delay, track_effort, clip_targets, seed) -> dict:
+    """Validate ``build_controller``'s actuation options; return the engine's keywords."""
+    delay_range = check_delay(delay)
+    if not isinstance(track_effort, (bool, np.bool_)):
+        raise ValueError(f"track_effort: expected a bool, got {track_effort!r}")
+    if clip_targets not in _CLIP_TARGETS:
+        raise ValueError(f"clip_targets: expected one of {_CLIP_TARGETS}, got {clip_targets!r}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not -(2**31) <= int(seed) < 2**31:
+        raise ValueError(f"seed: expected an int32, got {seed!r}")
+    return {
+        "delay": delay_range,
+        "track_effort": bool(track_effort),
+        "clip_targets": clip_targets == "joint_limits",
+        "seed": int(seed),
+    }
 
 
 def _host_values(name: str, value, shape_ok, n: int) -> np.ndarray:
@@ -116,7 +134,8 @@ class ActuationMixin:
         n_joints), torch / numpy / wp; finite and >= 0 (force_limit may be inf). Written to the per-env arrays, to
         Newton's per-DOF model arrays of those envs (gains with implicit actuation; effort limit and friction always)
         and the attached solver is notified. Validation reads the values on the host (a sync for device input): call
-        it outside captured graphs; use :meth:`randomize_drive_properties` inside them.
+        it outside captured graphs; use :meth:`randomize_drive_properties` inside them. With per-id values, list each
+        env once (a repeated id takes one of its rows, unspecified which).
         """
         eng = self._engine
         ids, mask = self._selection(env_ids)

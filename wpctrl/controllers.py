@@ -16,8 +16,10 @@ import numpy as np
 import warp as wp
 
 from . import config as cfg
-from .actuation import ActuationMixin, check_delay
+from . import config_ee as cfg_ee
+from .actuation import ActuationMixin, check_actuation_options
 from .binding import bind_joints
+from .ee import attach_ee_parts
 from .engine import _Engine
 from .inputs import _action_array, _as_rows_array, _claim, _env_selection, _raise_on_nonfinite, _type_name
 
@@ -25,7 +27,6 @@ _ACTUATIONS = ("implicit", "explicit")
 _NAN_POLICIES = ("hold", "raise")
 _EXPLICIT_PD = ("naive", "stable", "coupled")
 _INERTIA_UPDATES = ("control", "substep")
-_CLIP_TARGETS = ("none", "joint_limits")
 
 
 class BaseController(ActuationMixin):
@@ -76,13 +77,7 @@ class BaseController(ActuationMixin):
         if inertia_update not in _INERTIA_UPDATES:
             raise ValueError(f"inertia_update: expected one of {_INERTIA_UPDATES}, got {inertia_update!r}")
         self.explicit_pd = explicit_pd
-        delay_range = check_delay(delay)
-        if not isinstance(track_effort, (bool, np.bool_)):
-            raise ValueError(f"track_effort: expected a bool, got {track_effort!r}")
-        if clip_targets not in _CLIP_TARGETS:
-            raise ValueError(f"clip_targets: expected one of {_CLIP_TARGETS}, got {clip_targets!r}")
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not -(2**31) <= int(seed) < 2**31:
-            raise ValueError(f"seed: expected an int32, got {seed!r}")
+        actuation_options = check_actuation_options(delay, track_effort, clip_targets, seed)
         self.clip_targets = clip_targets
         if isinstance(config, Mapping):
             configs = dict(config)
@@ -97,10 +92,15 @@ class BaseController(ActuationMixin):
             names += cfg._joint_names(c)
         binding = bind_joints(model, names)  # once for the whole mode
         parts: list[tuple[str, Any, cfg.Rows]] = []
+        ee_specs: dict[str, cfg_ee.EESpec] = {}
         r0 = 0
         for uid, c in configs.items():
             n = len(c.joint_names)
-            parts.append((uid, c, cfg.config_rows(c, binding.qlimits[r0 : r0 + n])))
+            if isinstance(c, cfg_ee.EE_CONFIGS):  # end-effector controllers: position rows + an EE launch
+                rows, ee_specs[uid] = cfg_ee.ee_rows(c, binding.qlimits[r0 : r0 + n])
+            else:
+                rows = cfg.config_rows(c, binding.qlimits[r0 : r0 + n])
+            parts.append((uid, c, rows))
             r0 += n
         all_rows = cfg.Rows.concat([p[2] for p in parts])
         self._engine = _Engine(
@@ -112,14 +112,13 @@ class BaseController(ActuationMixin):
             explicit_pd=explicit_pd,
             inertia_update=inertia_update,
             sim_dt=1.0 / sim_freq,
-            delay=delay_range,
-            track_effort=bool(track_effort),
-            clip_targets=clip_targets == "joint_limits",
-            seed=int(seed),
+            **actuation_options,
         )
         self._rows = slice(0, all_rows.count)
         self._cols = slice(0, all_rows.action_dim)
         self._owner = True
+        ee_parts = attach_ee_parts(self._engine, parts, ee_specs)
+        self._ee = ee_parts.get("")
         self.children: dict[str, BaseController] = {}
         if isinstance(config, Mapping):
             r0 = c0 = 0
@@ -127,6 +126,7 @@ class BaseController(ActuationMixin):
                 child_cls = type(c).controller_cls
                 child = child_cls.__new__(child_cls)
                 child._init_view(c, self, slice(r0, r0 + rows.count), slice(c0, c0 + rows.action_dim), rows)
+                child._ee = ee_parts.get(uid)
                 self.children[uid] = child
                 r0 += rows.count
                 c0 += rows.action_dim
@@ -152,6 +152,8 @@ class BaseController(ActuationMixin):
                 )
         # Targets start at the model's initial pose (the first reset() re-initialises every env from the state).
         self._engine.reset(model_state, None, None, None, first=False)
+        for part in ee_parts.values():
+            wp.copy(part.target_pose, part.ee_pose)  # a defined target pose before any step
 
     def _init_view(self, config, parent: BaseController, rows_slice: slice, cols_slice: slice, rows: cfg.Rows):
         self.config = config
@@ -549,3 +551,7 @@ def build_controller(
     if not isinstance(config, cfg.ControllerConfig):
         raise cfg.ConfigError(f"config: expected a controller config or a dict of them, got {type(config).__name__}")
     return type(config).controller_cls(config, model, control_freq, sim_freq, **kw)
+
+
+# The end-effector classes set ``controller_cls`` on their configs (a dict mixing EE and joint configs needs them).
+from . import controllers_ee  # noqa: E402, F401

@@ -62,8 +62,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--explicit-pd",
         default=None,
-        help="build_controller's explicit_pd with --actuation explicit: stable (default) | naive (refused: does "
-        "not hold the Panda's gains) | ...",
+        help="build_controller's explicit_pd with --actuation explicit: coupled (default: PhysX's coupled implicit "
+        f"drive, 100 Hz) | stable (per-joint response, {STABLE_MIN_SIM_FREQ} Hz) | naive (refused: does not hold the "
+        "Panda's gains)",
     )
     p.add_argument(
         "--solver",
@@ -77,7 +78,7 @@ def _parser() -> argparse.ArgumentParser:
         "--sim-freq",
         type=int,
         default=None,
-        help=f"solver steps per second [Hz] (default 100; {STABLE_MIN_SIM_FREQ} with --actuation explicit, "
+        help=f"solver steps per second [Hz] (default 100; {STABLE_MIN_SIM_FREQ} with --explicit-pd stable, "
         f"{FEATHERSTONE_MIN_SIM_FREQ} with featherstone)",
     )
     p.add_argument("--control-freq", type=int, default=20, help="control steps per second [Hz]")
@@ -94,11 +95,15 @@ def _fail(parser: argparse.ArgumentParser, msg: str):
     raise SystemExit(2)
 
 
-def default_sim_freq(solver: str, actuation: str) -> int:
+DEFAULT_EXPLICIT_PD = "coupled"
+"""The demo's explicit PD law: PhysX's coupled implicit drive holds the Panda at 100 Hz (arm RMS 0.034 rad)."""
+
+
+def default_sim_freq(solver: str, actuation: str, explicit_pd: str | None = None) -> int:
     """The demo's solver rate [Hz] for a combination: the lowest rate measured to track the Panda at its gains."""
     if solver == "featherstone":
         return FEATHERSTONE_MIN_SIM_FREQ
-    if actuation == "explicit":
+    if actuation == "explicit" and (explicit_pd or DEFAULT_EXPLICIT_PD) == "stable":
         return STABLE_MIN_SIM_FREQ
     return 100
 
@@ -109,7 +114,8 @@ def unsupported(solver: str, actuation: str, explicit_pd: str | None, sim_freq: 
     Measured on the CPU with Newton 1.8 and MuJoCo-Warp 3.17 (this demo, 16 envs, 4 s; shared/reference/newton.md
     section 8 for XPBD and Featherstone's built-in drive). Arm RMS error against the desired trajectory: MuJoCo
     implicit 100 Hz 0.029 rad; stable explicit PD with MuJoCo 0.113 (100 Hz, chatter at the control rate), 0.047
-    (200 Hz), 0.034 (500 Hz), 0.032 (1 kHz); with Featherstone 0.032 (1 kHz), NaN at 100 Hz.
+    (200 Hz), 0.034 (500 Hz), 0.032 (1 kHz); with Featherstone 0.032 (1 kHz), NaN at 100 Hz. Coupled explicit PD
+    (PhysX's drive) with MuJoCo 0.034 at 100 Hz.
     """
     if solver == "xpbd":
         return (
@@ -121,13 +127,13 @@ def unsupported(solver: str, actuation: str, explicit_pd: str | None, sim_freq: 
         return (
             "--solver featherstone --actuation implicit: Featherstone's built-in joint drive is an explicit PD and "
             "diverges at the Panda's 1000/100 gains (NaN within 0.05 s at 100 Hz); use --actuation explicit "
-            "(stable PD, the default) or --solver mujoco"
+            "(coupled PD, the default) or --solver mujoco"
         )
     if actuation == "explicit" and explicit_pd == "naive":
         return (
             "--explicit-pd naive: the textbook explicit PD does not hold the Panda's 1000/100 gains (NaN within 0.1 s "
             "at 100 Hz; at 1 kHz finite but 0.8 rad RMS arm error: the 15 g fingers need a step under 2 m / Kd = "
-            "0.3 ms); use --explicit-pd stable (the default) or --actuation implicit"
+            "0.3 ms); use --explicit-pd coupled (the default) or --actuation implicit"
         )
     if solver == "featherstone" and sim_freq < FEATHERSTONE_MIN_SIM_FREQ:
         return (
@@ -139,8 +145,8 @@ def unsupported(solver: str, actuation: str, explicit_pd: str | None, sim_freq: 
         return (
             f"--explicit-pd stable at --sim-freq {sim_freq}: stable PD uses each joint's own response only, and "
             f"below {STABLE_MIN_SIM_FREQ} Hz the coupled arm chatters at the control rate (arm RMS 0.11 rad at 100 "
-            f"Hz vs 0.034 at 500 Hz); use --sim-freq {STABLE_MIN_SIM_FREQ} (its default) or more, or --actuation "
-            "implicit"
+            f"Hz vs 0.034 at 500 Hz); use --sim-freq {STABLE_MIN_SIM_FREQ} (its default) or more, --explicit-pd "
+            "coupled (100 Hz), or --actuation implicit"
         )
     return None
 
@@ -148,9 +154,9 @@ def unsupported(solver: str, actuation: str, explicit_pd: str | None, sim_freq: 
 def supported_combinations() -> str:
     """One line: what holds the Panda, at the demo's defaults."""
     return (
-        f"MuJoCo with --actuation implicit (100 Hz), MuJoCo with --actuation explicit --explicit-pd stable "
-        f"(--sim-freq {STABLE_MIN_SIM_FREQ}) and Featherstone with --actuation explicit (--sim-freq "
-        f"{FEATHERSTONE_MIN_SIM_FREQ}) hold ManiSkill's Panda gains"
+        f"MuJoCo with --actuation implicit (100 Hz), MuJoCo with --actuation explicit (coupled PD, 100 Hz; "
+        f"--explicit-pd stable at --sim-freq {STABLE_MIN_SIM_FREQ}) and Featherstone with --actuation explicit "
+        f"(--sim-freq {FEATHERSTONE_MIN_SIM_FREQ}) hold ManiSkill's Panda gains"
     )
 
 
@@ -160,8 +166,10 @@ def _check_args(parser, args) -> None:
         _fail(parser, f"--envs: expected >= 1, got {args.envs}")
     if not (args.seconds > 0 and math.isfinite(args.seconds)):
         _fail(parser, f"--seconds: expected a positive number, got {args.seconds}")
+    if args.actuation == "explicit" and args.explicit_pd is None:
+        args.explicit_pd = DEFAULT_EXPLICIT_PD
     if args.sim_freq is None:
-        args.sim_freq = default_sim_freq(args.solver, args.actuation)
+        args.sim_freq = default_sim_freq(args.solver, args.actuation, args.explicit_pd)
     if args.control_freq < 1 or args.sim_freq < 1 or args.sim_freq % args.control_freq:
         _fail(
             parser,
@@ -169,8 +177,6 @@ def _check_args(parser, args) -> None:
         )
     if args.actuation == "implicit" and args.explicit_pd is not None:
         _fail(parser, f"--explicit-pd {args.explicit_pd}: applies to --actuation explicit only")
-    if args.actuation == "explicit" and args.explicit_pd is None:
-        args.explicit_pd = "stable"
     why = unsupported(args.solver, args.actuation, args.explicit_pd, args.sim_freq)
     if why:
         _fail(parser, why)
@@ -232,6 +238,10 @@ def make_task(mode_name: str, ctrl, model, rest, num_envs: int, rng) -> JointTas
     feeds the per-env histogram), ``tracking_label``, ``names`` (one per tracked column, for the plot),
     ``action(t_next, state) -> (num_envs, action_dim) float32`` and ``tracked(t, state, control) -> (measured,
     desired, drive target)``, each (num_envs, len(names))."""
+    if mode_name.startswith("pd_ee"):  # end-effector modes: TCP actions and tracking (demo_ee.py)
+        from .demo_ee import EETask
+
+        return EETask(mode_name, ctrl, model, rest, num_envs, rng)
     return JointTask(mode_name, ctrl, model, rest, num_envs, rng)
 
 

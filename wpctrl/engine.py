@@ -7,15 +7,16 @@ an argument changed (:class:`_Launch`).
 
 Actuation state (issue 10), owned here: the per-env drive properties ``kp``/``kd``/``force_limit``/``friction``
 (num_envs, rows), initialised from the config and used by the explicit law, the acceleration gains and the model
-mirror; the device RNG counter; the optional delay ring buffer and effort readout (``None`` when off: the kernels
-branch on the null array and move no extra bytes).
+mirror; the device RNG counter; the optional delay ring buffer and effort readout (``None`` when off: the substep
+kernel variant compiled without them runs, moving no extra bytes).
 
 A mode without per-substep work (:attr:`_Engine.per_substep` False: implicit actuation, no interpolating row, no
 command delay, no effort readout, no per-substep inertia update) has drive targets that do not change between
 substeps: ``set_action`` writes them into the Control it knows (the last one given to ``substep`` or ``reset``) and
 ``substep`` launches nothing, unless it is handed a Control other than that one (a small write there, which it then
 knows). The per-env substep counter is then ``step + host_substeps``, the host counting the substeps since the last
-``set_action`` (see ``kernels/pd.py``).
+``set_action`` (see ``kernels/pd.py``). End-effector rows are ordinary position rows here: their EE launch writes
+their ``target_qpos`` before the joint launch, which writes them into the Control with the others.
 """
 
 from __future__ import annotations
@@ -211,6 +212,7 @@ class _Engine:
         self._launch_set_action: _Launch | None = None
         self._launch_substep: _Launch | None = None
         self._reset_count = 0
+        self.ee_parts: list = []  # wpctrl.ee.EEPart: end-effector controllers' launches (set_action, reset)
 
     def _needs_per_substep_work(self) -> bool:
         """Whether something must run before every solver substep: explicit torques (they depend on the measured
@@ -342,6 +344,8 @@ class _Engine:
                 },
                 self.device,
             )
+        for part in self.ee_parts:  # EE rows' targets first; the joint launch leaves them alone (act_col -1)
+            part.set_action(action, state)
         ln = self._launch_set_action
         ln.bind("action_in", action)
         ln.bind("joint_q_in", state.joint_q)
@@ -563,6 +567,8 @@ class _Engine:
         )
         if self.delay_range is not None and self.delay_range[1] > self.delay_range[0]:
             wp.launch(KA._bump_counter_kernel, dim=1, inputs=[self.rng_counter], device=self.device)
+        for part in self.ee_parts:
+            part.reset(state, env_ids, env_mask)
         if write_all:
             self.write_targets(control)
 

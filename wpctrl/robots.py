@@ -36,11 +36,13 @@ from wpctrl.config import (
     PDJointPosVelControllerConfig,
     PDJointVelControllerConfig,
 )
+from wpctrl.config_ee import PDEEPosControllerConfig, PDEEPoseControllerConfig
 
 __all__ = [
     "PANDA_ARM_JOINTS",
     "PANDA_BODIES",
     "PANDA_CONTROL_MODES",
+    "PANDA_FRAMES",
     "PANDA_GRIPPER_JOINTS",
     "PANDA_INITIAL_Q",
     "PANDA_JOINTS",
@@ -305,6 +307,7 @@ def panda(
     actuator_mode: newton.JointTargetMode = newton.JointTargetMode.POSITION_VELOCITY,
     inertia_merge: Literal["newton", "exact"] = "newton",
     visual_shapes: bool = True,
+    tcp_site: bool = True,
 ) -> newton.ModelBuilder:
     """Build one Franka Panda, fixed base at the origin, Z up.
 
@@ -337,6 +340,9 @@ def panda(
             fixed link, as SAPIEN/PhysX does). Mass and COM are identical in both modes.
         visual_shapes: Add rough, massless, non-colliding capsules and boxes for viewers (the base outline goes on the
             world, body -1). They never take part in contacts, so they cannot disturb the arm or touch the ground.
+        tcp_site: Keep the URDF's ``panda_hand_tcp`` frame (merged into ``panda_link7``) as a Newton site labelled
+            ``{label_prefix}/panda_hand_tcp``: the EE controllers' ``ee_link``. A site is a massless, non-colliding,
+            invisible reference shape, so the dynamics (and MuJoCo's articulation) do not change.
 
     Returns:
         A fresh ``newton.ModelBuilder`` (default up axis Z and gravity) holding one articulation. Use
@@ -420,6 +426,9 @@ def panda(
 
     if visual_shapes:
         _add_visual_shapes(builder, body_of, survivor, label)
+    if tcp_site:
+        link, x_tcp = survivor["panda_hand_tcp"]
+        builder.add_site(body_of[link], xform=_wp_transform(x_tcp), label=label("panda_hand_tcp"))
     return builder
 
 
@@ -462,7 +471,7 @@ def _add_visual_shapes(builder: newton.ModelBuilder, body_of: dict[str, int], su
 
 
 # ----------------------------------------------------------------------------------------------------------------------
-# ManiSkill 3's Panda control modes (mani_skill/agents/robots/panda/panda.py), joint-space modes only.
+# ManiSkill 3's Panda control modes (mani_skill/agents/robots/panda/panda.py).
 
 _ARM_STIFFNESS = 1e3
 _ARM_DAMPING = 1e2
@@ -470,14 +479,21 @@ _ARM_FORCE_LIMIT = 100
 _GRIPPER_STIFFNESS = 1e3
 _GRIPPER_DAMPING = 1e2
 _GRIPPER_FORCE_LIMIT = 100
+_EE_LINK = "panda_hand_tcp"
 
 
 def panda_control_modes() -> dict[str, dict[str, ControllerConfig]]:
-    """ManiSkill 3's joint-space Panda control modes, as fresh configs on every call.
+    """ManiSkill 3's Panda control modes, as fresh configs on every call.
 
-    The modes keep ManiSkill's order (its ``pd_ee_*`` modes are left out): ``pd_joint_delta_pos`` (the default),
-    ``pd_joint_pos``, ``pd_joint_target_delta_pos``, ``pd_joint_vel``, ``pd_joint_pos_vel``, ``pd_joint_delta_pos_vel``.
+    The joint-space modes first, in ManiSkill's relative order: ``pd_joint_delta_pos`` (the default),
+    ``pd_joint_pos``, ``pd_joint_target_delta_pos``, ``pd_joint_vel``, ``pd_joint_pos_vel``, ``pd_joint_delta_pos_vel``;
+    then the end-effector modes, in ManiSkill's relative order: ``pd_ee_delta_pos``, ``pd_ee_delta_pose``,
+    ``pd_ee_pose``, ``pd_ee_target_delta_pos``, ``pd_ee_target_delta_pose``.
     Each is ``{"arm": <arm config>, "gripper": <gripper config>}``, and every config object is a separate copy.
+
+    EE modes (``ee_link="panda_hand_tcp"``, the site :func:`panda` keeps; ``urdf_path=None``: a Panda loaded with
+    ``add_urdf(collapse_fixed_joints=True)`` needs ``urdf_path`` set to its URDF): delta position bounds ±0.1 [m],
+    delta rotation bounds ±0.1 [rad]; ``pd_ee_pose`` takes absolute poses (no bounds, not normalised).
 
     Arm: stiffness 1e3 [N·m/rad], damping 1e2 [N·m·s/rad], force limit 100 [N·m]; delta bounds ±0.1 [rad], velocity
     bounds ±1 [rad/s]. Gripper (all modes): a mimic position controller on both fingers, bounds [-0.01, 0.04] [m]
@@ -512,6 +528,20 @@ def panda_control_modes() -> dict[str, dict[str, ControllerConfig]]:
         force_limit=_GRIPPER_FORCE_LIMIT,
         mimic={"panda_finger_joint2": {"joint": "panda_finger_joint1"}},
     )
+    ee = dict(
+        stiffness=_ARM_STIFFNESS, damping=_ARM_DAMPING, force_limit=_ARM_FORCE_LIMIT, ee_link=_EE_LINK, urdf_path=None
+    )
+    arm_pd_ee_delta_pos = PDEEPosControllerConfig(list(arm), pos_lower=-0.1, pos_upper=0.1, **ee)
+    arm_pd_ee_delta_pose = PDEEPoseControllerConfig(
+        list(arm), pos_lower=-0.1, pos_upper=0.1, rot_lower=-0.1, rot_upper=0.1, **ee
+    )
+    arm_pd_ee_pose = PDEEPoseControllerConfig(
+        list(arm), pos_lower=None, pos_upper=None, use_delta=False, normalize_action=False, **ee
+    )
+    arm_pd_ee_target_delta_pos = copy.deepcopy(arm_pd_ee_delta_pos)
+    arm_pd_ee_target_delta_pos.use_target = True
+    arm_pd_ee_target_delta_pose = copy.deepcopy(arm_pd_ee_delta_pose)
+    arm_pd_ee_target_delta_pose.use_target = True
     modes = {
         "pd_joint_delta_pos": {"arm": arm_pd_joint_delta_pos, "gripper": gripper_pd_joint_pos},
         "pd_joint_pos": {"arm": arm_pd_joint_pos, "gripper": gripper_pd_joint_pos},
@@ -519,10 +549,28 @@ def panda_control_modes() -> dict[str, dict[str, ControllerConfig]]:
         "pd_joint_vel": {"arm": arm_pd_joint_vel, "gripper": gripper_pd_joint_pos},
         "pd_joint_pos_vel": {"arm": arm_pd_joint_pos_vel, "gripper": gripper_pd_joint_pos},
         "pd_joint_delta_pos_vel": {"arm": arm_pd_joint_delta_pos_vel, "gripper": gripper_pd_joint_pos},
+        "pd_ee_delta_pos": {"arm": arm_pd_ee_delta_pos, "gripper": gripper_pd_joint_pos},
+        "pd_ee_delta_pose": {"arm": arm_pd_ee_delta_pose, "gripper": gripper_pd_joint_pos},
+        "pd_ee_pose": {"arm": arm_pd_ee_pose, "gripper": gripper_pd_joint_pos},
+        "pd_ee_target_delta_pos": {"arm": arm_pd_ee_target_delta_pos, "gripper": gripper_pd_joint_pos},
+        "pd_ee_target_delta_pose": {"arm": arm_pd_ee_target_delta_pose, "gripper": gripper_pd_joint_pos},
     }
     # As ManiSkill's deepcopy_dict: every value is copied on its own, so no two modes share a config object.
     return {mode: {uid: copy.deepcopy(cfg) for uid, cfg in children.items()} for mode, children in modes.items()}
 
 
 PANDA_CONTROL_MODES: dict[str, dict[str, ControllerConfig]] = panda_control_modes()
-"""ManiSkill's joint-space Panda control modes (one shared instance; call :func:`panda_control_modes` for copies)."""
+
+
+def _panda_frames() -> dict[str, tuple[str | None, tuple[tuple[float, ...], tuple[float, ...]]]]:
+    survivor = _collapse("newton")[2]
+    return {
+        link: (s, (tuple(float(v) for v in x[0]), tuple(float(v) for v in x[1]))) for link, (s, x) in survivor.items()
+    }
+
+
+PANDA_FRAMES = _panda_frames()
+"""Every link of the Panda URDF as ``(kept body or None for the world, (position [m], quaternion xyzw))`` relative to
+the body it is merged into by ``collapse_fixed_joints`` (``panda_hand_tcp`` -> ``panda_link7``). The EE controllers
+fall back on it when a Panda model lacks ``ee_link`` and ``urdf_path`` cannot be read."""
+"""ManiSkill's Panda control modes (one shared instance; call :func:`panda_control_modes` for copies)."""

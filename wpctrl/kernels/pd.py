@@ -15,17 +15,16 @@ cross-row dependencies are arranged so that no thread reads what another writes:
 The per-env ``step`` array holds ManiSkill's ``_step`` minus ``host_substeps``, the substeps the host counted since the
 last ``set_action`` when the substep launch is elided (0 otherwise): ``_step = step + host_substeps``.
 
-Row parameters are shared by all envs; gains are ``(1 | num_envs, rows)`` arrays indexed with the batch rule
-``env if shape[0] > 1 else 0``. A row's coordinate in ``joint_q``/``joint_target_q`` and its DOF in
-``joint_qd``/``joint_target_qd``/``joint_f`` come from precomputed index tables (:func:`_at`): for a replicated layout a
-``(1, rows)`` table of env 0 plus ``env * stride`` (no per-env load, no index traffic at 1M envs), otherwise a flat
-``(num_envs, rows)`` table (one load instead of a chain of table loads).
+Row parameters are shared by all envs; gains are indexed with the batch rule ``env if shape[0] > 1 else 0``. A
+row's coordinate in ``joint_q``/``joint_target_q`` and its DOF in ``joint_qd``/``joint_target_qd``/``joint_f`` come
+from precomputed index tables (:func:`_at`): for a replicated layout a ``(1, rows)`` table of env 0 plus
+``env * stride`` (no per-env load, no index traffic at 1M envs), otherwise a flat ``(num_envs, rows)`` table (one load
+instead of a chain of table loads).
 
+Actuation (issue 10): the drive properties ``kp``/``kd``/``force_limit`` are ``(num_envs, rows)`` in wpctrl (the
+batch rule still accepts ``(1, rows)``). The three options below are off by default and then compiled out
+(``wp.static`` variants of the set_action and substep kernels, all with the same parameters):
 
-Actuation options (issue 10), all off by default and then costing one branch on a null array:
-
-- per-env drive properties: ``kp``/``kd``/``force_limit`` are ``(num_envs, rows)`` in wpctrl (the batch rule still
-  accepts ``(1, rows)``);
 - command delay: a ring buffer ``delay_q``/``delay_qd`` of shape ``(max_delay + 1, num_envs, rows)`` written by the
   substep kernel, read ``delay[env]`` substeps back; each row keeps its own ring head (no cross-thread race);
 - effort readout: ``computed_effort``/``applied_effort``/``saturation_count`` written by the substep kernel;

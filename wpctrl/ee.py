@@ -1,0 +1,406 @@
+"""The end-effector part of a control mode: chain binding in the Newton model, device arrays, recorded launches.
+
+An EE controller's joints are ordinary position rows of the mode's :class:`wpctrl.engine._Engine` (drive targets,
+interpolation, actuation, NaN hold, resets and graph capture work as for joint controllers); :class:`EEPart` adds
+one kernel launch before the joint launch of ``set_action`` (it writes those rows' ``target_qpos``) and one after
+the joint reset (measured EE pose, and the target pose with ``use_target``).
+
+Root frame: the body ``root_link_name`` when given; otherwise the articulation root: the child of the chain's top
+joint when that joint is free or fixed, or, for a fixed base merged into the world (``collapse_fixed_joints``), the
+world frame of env 0 moved with each env's own base placement (so every env reports poses relative to its base).
+"""
+
+from __future__ import annotations
+
+import difflib
+import logging
+import math
+import os
+import xml.etree.ElementTree as ET
+
+import newton
+import numpy as np
+import warp as wp
+
+from .config import ConfigError
+from .config_ee import MAX_EE_DOF, EESpec
+from .kernels import ee as KE
+
+logger = logging.getLogger("wpctrl")
+
+_MOVING = (int(newton.JointType.REVOLUTE), int(newton.JointType.PRISMATIC))
+_FIXED = int(newton.JointType.FIXED)
+
+
+def _short(label: str) -> str:
+    return label.rsplit("/", 1)[-1]
+
+
+def _find(labels, ids, name: str) -> list[int]:
+    return [i for i in ids if labels[i] == name or _short(labels[i]) == name]
+
+
+def _rpy_quat(rpy) -> np.ndarray:
+    """URDF roll-pitch-yaw (R = Rz Ry Rx) as an (x, y, z, w) quaternion."""
+    r, p, y = (float(v) for v in rpy)
+
+    def axis(k, a):
+        q = np.zeros(4)
+        q[k] = math.sin(0.5 * a)
+        q[3] = math.cos(0.5 * a)
+        return q
+
+    return _qmul(_qmul(axis(2, y), axis(1, p)), axis(0, r))
+
+
+def _qmul(a, b):
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    return np.array(
+        [
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz,
+        ]
+    )
+
+
+def _urdf_offset(path: str, ee_link: str, kept: set[str]) -> tuple[str, wp.transform]:
+    """Walk the URDF's fixed joints up from ``ee_link`` to a link in ``kept``; return it and the composed offset."""
+    try:
+        root = ET.parse(path).getroot()
+    except (OSError, ET.ParseError) as e:
+        raise ConfigError(f"urdf_path: cannot read {path!r} to locate ee_link {ee_link!r}: {e}") from e
+    parent_of = {}
+    for j in root.findall("joint"):
+        child = j.find("child").get("link")
+        parent_of[child] = j
+    links = {lk.get("name") for lk in root.findall("link")}
+    if ee_link not in links:
+        raise ConfigError(f"ee_link: link {ee_link!r} is neither in the model nor in urdf_path {path!r}")
+    wp_p = np.zeros(3)
+    wp_q = np.array([0.0, 0.0, 0.0, 1.0])
+    link = ee_link
+    while link not in kept:
+        j = parent_of.get(link)
+        if j is None:
+            raise ConfigError(f"ee_link: {ee_link!r} has no ancestor body in the model (searched {path!r})")
+        if j.get("type") != "fixed":
+            raise ConfigError(
+                f"ee_link: {ee_link!r} hangs off the moving joint {j.get('name')!r}, which the model lacks; "
+                f"the model and urdf_path {path!r} describe different robots"
+            )
+        o = j.find("origin")
+        xyz = np.array([float(v) for v in (o.get("xyz", "0 0 0") if o is not None else "0 0 0").split()])
+        rpy = [float(v) for v in (o.get("rpy", "0 0 0") if o is not None else "0 0 0").split()]
+        q = _rpy_quat(rpy)
+        # offset <- X_joint * offset
+        wp_p = xyz + _rotate(q, wp_p)
+        wp_q = _qmul(q, wp_q)
+        link = j.find("parent").get("link")
+    return link, wp.transform(wp.vec3(*wp_p), wp.quat(*wp_q))
+
+
+def _rotate(q, v):
+    x, y, z, w = q
+    u = np.array([x, y, z])
+    return v + 2.0 * np.cross(u, np.cross(u, v) + w * v)
+
+
+def _known_frame(link: str, labels, bodies0):
+    """A Panda link merged away (e.g. ``panda_hand_tcp``) from wpctrl.robots' URDF facts: ([body], offset) or None."""
+    from .robots import PANDA_FRAMES
+
+    entry = PANDA_FRAMES.get(link)
+    if entry is None or entry[0] is None:
+        return None
+    cand = _find(labels, bodies0, entry[0])
+    if len(cand) != 1:
+        return None
+    p, q = entry[1]
+    return cand, wp.transform(wp.vec3(*p), wp.quat(*q))
+
+
+def _is_merged_root(spec: EESpec) -> bool:
+    """Whether ``root_link_name`` is the robot's root link (absent from the model: merged into the world)."""
+    name = spec.root_link_name
+    if spec.urdf_path is not None and os.path.exists(spec.urdf_path):
+        try:
+            root = ET.parse(spec.urdf_path).getroot()
+        except (OSError, ET.ParseError):
+            return False
+        children = {j.find("child").get("link") for j in root.findall("joint")}
+        roots = [lk.get("name") for lk in root.findall("link") if lk.get("name") not in children]
+        return roots == [name]
+    from .robots import PANDA_FRAMES
+
+    return name in PANDA_FRAMES and PANDA_FRAMES[name][0] is None
+
+
+class EEPart:
+    """The device side of one EE controller inside a control mode's engine."""
+
+    def __init__(self, spec: EESpec, engine, row0: int, col0: int, num_dof: int):
+        self.spec = spec
+        self.engine = engine
+        self.row0 = row0
+        self.col0 = col0
+        self.num_dof = num_dof
+        model = engine.model
+        dev = engine.device
+        E = engine.num_envs
+        self._bind_chain(model, engine.binding, spec)
+
+        self.row_q_off = wp.array(engine.binding.q_off[row0 : row0 + num_dof], dtype=wp.int32, device=dev)
+        self.target_pose = wp.zeros((E, 7), dtype=wp.float32, device=dev)
+        self.ee_pose = wp.zeros((E, 7), dtype=wp.float32, device=dev)
+        self.ik_success = wp.ones(E, dtype=wp.int32, device=dev)
+        self._launch = None
+        self._chain_params = {
+            "chain_joint": self.chain_joint,
+            "chain_col": self.chain_col,
+            "joint_type": model.joint_type,
+            "joint_X_p": model.joint_X_p,
+            "joint_X_c": model.joint_X_c,
+            "joint_axis": model.joint_axis,
+            "joint_q_start": model.joint_q_start,
+            "joint_qd_start": model.joint_qd_start,
+            "env_root": self.env_root,
+            "ee_offset": self.ee_offset,
+        }
+
+    # -- binding ----------------------------------------------------------------------------------------------------
+
+    def _bind_chain(self, model, binding, spec: EESpec) -> None:
+        labels = list(model.body_label)
+        jlabels = list(model.joint_label)
+        world_count = binding.num_envs
+        bworld = model.body_world.numpy()
+        if world_count == 1 and (bworld == 0).sum() == 0:
+            bworld = np.zeros_like(bworld)
+        bodies0 = [b for b in range(len(labels)) if bworld[b] == 0]
+        jparent = model.joint_parent.numpy()
+        jchild = model.joint_child.numpy()
+        jtype = model.joint_type.numpy()
+        jxp = model.joint_X_p.numpy()
+
+        # The EE body and its offset: a body, a site/shape on a body, or a URDF link merged into a kept body.
+        offset = wp.transform_identity()
+        cand = _find(labels, bodies0, spec.ee_link)
+        if not cand:
+            slabels = list(getattr(model, "shape_label", []) or [])
+            sbody = model.shape_body.numpy() if len(slabels) else np.zeros(0, np.int32)
+            scand = [s for s in _find(slabels, range(len(slabels)), spec.ee_link) if sbody[s] in set(bodies0)]
+            if scand:
+                s = scand[0]
+                cand = [int(sbody[s])]
+                st = model.shape_transform.numpy()[s]
+                offset = wp.transform(wp.vec3(*st[:3]), wp.quat(*st[3:]))
+            elif spec.urdf_path is not None and os.path.exists(spec.urdf_path):
+                kept = {_short(labels[b]) for b in bodies0}
+                link, offset = _urdf_offset(spec.urdf_path, spec.ee_link, kept)
+                cand = _find(labels, bodies0, link)
+            elif (known := _known_frame(spec.ee_link, labels, bodies0)) is not None:
+                cand, offset = known
+                logger.info("ee_link %r: using wpctrl.robots.PANDA_FRAMES (not in the model)", spec.ee_link)
+            elif spec.urdf_path is not None:
+                _urdf_offset(spec.urdf_path, spec.ee_link, set())  # raises: cannot read urdf_path
+            else:
+                known = sorted({_short(labels[b]) for b in bodies0})
+                close = difflib.get_close_matches(spec.ee_link, known, n=5, cutoff=0.5)
+                raise ConfigError(
+                    f"ee_link: {spec.ee_link!r} is not a body or site of world 0 of the model"
+                    f"{'; close matches: ' + str(close) if close else '; the bodies: ' + str(known[:20])}"
+                    f" (give urdf_path to locate a link merged away by collapse_fixed_joints)"
+                )
+        if len(cand) > 1:
+            raise ConfigError(f"ee_link: {spec.ee_link!r} matches {len(cand)} bodies: {[labels[b] for b in cand]}")
+        ee_body = cand[0]
+
+        root_body = -1
+        root_name = spec.root_link_name
+        if root_name is not None and not _find(labels, bodies0, root_name) and _is_merged_root(spec):
+            root_name = None  # the URDF's root link, merged into the world (a fixed base): the default root
+        if root_name is not None:
+            rc = _find(labels, bodies0, spec.root_link_name)
+            if len(rc) != 1:
+                raise ConfigError(
+                    f"root_link_name: expected one body named {spec.root_link_name!r} in world 0, got {len(rc)}"
+                )
+            root_body = rc[0]
+
+        joint_of_child = np.full(len(labels), -1, np.int64)
+        joint_of_child[jchild] = np.arange(len(jchild))
+        chain = []
+        b = ee_body
+        while b != root_body and b >= 0:
+            j = int(joint_of_child[b])
+            if j < 0:
+                break
+            chain.append(j)
+            b = int(jparent[j])
+        if root_name is not None and b != root_body:
+            raise ConfigError(f"root_link_name: {spec.root_link_name!r} is not an ancestor of ee_link {spec.ee_link!r}")
+        chain.reverse()
+        world_top = False
+        if root_name is None and chain:
+            top = chain[0]
+            if int(jtype[top]) not in _MOVING:
+                chain = chain[1:]  # a free or fixed base: its child is the root link
+            else:
+                world_top = True
+        for j in chain:
+            if int(jtype[j]) not in _MOVING and int(jtype[j]) != _FIXED:
+                raise ConfigError(
+                    f"ee_link: the chain to {spec.ee_link!r} passes through joint {jlabels[j]!r} of type "
+                    f"{newton.JointType(int(jtype[j])).name}; EE control supports revolute, prismatic and fixed joints"
+                )
+        # Jacobian columns: the controlled rows, in row order.
+        ctrl0 = binding.joint_index[0, self.row0 : self.row0 + self.num_dof]
+        col = np.full(len(chain), -1, np.int32)
+        for c, j in enumerate(ctrl0):
+            if int(j) not in chain:
+                raise ConfigError(
+                    f"joint_names: {jlabels[int(j)]!r} is not on the kinematic chain from the root to ee_link "
+                    f"{spec.ee_link!r}"
+                )
+            col[chain.index(int(j))] = c
+        # Other envs: the same chain shifted by each world's first joint (checked against the row binding).
+        chain0 = np.asarray(chain, np.int64)
+        if world_count > 1:
+            jws = model.joint_world_start.numpy()[:world_count].astype(np.int64)
+            table = chain0[None, :] - jws[0] + jws[:, None]
+            ok = (jtype[table] == jtype[chain0][None, :]).all()
+            ctrl = binding.joint_index[:, self.row0 : self.row0 + self.num_dof]
+            ok = ok and (table[:, col >= 0][:, np.argsort(col[col >= 0])] == ctrl).all()
+            if not ok:
+                raise ConfigError(
+                    "ee_link: the EE chain is laid out differently across worlds; every world must hold the same robot"
+                )
+        else:
+            table = chain0[None, :]
+        root = np.tile(np.array([0, 0, 0, 0, 0, 0, 1], np.float32), (world_count, 1))
+        if world_top:
+            # env 0's world frame is the root frame; env e's base placement moves it.
+            t0 = jxp[table[0, 0]]
+            for e in range(world_count):
+                te = jxp[table[e, 0]]
+                if np.array_equal(te, t0):
+                    continue
+                x0 = wp.transform(wp.vec3(*t0[:3]), wp.quat(*t0[3:]))
+                xe = wp.transform(wp.vec3(*te[:3]), wp.quat(*te[3:]))
+                r = x0 * wp.transform_inverse(xe)
+                root[e] = np.array([*r.p, *r.q], np.float32)
+        dev = model.device
+        self.chain_joint = wp.array(table.astype(np.int32).reshape(world_count, len(chain)), dtype=wp.int32, device=dev)
+        self.chain_col = wp.array(col, dtype=wp.int32, device=dev)
+        self.env_root = wp.array(root, dtype=wp.transform, device=dev)
+        self.ee_offset = offset
+        self.ee_body = ee_body
+
+    # -- stages -----------------------------------------------------------------------------------------------------
+
+    def set_action(self, action: wp.array, state) -> None:
+        eng = self.engine
+        s = self.spec
+        if self._launch is None:
+            from .engine import _Launch
+
+            lo = eng.rows.action_low[self.col0 : self.col0 + 3]
+            hi = eng.rows.action_high[self.col0 : self.col0 + 3]
+            params = dict(self._chain_params)
+            params.update(
+                {
+                    "row_q_off": self.row_q_off,
+                    "env_q_base": eng.env_q_base,
+                    "row_qlo": eng.row_qlo,
+                    "row_qhi": eng.row_qhi,
+                    "clip_targets": int(getattr(eng, "clip_targets", False)),
+                    "row0": self.row0,
+                    "num_dof": self.num_dof,
+                    "col0": self.col0,
+                    "pose": int(s.pose),
+                    "use_delta": int(s.use_delta),
+                    "use_target": int(s.use_target),
+                    "normalize": int(s.normalize),
+                    "frame_bits": s.frame_bits,
+                    "solver": s.solver,
+                    "alpha": s.alpha,
+                    "lm_lambda": s.lm_lambda,
+                    "iterations": s.iterations,
+                    "tolerance": s.tolerance,
+                    "clik_dt": s.clik_dt,
+                    "clik_damping": s.clik_damping,
+                    "act_lo": wp.vec3(*(float(v) for v in np.nan_to_num(lo))),
+                    "act_hi": wp.vec3(*(float(v) for v in np.nan_to_num(hi))),
+                    "rot_scale": wp.vec3(*(float(v) for v in s.rot_scale)),
+                    "action_in": action,
+                    "joint_q_in": state.joint_q,
+                    "processed_action_out": eng.processed_action,
+                    "target_qpos_out": eng.target_qpos,
+                    "target_pose_out": self.target_pose,
+                    "ee_pose_out": self.ee_pose,
+                    "ik_success_out": self.ik_success,
+                }
+            )
+            kernel = KE._ee_clik_kernel if s.iterations > 1 else KE._ee_set_action_kernel
+            self._launch = _Launch(kernel, eng.num_envs, params, eng.device)
+        self._launch.bind("action_in", action)
+        self._launch.bind("joint_q_in", state.joint_q)
+        self._launch.launch()
+
+    def reset(self, state, env_ids, env_mask) -> None:
+        eng = self.engine
+        dim = eng.num_envs if env_ids is None else env_ids.shape[0]
+        if dim == 0:
+            return
+        p = self._chain_params
+        wp.launch(
+            KE._ee_reset_kernel,
+            dim=dim,
+            inputs=[
+                *p.values(),
+                self.row_q_off,
+                eng.env_q_base,
+                self.num_dof,
+                int(self.spec.use_target),
+                env_ids,
+                env_mask,
+                state.joint_q,
+                self.target_pose,
+                self.ee_pose,
+            ],
+            device=eng.device,
+        )
+
+    def fk_jacobian(self, joint_q: wp.array) -> tuple[wp.array, wp.array]:
+        """(num_envs, 7) EE poses and (num_envs, 6, num_dof) Jacobians at ``joint_q`` (allocates; not per step)."""
+        eng = self.engine
+        pose = wp.zeros((eng.num_envs, 7), dtype=wp.float32, device=eng.device)
+        jac = wp.zeros((eng.num_envs, 6, self.num_dof), dtype=wp.float32, device=eng.device)
+        wp.launch(
+            KE._ee_fk_jacobian_kernel,
+            dim=eng.num_envs,
+            inputs=[*self._chain_params.values(), self.row_q_off, eng.env_q_base, self.num_dof, joint_q, pose, jac],
+            device=eng.device,
+        )
+        return pose, jac
+
+
+def attach_ee_parts(engine, parts, ee_specs: dict) -> dict:
+    """Attach the EE launches of a mode's end-effector controllers to its engine; ``{uid: EEPart}``.
+
+    ``parts`` lists ``(uid, config, rows)`` in the mode's row and action-column order."""
+    out = {}
+    r0 = c0 = 0
+    for uid, _, rows in parts:
+        if uid in ee_specs:
+            out[uid] = EEPart(ee_specs[uid], engine, r0, c0, rows.count)
+            engine.ee_parts.append(out[uid])
+        r0 += rows.count
+        c0 += rows.action_dim
+    return out
+
+
+__all__ = ["EEPart", "MAX_EE_DOF", "attach_ee_parts"]

@@ -16,6 +16,7 @@ import warp as wp
 from harness import ARM, Harness, delta_arm, gripper
 
 import wpctrl
+from wpctrl.robots import panda_control_modes
 
 f32 = np.float32
 
@@ -65,6 +66,7 @@ def _control_step(h, action, control=None):
         (_mode(), "explicit", {}, 1 + 5),  # explicit torques: a substep launch each
         (_mode(), "implicit", {"delay": (1, 2)}, 1 + 5),  # the delay ring shifts every substep
         (_mode(), "implicit", {"track_effort": True}, 1 + 5),  # the effort readout reads the measured state
+        (panda_control_modes()["pd_ee_delta_pos"], "implicit", {}, 2),  # the EE launch, then the joint launch
     ],
 )
 def test_launches_per_control_step(monkeypatch, mode, actuation, options, expected):
@@ -75,18 +77,19 @@ def test_launches_per_control_step(monkeypatch, mode, actuation, options, expect
     counter = LaunchCounter(monkeypatch)
     _control_step(h, act)  # the first Control seen: the elided mode writes it once, in the first substep
     first = counter.take()
+    elided = not h.ctrl._engine.per_substep
+    assert elided == (expected <= 2)
     for _ in range(3):
         _control_step(h, act)
         launched = counter.take()
         assert len(launched) == expected, launched
-        assert launched[0].startswith("_set_action_kernel")
-    assert h.ctrl._engine.per_substep == (expected > 1)
-    if expected == 1:
-        assert len(first) == 2 and first[1].startswith("_targets_kernel")
+        assert launched[expected - 1 if elided else 0].startswith("_set_action_kernel"), launched
+    if elided:
+        assert len(first) == expected + 1 and first[-1].startswith("_targets_kernel"), first
     # A second Control (double buffering): one small write when it first appears in a step, then nothing.
     other = h.model.control()
     _control_step(h, act, other)
-    assert len(counter.take()) == (2 if expected == 1 else expected)
+    assert len(counter.take()) == (expected + 1 if elided else expected)
     _control_step(h, act, other)
     assert len(counter.take()) == expected
 

@@ -53,7 +53,13 @@ def _run(device, mode, actuation, acts, qs, resets, graph=False):
                 h.ctrl.reset(h.state, env_ids=mask)
             # .numpy() of a CPU array is a view of live memory: copy each step's values
             out.append(
-                (h.ctrl.target_qpos.numpy().copy(), h.drive_q(), h.drive_qd(), h.joint_f(), h.ctrl.step_counter.numpy())
+                (
+                    h.ctrl.target_qpos.numpy().copy(),
+                    h.drive_q(),
+                    h.drive_qd(),
+                    h.joint_f(),
+                    h.ctrl.step_counter.numpy().copy(),
+                )
             )
         return out
 

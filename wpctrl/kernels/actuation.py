@@ -36,11 +36,15 @@ def _select(tid: int, num_rows: int, env_ids_in: wp.array[wp.int32], env_mask_in
 
 
 @wp.func
-def _mirror(
+def _store(
     env: int,
     r: int,
     p: int,
     value: float,
+    kp_out: wp.array2d[float],
+    kd_out: wp.array2d[float],
+    force_limit_out: wp.array2d[float],
+    friction_out: wp.array2d[float],
     row_accel: wp.array[wp.int32],
     row_qd_off: wp.array[wp.int32],
     env_qd_base: wp.array[wp.int32],
@@ -50,8 +54,17 @@ def _mirror(
     joint_effort_limit_out: wp.array[float],
     joint_friction_out: wp.array[float],
 ):
-    """Write one property of (env, row) into Newton's per-DOF model array. Gains only with implicit actuation (the
-    ke/kd outputs are None otherwise); an acceleration row hands the solver Kp / r, Kd / r."""
+    """Write one property of (env, row) into its per-env array and mirror it into Newton's per-DOF model array.
+    Gains reach the model only with implicit actuation (the ke/kd outputs are None otherwise); an acceleration row
+    hands the solver Kp / r, Kd / r."""
+    if p == 0:
+        kp_out[env, r] = value
+    elif p == 1:
+        kd_out[env, r] = value
+    elif p == 2:
+        force_limit_out[env, r] = value
+    else:
+        friction_out[env, r] = value
     di = env_qd_base[env] + row_qd_off[r]
     if p < 2:
         if joint_target_ke_out:
@@ -114,19 +127,15 @@ def _randomize_drive_kernel(
             x = lo[p] + (hi[p] - lo[p]) * u
             if mode == MODE_SCALE:
                 x = nominal_in[p, r] * x
-            if p == 0:
-                kp_out[env, r] = x
-            elif p == 1:
-                kd_out[env, r] = x
-            elif p == 2:
-                force_limit_out[env, r] = x
-            else:
-                friction_out[env, r] = x
-            _mirror(
+            _store(
                 env,
                 r,
                 p,
                 x,
+                kp_out,
+                kd_out,
+                force_limit_out,
+                friction_out,
                 row_accel,
                 row_qd_off,
                 env_qd_base,
@@ -177,19 +186,15 @@ def _set_drive_kernel(
     for p in range(4):
         if enabled[p] != 0:
             x = values_in[p, b, rl]
-            if p == 0:
-                kp_out[env, r] = x
-            elif p == 1:
-                kd_out[env, r] = x
-            elif p == 2:
-                force_limit_out[env, r] = x
-            else:
-                friction_out[env, r] = x
-            _mirror(
+            _store(
                 env,
                 r,
                 p,
                 x,
+                kp_out,
+                kd_out,
+                force_limit_out,
+                friction_out,
                 row_accel,
                 row_qd_off,
                 env_qd_base,

@@ -31,22 +31,21 @@ import numpy as np  # noqa: E402
 import warp as wp  # noqa: E402
 
 from bench.common import (  # noqa: E402
-    DEFAULT_OUT,
-    Sync,
+    add_run_args,
     build_panda_model,
+    finish_run,
     fmt_envs,
     fmt_ratio,
     fmt_us,
-    load_average,
-    machine_info,
     md_table,
     measure_interleaved,
     meta_markdown,
     panda_mode,
     parse_envs,
+    parse_run_args,
     real_setup,
+    start_run,
     synthetic_setup,
-    write_results,
 )
 
 VARIANTS = {
@@ -175,35 +174,19 @@ def markdown(meta: dict, rows: list[dict], args) -> str:
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--device", default="cuda:0" if wp.is_cuda_available() else "cpu")
-    p.add_argument("--envs", default=None, help="comma list, k/M suffixes (default: cpu 1,64,1k,4k; cuda up to 1M)")
-    p.add_argument("--repeats", type=int, default=5)
-    p.add_argument("--min-time", type=float, default=None)
-    p.add_argument("--warmup", type=int, default=3)
+    add_run_args(
+        p,
+        envs_help="comma list, k/M suffixes (default: cpu 1,64,1k,4k; cuda up to 1M)",
+        variants=VARIANTS,
+        torch_threads=False,
+    )
     p.add_argument("--mode", default="pd_joint_target_delta_pos")
     p.add_argument("--interpolate", action="store_true")
     p.add_argument("--actuation", default="explicit", choices=["explicit", "implicit"])
-    p.add_argument("--variants", default=",".join(VARIANTS))
     p.add_argument("--eager", action="store_true", help="also time the eager calls")
     p.add_argument("--max-real-envs", type=int, default=4096)
-    p.add_argument("--clock", default="wall", choices=["wall", "thread"])
-    p.add_argument("--out", default=str(DEFAULT_OUT))
-    p.add_argument("--tag", default=None)
-    args = p.parse_args(argv)
-    args.variants = [v.strip() for v in args.variants.split(",") if v.strip()]
-
-    wp.init()
-    device = wp.get_device(args.device)
-    sync = Sync(device)
-    if args.clock == "thread" and device.is_cuda:
-        p.error("--clock thread only makes sense on the CPU device")
-    if args.min_time is None:
-        args.min_time = 0.02 if device.is_cuda else 0.05
-    if args.envs is None:
-        args.envs = "1,64,1k,4k,64k,256k,1M" if device.is_cuda else "1,64,1k,4k"
-    meta = machine_info(device)
-    meta.update({"args": vars(args), "loadavg_start": load_average()})
-    print(meta_markdown(meta), flush=True)
+    args = parse_run_args(p, argv)
+    device, sync, meta = start_run(p, args, cpu_envs="1,64,1k,4k", cuda_envs="1,64,1k,4k,64k,256k,1M")
     rows = []
     small_model = None
     t0 = time.perf_counter()
@@ -224,11 +207,7 @@ def main(argv=None):
             )
         rows += got
         del model
-    meta["wall_s"] = time.perf_counter() - t0
-    meta["loadavg_end"] = load_average()
-    tag = args.tag or ("cuda" if device.is_cuda else "cpu")
-    j, m = write_results(args.out, f"actuation_cost_{tag}", meta, rows, markdown(meta, rows, args))
-    print(f"wrote {j} and {m}", flush=True)
+    finish_run(args, device, meta, rows, t0, "actuation_cost", lambda: markdown(meta, rows, args))
 
 
 if __name__ == "__main__":

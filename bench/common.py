@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import copy
 import datetime
 import inspect
@@ -344,6 +345,77 @@ def load_average() -> list[float]:
         return list(os.getloadavg())
     except OSError:
         return []
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# Command line and run bookkeeping of the step benchmarks (controller_step, ee_step, actuation_cost)
+
+
+def add_run_args(p: argparse.ArgumentParser, *, envs_help: str, variants, torch_threads: bool = True) -> None:
+    """The options every step benchmark takes (the script adds its own): device, sizes, timing, variants, output."""
+    p.add_argument("--device", default="cuda:0" if wp.is_cuda_available() else "cpu")
+    p.add_argument("--envs", default=None, help=envs_help)
+    p.add_argument("--repeats", type=int, default=5, help="timed samples per row (median reported)")
+    p.add_argument("--min-time", type=float, default=None, help="seconds per sample (default cpu 0.05, cuda 0.02)")
+    p.add_argument("--warmup", type=int, default=3)
+    p.add_argument("--variants", default=",".join(variants))
+    p.add_argument(
+        "--clock",
+        default="wall",
+        choices=["wall", "thread"],
+        help="wall time (default) or the calling thread's CPU time (robust on a shared CPU)",
+    )
+    if torch_threads:
+        p.add_argument(
+            "--torch-threads",
+            type=int,
+            default=None,
+            help="torch.set_num_threads (Warp's CPU backend is single-threaded; --clock thread forces 1)",
+        )
+    p.add_argument("--out", default=str(DEFAULT_OUT))
+    p.add_argument("--tag", default=None, help="file-name suffix (default: the device kind)")
+
+
+def parse_run_args(p: argparse.ArgumentParser, argv) -> argparse.Namespace:
+    """Parse; ``--variants`` becomes a list."""
+    args = p.parse_args(argv)
+    args.variants = [v.strip() for v in args.variants.split(",") if v.strip()]
+    return args
+
+
+def start_run(p, args, *, cpu_envs: str, cuda_envs: str, thread_clock_cpu_only: bool = True):
+    """Initialise Warp, apply the device-dependent defaults (``--min-time``, ``--envs``) and the clock / torch thread
+    settings, print the machine metadata. Returns (device, sync, meta)."""
+    wp.init()
+    device = wp.get_device(args.device)
+    sync = Sync(device)
+    if args.clock == "thread":
+        if thread_clock_cpu_only and device.is_cuda:
+            p.error("--clock thread only makes sense on the CPU device (GPU work runs on no host thread)")
+        if hasattr(args, "torch_threads"):
+            args.torch_threads = 1
+    if getattr(args, "torch_threads", None):
+        import torch
+
+        torch.set_num_threads(args.torch_threads)
+    if args.min_time is None:
+        args.min_time = 0.02 if device.is_cuda else 0.05
+    if args.envs is None:
+        args.envs = cuda_envs if device.is_cuda else cpu_envs
+    meta = machine_info(device)
+    meta.update({"args": vars(args), "loadavg_start": load_average()})
+    print(meta_markdown(meta), flush=True)
+    return device, sync, meta
+
+
+def finish_run(args, device, meta: dict, rows: list[dict], t_start: float, stem: str, render) -> None:
+    """Record the run's wall time and end load into ``meta``, then write ``<out>/<stem>_<tag>.{json,md}`` with the
+    Markdown from ``render()`` (called after ``meta`` is complete)."""
+    meta["wall_s"] = time.perf_counter() - t_start
+    meta["loadavg_end"] = load_average()
+    tag = args.tag or ("cuda" if device.is_cuda else "cpu")
+    j, m = write_results(args.out, f"{stem}_{tag}", meta, rows, render())
+    print(f"wrote {j} and {m}", flush=True)
 
 
 # ----------------------------------------------------------------------------------------------------------------------

@@ -30,22 +30,22 @@ import torch  # noqa: E402
 import warp as wp  # noqa: E402
 
 from bench.common import (  # noqa: E402
-    DEFAULT_OUT,
     Sync,
+    add_run_args,
     build_panda_model,
+    finish_run,
     fmt_envs,
     fmt_ratio,
     fmt_us,
-    load_average,
-    machine_info,
     md_table,
     measure_interleaved,
     meta_markdown,
     panda_mode,
     parse_envs,
+    parse_run_args,
     real_setup,
+    start_run,
     synthetic_setup,
-    write_results,
 )
 from bench.reference_torch import TorchCombinedController  # noqa: E402
 
@@ -286,56 +286,22 @@ def markdown(meta: dict, rows: list[dict], traffic: dict) -> str:
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--device", default="cuda:0" if wp.is_cuda_available() else "cpu")
-    p.add_argument("--envs", default=None, help="comma list, k/M suffixes (default: cpu 1,64,1k,4k,16k; cuda up to 1M)")
-    p.add_argument("--repeats", type=int, default=5, help="timed samples per row (median reported)")
-    p.add_argument("--min-time", type=float, default=None, help="seconds per sample (default cpu 0.05, cuda 0.02)")
-    p.add_argument("--warmup", type=int, default=3)
+    add_run_args(
+        p, envs_help="comma list, k/M suffixes (default: cpu 1,64,1k,4k,16k; cuda up to 1M)", variants=VARIANTS
+    )
     p.add_argument("--mode", default="pd_joint_target_delta_pos")
     p.add_argument("--interpolate", default="both", choices=["both", "on", "off"])
     p.add_argument("--actuation", default="explicit", choices=["explicit", "implicit"])
-    p.add_argument("--variants", default=",".join(VARIANTS))
     p.add_argument(
         "--max-real-envs",
         type=int,
         default=4096,
         help="above this N use the synthetic layout instead of replicating N Pandas",
     )
-    p.add_argument(
-        "--clock",
-        default="wall",
-        choices=["wall", "thread"],
-        help="wall time (default) or the calling thread's CPU time (robust on a shared CPU; CPU only)",
-    )
-    p.add_argument(
-        "--torch-threads",
-        type=int,
-        default=None,
-        help="torch.set_num_threads (Warp's CPU backend is single-threaded; --clock thread forces 1)",
-    )
-    p.add_argument("--out", default=str(DEFAULT_OUT))
-    p.add_argument("--tag", default=None, help="file-name suffix (default: the device kind)")
-    args = p.parse_args(argv)
-    args.variants = [v.strip() for v in args.variants.split(",") if v.strip()]
-
-    wp.init()
-    device = wp.get_device(args.device)
-    sync = Sync(device)
-    if args.clock == "thread":
-        if device.is_cuda:
-            p.error("--clock thread only makes sense on the CPU device (GPU work runs on no host thread)")
-        args.torch_threads = 1
-    if args.torch_threads:
-        torch.set_num_threads(args.torch_threads)
-    if args.min_time is None:
-        args.min_time = 0.02 if device.is_cuda else 0.05
-    if args.envs is None:
-        args.envs = "1,64,1k,4k,16k,64k,256k,1M" if device.is_cuda else "1,64,1k,4k,16k"
+    args = parse_run_args(p, argv)
+    device, sync, meta = start_run(p, args, cpu_envs="1,64,1k,4k,16k", cuda_envs="1,64,1k,4k,16k,64k,256k,1M")
     envs = parse_envs(args.envs)
     interps = {"both": [False, True], "on": [True], "off": [False]}[args.interpolate]
-    meta = machine_info(device)
-    meta.update({"args": vars(args), "loadavg_start": load_average()})
-    print(meta_markdown(meta), flush=True)
 
     rows = []
     small_model = None
@@ -372,12 +338,15 @@ def main(argv=None):
         del model
         if device.is_cuda:
             torch.cuda.empty_cache()
-    meta["wall_s"] = time.perf_counter() - t_start
-    meta["loadavg_end"] = load_average()
-    traffic = traffic_bytes(panda_mode(args.mode, False), 5, args.actuation == "explicit")
-    tag = args.tag or ("cuda" if device.is_cuda else "cpu")
-    j, m = write_results(args.out, f"controller_step_{tag}", meta, rows, markdown(meta, rows, traffic))
-    print(f"wrote {j} and {m}", flush=True)
+    finish_run(
+        args,
+        device,
+        meta,
+        rows,
+        t_start,
+        "controller_step",
+        lambda: markdown(meta, rows, traffic_bytes(panda_mode(args.mode, False), 5, args.actuation == "explicit")),
+    )
 
 
 if __name__ == "__main__":

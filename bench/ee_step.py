@@ -34,21 +34,21 @@ import torch  # noqa: E402
 import warp as wp  # noqa: E402
 
 from bench.common import (  # noqa: E402
-    DEFAULT_OUT,
     Sync,
+    add_run_args,
     build_panda_model,
+    finish_run,
     fmt_envs,
     fmt_ratio,
     fmt_us,
-    load_average,
-    machine_info,
     md_table,
     measure,
     measure_interleaved,
     meta_markdown,
     panda_mode,
     parse_envs,
-    write_results,
+    parse_run_args,
+    start_run,
 )
 
 VARIANTS = ["wpctrl_eager", "wpctrl_graph", "torch_eager", "torch_graph"]
@@ -314,38 +314,17 @@ def markdown(meta: dict, rows: list[dict]) -> str:
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--device", default="cuda:0" if wp.is_cuda_available() else "cpu")
-    p.add_argument("--envs", default=None, help="comma list, k/M suffixes (default: cpu 1,64,1k,4k; cuda 1..64k)")
+    add_run_args(p, envs_help="comma list, k/M suffixes (default: cpu 1,64,1k,4k; cuda 1..64k)", variants=VARIANTS)
     p.add_argument("--mode", default="pd_ee_delta_pose")
-    p.add_argument("--repeats", type=int, default=5)
-    p.add_argument("--min-time", type=float, default=None)
-    p.add_argument("--warmup", type=int, default=3)
-    p.add_argument("--variants", default=",".join(VARIANTS))
     p.add_argument("--physics-envs", type=int, default=None, help="time MuJoCo-Warp at this N (default: cuda 4096)")
-    p.add_argument("--clock", default="wall", choices=["wall", "thread"])
-    p.add_argument("--torch-threads", type=int, default=None)
-    p.add_argument("--out", default=str(DEFAULT_OUT))
-    p.add_argument("--tag", default=None)
-    args = p.parse_args(argv)
-    args.variants = [v.strip() for v in args.variants.split(",") if v.strip()]
+    args = parse_run_args(p, argv)
     if args.mode not in ("pd_ee_delta_pose",):
         p.error("--mode: the torch baseline ports pd_ee_delta_pose only")
-    wp.init()
-    device = wp.get_device(args.device)
-    sync = Sync(device)
-    if args.clock == "thread":
-        args.torch_threads = 1
-    if args.torch_threads:
-        torch.set_num_threads(args.torch_threads)
-    if args.min_time is None:
-        args.min_time = 0.02 if device.is_cuda else 0.05
-    if args.envs is None:
-        args.envs = "1,64,1k,4k,16k,64k" if device.is_cuda else "1,64,1k,4k"
+    device, sync, meta = start_run(
+        p, args, cpu_envs="1,64,1k,4k", cuda_envs="1,64,1k,4k,16k,64k", thread_clock_cpu_only=False
+    )
     if args.physics_envs is None:
         args.physics_envs = 4096 if device.is_cuda else -1
-    meta = machine_info(device)
-    meta.update({"args": vars(args), "loadavg_start": load_average()})
-    print(meta_markdown(meta), flush=True)
     rows = []
     t_start = time.perf_counter()
     for n in parse_envs(args.envs):
@@ -370,11 +349,7 @@ def main(argv=None):
         rows += got
         if device.is_cuda:
             torch.cuda.empty_cache()
-    meta["wall_s"] = time.perf_counter() - t_start
-    meta["loadavg_end"] = load_average()
-    tag = args.tag or ("cuda" if device.is_cuda else "cpu")
-    j, m = write_results(args.out, f"ee_step_{tag}", meta, rows, markdown(meta, rows))
-    print(f"wrote {j} and {m}", flush=True)
+    finish_run(args, device, meta, rows, t_start, "ee_step", lambda: markdown(meta, rows))
 
 
 if __name__ == "__main__":

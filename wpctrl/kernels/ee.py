@@ -26,6 +26,7 @@ from .ee_math import (
     _euler_xyz,
     _jacobian,
     _log6,
+    _measured_q,
     _read_pose,
     _std,
     _store_target,
@@ -103,11 +104,7 @@ def _make_set_action_kernel(clik: bool):
         for c in range(action_in.shape[1]):
             if not wp.isfinite(action_in[env, c]):
                 return
-        q_base = env_q_base[env]
-        q0 = vecD()
-        for c in range(MAX_DOF):
-            if c < num_dof:
-                q0[c] = joint_q_in[q_base + row_q_off[c]]
+        q0 = _measured_q(env, row_q_off, env_q_base, num_dof, joint_q_in)
 
         # Processed action (ManiSkill's _preprocess_action).
         act = vecD()
@@ -267,10 +264,7 @@ def _ee_reset_kernel(
     if env_mask_in:
         if not env_mask_in[env]:
             return
-    q0 = vecD()
-    for c in range(MAX_DOF):
-        if c < num_dof:
-            q0[c] = joint_q_in[env_q_base[env] + row_q_off[c]]
+    q0 = _measured_q(env, row_q_off, env_q_base, num_dof, joint_q_in)
     t_ee, t_joint, axes, origins, kinds = _chain_fk(
         env,
         chain_joint,
@@ -315,10 +309,7 @@ def _ee_fk_jacobian_kernel(
 ):
     """The EE pose (root frame) and its geometric Jacobian (6, num_dof) per env, from ``joint_q``."""
     env = wp.tid()
-    q0 = vecD()
-    for c in range(MAX_DOF):
-        if c < num_dof:
-            q0[c] = joint_q_in[env_q_base[env] + row_q_off[c]]
+    q0 = _measured_q(env, row_q_off, env_q_base, num_dof, joint_q_in)
     t_ee, t_joint, axes, origins, kinds = _chain_fk(
         env,
         chain_joint,

@@ -116,6 +116,18 @@ def _log6(t: wp.transform):
 
 
 @wp.func
+def _measured_q(
+    env: int, row_q_off: wp.array[wp.int32], env_q_base: wp.array[wp.int32], num_dof: int, joint_q: wp.array[float]
+):
+    """The env's measured positions [rad or m] of the controlled joints (columns 0..num_dof-1; the rest zero)."""
+    q = vecD()
+    for c in range(MAX_DOF):
+        if c < num_dof:
+            q[c] = joint_q[env_q_base[env] + row_q_off[c]]
+    return q
+
+
+@wp.func
 def _chain_fk(
     env: int,
     chain_joint: wp.array2d[wp.int32],

@@ -30,6 +30,7 @@ import warp as wp
 
 from .. import config as _cfg
 from .inertia import chain_funcs
+from .pd import _bidx
 
 wp.set_module_options({"enable_backward": False})
 
@@ -50,12 +51,6 @@ def coupled_kernel(nj: int, n: int, nr: int) -> wp.Kernel:
     chain_rows_factor, MatR, VecR = chain_funcs(nj, n, nr)
     row_pos = wp.constant(_ROW_POS)
     flag_vel = wp.constant(_FLAG_VEL_TARGET)
-
-    @wp.func
-    def _bidx(m: int, env: int):
-        if m > 1:
-            return env
-        return 0
 
     @wp.func
     def solve_masked(A: MatR, dinv: VecR, rhs: VecR, free: VecR, nr_rt: int):

@@ -35,6 +35,7 @@ from .ee_math import (
     vec6,
     vecD,
 )
+from .pd import _action_finite, _scale
 
 wp.set_module_options({"enable_backward": False})
 
@@ -101,18 +102,14 @@ def _make_set_action_kernel(clik: bool):
         An env whose action holds NaN/Inf (any column of the whole mode) is left untouched, as the joint kernel does.
         """
         env = wp.tid()
-        for c in range(action_in.shape[1]):
-            if not wp.isfinite(action_in[env, c]):
-                return
+        if not _action_finite(action_in, env):
+            return
         q0 = _measured_q(env, row_q_off, env_q_base, num_dof, joint_q_in)
 
         # Processed action (ManiSkill's _preprocess_action).
         act = vecD()
         for k in range(3):
-            a = action_in[env, col0 + k]
-            if normalize != 0:
-                a = 0.5 * (act_hi[k] + act_lo[k]) + (0.5 * (act_hi[k] - act_lo[k])) * wp.clamp(a, -1.0, 1.0)
-            act[k] = a
+            act[k] = _scale(action_in[env, col0 + k], act_lo[k], act_hi[k], normalize)
         if pose != 0:
             r = wp.vec3(action_in[env, col0 + 3], action_in[env, col0 + 4], action_in[env, col0 + 5])
             if normalize != 0:

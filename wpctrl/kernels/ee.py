@@ -328,15 +328,3 @@ def _ee_fk_jacobian_kernel(
         for c in range(MAX_DOF):
             if c < num_dof:
                 jacobian_out[env, k, c] = jac[k, c]
-
-
-@wp.kernel
-def _copy_pose_kernel(
-    # In:
-    src_in: wp.array2d[float],
-    # Out:
-    dst_out: wp.array2d[float],
-):
-    """Copy (num_envs, 7) pose rows."""
-    i, j = wp.tid()
-    dst_out[i, j] = src_in[i, j]

@@ -120,25 +120,22 @@ class DistContext:
         dev = torch.device("cuda", int(self.device.split(":")[1])) if self.backend == "nccl" else torch.device("cpu")
         return torch.as_tensor(np.asarray(values, dtype=np.float64).reshape(-1), device=dev)
 
-    def all_reduce_sum(self, values) -> np.ndarray:
-        """Element-wise sum over ranks of a flat float64 vector (NaN propagates: a diverged rank shows)."""
+    def _all_reduce(self, values, op: str) -> np.ndarray:
         a = np.asarray(values, dtype=np.float64).reshape(-1)
         if not self.distributed:
             return a.copy()
         _, dist = _require_torch()
         t = self._tensor(a)
-        dist.all_reduce(t, op=dist.ReduceOp.SUM)
+        dist.all_reduce(t, op=getattr(dist.ReduceOp, op))
         return t.cpu().numpy()
+
+    def all_reduce_sum(self, values) -> np.ndarray:
+        """Element-wise sum over ranks of a flat float64 vector (NaN propagates: a diverged rank shows)."""
+        return self._all_reduce(values, "SUM")
 
     def all_reduce_max(self, values) -> np.ndarray:
         """Element-wise max over ranks of a flat float64 vector."""
-        a = np.asarray(values, dtype=np.float64).reshape(-1)
-        if not self.distributed:
-            return a.copy()
-        _, dist = _require_torch()
-        t = self._tensor(a)
-        dist.all_reduce(t, op=dist.ReduceOp.MAX)
-        return t.cpu().numpy()
+        return self._all_reduce(values, "MAX")
 
     def all_gather(self, values) -> np.ndarray:
         """(world_size, n) float64: every rank's flat vector of n values (same n on every rank), on every rank."""

@@ -1,4 +1,4 @@
-"""wpctrl: ManiSkill 3's PD joint controllers as Warp kernels on Newton's arrays, for thousands of parallel envs.
+"""wpctrl: ManiSkill 3's joint and end-effector controllers as Warp kernels on Newton's arrays, for many envs.
 
 Public import path: ``import wpctrl``.
 """

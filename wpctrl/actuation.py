@@ -23,7 +23,7 @@ from collections.abc import Sequence
 import numpy as np
 import warp as wp
 
-from .engine import DRIVE_FIELDS
+from .drive_props import DRIVE_FIELDS
 from .inputs import _env_selection, _is_torch
 
 _RAND_MODES = ("scale", "abs")

@@ -305,7 +305,7 @@ class EEPart:
         eng = self.engine
         s = self.spec
         if self._launch is None:
-            from .engine import _Launch
+            from .launch import _Launch
 
             lo = eng.rows.action_low[self.col0 : self.col0 + 3]
             hi = eng.rows.action_high[self.col0 : self.col0 + 3]

@@ -25,6 +25,7 @@ import warp as wp
 from .config import ConfigError
 from .config_ee import MAX_EE_DOF, EESpec
 from .kernels import ee as KE
+from .launch import PER_ENV_BLOCK_DIM, _Launch
 
 logger = logging.getLogger("wpctrl")
 
@@ -305,8 +306,6 @@ class EEPart:
         eng = self.engine
         s = self.spec
         if self._launch is None:
-            from .launch import _Launch
-
             lo = eng.rows.action_low[self.col0 : self.col0 + 3]
             hi = eng.rows.action_high[self.col0 : self.col0 + 3]
             params = dict(self._chain_params)
@@ -345,7 +344,7 @@ class EEPart:
                 }
             )
             kernel = KE._ee_clik_kernel if s.iterations > 1 else KE._ee_set_action_kernel
-            self._launch = _Launch(kernel, eng.num_envs, params, eng.device)
+            self._launch = _Launch(kernel, eng.num_envs, params, eng.device, block_dim=PER_ENV_BLOCK_DIM)
         self._launch.bind("action_in", action)
         self._launch.bind("joint_q_in", state.joint_q)
         self._launch.launch()
@@ -372,6 +371,7 @@ class EEPart:
                 self.ee_pose,
             ],
             device=eng.device,
+            block_dim=PER_ENV_BLOCK_DIM,
         )
 
     def fk_jacobian(self, joint_q: wp.array) -> tuple[wp.array, wp.array]:

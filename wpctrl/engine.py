@@ -32,7 +32,7 @@ from .kernels import actuation as KA
 from .kernels import drive as KD
 from .kernels import inertia as KI
 from .kernels import pd as K
-from .launch import _index_table, _Launch, _Targets
+from .launch import PER_ENV_BLOCK_DIM, _index_table, _Launch, _Targets
 
 
 class _Engine(_DrivePropertiesMixin):
@@ -404,7 +404,9 @@ class _Engine(_DrivePropertiesMixin):
                     "saturation_count_out": self.saturation_count,
                 }
             )
-            self._launch_coupled = _Launch(KD.coupled_kernel(*fc.kernel_key()), self.num_envs, params, self.device)
+            self._launch_coupled = _Launch(
+                KD.coupled_kernel(*fc.kernel_key()), self.num_envs, params, self.device, block_dim=PER_ENV_BLOCK_DIM
+            )
         ln = self._launch_coupled
         ln.bind("joint_q_in", state.joint_q)
         ln.bind("joint_qd_in", state.joint_qd)

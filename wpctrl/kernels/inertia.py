@@ -26,6 +26,8 @@ import newton
 import numpy as np
 import warp as wp
 
+from ..launch import PER_ENV_BLOCK_DIM
+
 wp.set_module_options({"enable_backward": False})
 
 MAX_CHAIN_DOFS = 24
@@ -398,4 +400,10 @@ class FusedChain:
         k = response_kernel(*self.kernel_key())
         args = self.chain_args()
         args.update({"joint_q_in": joint_q, "response_out": response_out, "block_out": block_out})
-        wp.launch(k, dim=self.layout.env_joint_base.shape[0], inputs=list(args.values()), device=self.model.device)
+        wp.launch(
+            k,
+            dim=self.layout.env_joint_base.shape[0],
+            inputs=list(args.values()),
+            device=self.model.device,
+            block_dim=PER_ENV_BLOCK_DIM,
+        )

@@ -100,27 +100,32 @@ def traffic_bytes(mode: dict, num_substeps: int, explicit: bool = True) -> dict:
     return {"per_env": total, "set_action": set_action, "substep": substep, "num_substeps": num_substeps}
 
 
-def wpctrl_bytes_estimate(mode: dict, num_substeps: int, interp: bool, elided: bool = False) -> int:
-    """Bytes per env that wpctrl's kernels touch (wpctrl/kernels/pd.py, issue 12), for comparison with the floor.
+def wpctrl_bytes_estimate(
+    mode: dict, num_substeps: int, interp: bool, elided: bool = False, explicit: bool = True
+) -> int:
+    """Bytes per env that wpctrl's step kernels touch (``wpctrl/kernels/pd_step.py``), for the same-bytes floor.
 
-    set_action: action, q and start snapshot of every row, previous and new target, processed action, the per-env
-    step counter and, with interpolation, the per-row counters. Substep: per-env counter read and write, q, qd,
-    target, ``joint_target_q``, ``joint_f`` and, with interpolation, the start and the per-row counter read and write.
-    Elided substeps (implicit, no interpolation): set_action also writes ``joint_target_q``; the substeps touch nothing.
+    set_action: the action row, q and the start snapshot of every position row, the previous target of rows that
+    need it (delta on the target, or rows outside the action), the new target, the processed action and the per-env
+    step counter. Substep: the per-env counter (read, write), the target and ``joint_target_q`` of every row, with
+    interpolation the start, with explicit actuation q, qd, the per-env kp / kd / force limit and ``joint_f``.
+    Elided substeps (implicit, no interpolation): set_action also writes ``joint_target_q``; the substeps touch
+    nothing.
     """
     n = sum(len(c.joint_names) for c in mode.values())
     d = 0
-    n_src = 0
+    t_read = 0
     for c in mode.values():
         mimic = getattr(c, "mimic", None)
         dc = len({v["joint"] for v in mimic.values()}) if mimic else len(c.joint_names)
         d += dc
-        n_src += len(c.joint_names) - (len(mimic) if mimic else 0)
-    sa = 4 * (d + n + n + n_src + n + d + (n if interp else 0)) + 4
+        if c.use_delta and c.use_target:
+            t_read += dc
+    sa = 4 * (d + n + n + t_read + n + d) + 4
     if elided:
         return sa + 4 * n
-    ss = 8 + 4 * n * 5 + (4 * n * 3 if interp else 0)
-    return sa + num_substeps * ss
+    per_row = 2 + (1 if interp else 0) + (6 if explicit else 0)
+    return sa + num_substeps * (8 + 4 * n * per_row)
 
 
 def run_one(args, setup, mode_name: str, interp: bool, sync: Sync, device) -> list[dict]:
@@ -187,12 +192,19 @@ def run_one(args, setup, mode_name: str, interp: bool, sync: Sync, device) -> li
         with torch.cuda.graph(tgraph):
             torch_step()
         fns["torch_graph"] = tgraph.replay
+    same_bytes = n_envs * wpctrl_bytes_estimate(
+        mode, K, interp, elided=not ctrl._engine.per_substep, explicit=args.actuation == "explicit"
+    )
     if "floor" in args.variants:
         # One copy of half the bytes: it reads half and writes half, moving floor_bytes in all.
         count = max(1, floor_bytes // 8)
         src = torch.ones(count, dtype=torch.float32, device=tdev)
         dst = torch.empty_like(src)
         fns["floor"] = lambda: dst.copy_(src)
+        # The same for the bytes wpctrl's kernels actually move (per-env gains, counters, snapshots included).
+        src2 = torch.ones(max(1, same_bytes // 8), dtype=torch.float32, device=tdev)
+        dst2 = torch.empty_like(src2)
+        fns["floor_same"] = lambda: dst2.copy_(src2)
 
     extra = {}
     if "floor" in fns and sync.cuda:
@@ -203,6 +215,12 @@ def run_one(args, setup, mode_name: str, interp: bool, sync: Sync, device) -> li
         with torch.cuda.graph(g):
             fns["floor"]()
         fns["floor_graph"] = g.replay
+        g2 = torch.cuda.CUDAGraph()
+        fns["floor_same"]()
+        torch.cuda.synchronize()
+        with torch.cuda.graph(g2):
+            fns["floor_same"]()
+        fns["floor_same_graph"] = g2.replay
     # Samples round-robin over the variants, so that a noisy phase of the machine hits them all alike.
     times = measure_interleaved(
         fns, sync, repeats=args.repeats, min_time=args.min_time, warmup=args.warmup, clock=args.clock
@@ -213,6 +231,12 @@ def run_one(args, setup, mode_name: str, interp: bool, sync: Sync, device) -> li
         extra["floor_graph_s"] = fg["median_s"]
         if fg["median_s"] < times["floor"]["median_s"]:
             times["floor"] = fg
+    t_same = None
+    if "floor_same" in times:
+        t_same = times.pop("floor_same")["median_s"]
+        if "floor_same_graph" in times:
+            t_same = min(t_same, times.pop("floor_same_graph")["median_s"])
+        extra["floor_same_bytes_s"] = t_same
 
     rows = []
     t_torch = times.get("torch_eager", {}).get("median_s")
@@ -235,9 +259,8 @@ def run_one(args, setup, mode_name: str, interp: bool, sync: Sync, device) -> li
                 "speedup_vs_torch_eager": (t_torch / t) if t_torch else None,
                 "x_floor": (t / t_floor) if t_floor else None,
                 "floor_bytes_per_env": traffic["per_env"],
-                "wpctrl_bytes_per_env_estimate": wpctrl_bytes_estimate(
-                    mode, K, interp, elided=not ctrl._engine.per_substep
-                ),
+                "wpctrl_bytes_per_env_estimate": same_bytes // n_envs,
+                "x_floor_same_bytes": (t / t_same) if t_same else None,
                 "effective_GBps_at_floor_bytes": floor_bytes / t / 1e9,
                 "iters": times[name]["iters"],
                 "samples_us": [x * 1e6 for x in times[name]["samples_s"]],
@@ -245,6 +268,7 @@ def run_one(args, setup, mode_name: str, interp: bool, sync: Sync, device) -> li
                 "wall_us_per_step": times[name]["wall_median_s"] * 1e6,
                 "thread_cpu_us_per_step": times[name]["thread_median_s"] * 1e6,
                 "build_s": setup.build_s,
+                "block_dim": getattr(ctrl._engine, "block_dim", None),
                 "check": check,
                 **({"floor_detail": extra} if name == "floor" and extra else {}),
             }
@@ -257,7 +281,8 @@ def markdown(meta: dict, rows: list[dict], traffic: dict) -> str:
     out.append(
         f"Mode `{rows[0]['mode'] if rows else ''}`, explicit PD torques, K = {traffic['num_substeps']} substeps per "
         f"control step. Floor: one device copy moving {traffic['per_env']} B/env (hold) — see `traffic_bytes`. "
-        "'vs torch eager' = torch eager time / this time (higher is better); '× floor' = this time / floor time. "
+        "'vs torch eager' = torch eager time / this time (higher is better); '× floor' = this time / floor time; "
+        "'× same-bytes floor' = this time / one copy of the bytes wpctrl's kernels move (`wpctrl_bytes_estimate`). "
         f"Clock: {rows[0]['clock'] if rows else 'wall'} time, median of {meta['args']['repeats']} samples taken "
         "round-robin over the variants.\n"
     )
@@ -276,9 +301,16 @@ def markdown(meta: dict, rows: list[dict], traffic: dict) -> str:
                     f"{r['ns_per_env_step']:.3g}",
                     fmt_ratio(r["speedup_vs_torch_eager"]),
                     fmt_ratio(r["x_floor"]),
+                    fmt_ratio(r.get("x_floor_same_bytes")),
+                    str(r["wpctrl_bytes_per_env_estimate"]),
                 ]
             )
-        out.append(md_table(["envs", "variant", "µs/step", "ns/env-step", "vs torch eager", "× floor"], body))
+        out.append(
+            md_table(
+                ["envs", "variant", "µs/step", "ns/env-step", "vs torch eager", "× floor", "× same-bytes", "B/env"],
+                body,
+            )
+        )
     if any(r["layout"] == "synthetic" for r in rows):
         out.append("\n\\* synthetic layout: a small replicated model's index tables tiled to N worlds (same layout).\n")
     return "".join(out)
@@ -298,7 +330,17 @@ def main(argv=None):
         default=4096,
         help="above this N use the synthetic layout instead of replicating N Pandas",
     )
+    p.add_argument(
+        "--block-dim",
+        type=int,
+        default=0,
+        help="force the CUDA block size of the step kernels (default: wpctrl's choice, launch.step_block_dim)",
+    )
     args = parse_run_args(p, argv)
+    if args.block_dim:
+        import wpctrl.engine
+
+        wpctrl.engine.step_block_dim = lambda device, num_envs: args.block_dim
     device, sync, meta = start_run(p, args, cpu_envs="1,64,1k,4k,16k", cuda_envs="1,64,1k,4k,16k,64k,256k,1M")
     envs = parse_envs(args.envs)
     interps = {"both": [False, True], "on": [True], "off": [False]}[args.interpolate]

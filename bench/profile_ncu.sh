@@ -40,7 +40,7 @@ fi
 nvidia-smi --query-gpu=name,driver_version,clocks.max.sm,clocks.max.mem --format=csv,noheader 2>&1 | tee -a "$LOG"
 git rev-parse --short HEAD 2>/dev/null | sed 's/^/wpctrl commit /' | tee -a "$LOG"
 
-KERNELS='regex:_set_action_kernel|_substep_kernel|_targets_kernel'
+KERNELS='regex:wpctrl_set_action|wpctrl_substep|_targets_kernel'
 SECTIONS=(--section SpeedOfLight --section MemoryWorkloadAnalysis --section Occupancy --section WarpStateStats
   --section LaunchStats --section SchedulerStats)
 METRICS=gpu__time_duration.sum,dram__throughput.avg.pct_of_peak_sustained_elapsed,\

@@ -83,7 +83,7 @@ def test_launches_per_control_step(monkeypatch, mode, actuation, options, expect
         _control_step(h, act)
         launched = counter.take()
         assert len(launched) == expected, launched
-        assert launched[expected - 1 if elided else 0].startswith("_set_action_kernel"), launched
+        assert launched[expected - 1 if elided else 0].startswith("wpctrl_set_action"), launched
     if elided:
         assert len(first) == expected + 1 and first[-1].startswith("_targets_kernel"), first
     # A second Control (double buffering): one small write when it first appears in a step, then nothing.

@@ -32,7 +32,8 @@ from .kernels import actuation as KA
 from .kernels import drive as KD
 from .kernels import inertia as KI
 from .kernels import pd as K
-from .launch import PER_ENV_BLOCK_DIM, _index_table, _Launch, _Targets
+from .kernels import pd_step as KS
+from .launch import PER_ENV_BLOCK_DIM, _index_table, _Launch, _Targets, step_block_dim
 
 
 class _Engine(_DrivePropertiesMixin):
@@ -75,23 +76,6 @@ class _Engine(_DrivePropertiesMixin):
 
         self.row_kind = up(rows.kind, wp.int32)
         self.row_flags = up(rows.flags, wp.int32)
-        self.row_act_col = up(rows.act_col, wp.int32)
-        self.row_vel_col = up(rows.vel_col, wp.int32)
-        self.row_lo = up(rows.lo, wp.float32)
-        self.row_hi = up(rows.hi, wp.float32)
-        self.row_vlo = up(rows.vlo, wp.float32)
-        self.row_vhi = up(rows.vhi, wp.float32)
-        self.row_mimic_src = up(rows.mimic_src, wp.int32)
-        # Followers of each row (CSR): set_action's source-row thread writes them.
-        order = np.argsort(rows.mimic_src, kind="stable")
-        order = order[rows.mimic_src[order] >= 0]
-        counts = np.bincount(rows.mimic_src[order], minlength=R) if R else np.zeros(0, np.int64)
-        self.row_follow_start = up(np.concatenate([[0], np.cumsum(counts)]).astype(np.int32), wp.int32)
-        self.row_follow = up(order.astype(np.int32) if order.size else np.zeros(1, np.int32), wp.int32)
-        leads = np.nonzero(rows.mimic_src < 0)[0]
-        self.lead_row = int(leads[0]) if leads.size else 0
-        self.row_mimic_mul = up(rows.mimic_mul, wp.float32)
-        self.row_mimic_off = up(rows.mimic_off, wp.float32)
         self.row_q_off = up(binding.q_off, wp.int32)
         self.row_qd_off = up(binding.qd_off, wp.int32)
         self.env_q_base = up(binding.q_base, wp.int32)
@@ -100,6 +84,10 @@ class _Engine(_DrivePropertiesMixin):
         # replicated layout, else a flat (num_envs, rows) table; either way no chain of table loads.
         q_idx, self.q_stride = _index_table(binding.coord_index.reshape(E, R))
         qd_idx, self.qd_stride = _index_table(binding.dof_index.reshape(E, R))
+        strided = q_idx.shape[0] == 1 and qd_idx.shape[0] == 1  # (one env: stride 0)
+        if not strided:  # both flat, so that a step kernel indexes either table by env
+            q_idx, self.q_stride = binding.coord_index.reshape(E, R).astype(np.int32), 0
+            qd_idx, self.qd_stride = binding.dof_index.reshape(E, R).astype(np.int32), 0
         self.q_idx = up(q_idx, wp.int32)
         self.qd_idx = up(qd_idx, wp.int32)
         # Per-env drive properties (num_envs, rows), from the config; the nominal (config) values for "scale" draws.
@@ -112,7 +100,9 @@ class _Engine(_DrivePropertiesMixin):
         self.seed = int(seed)
         # Target clamping: the joints' limits [rad or m] (env 0's, as the binding reads them; +-inf: unlimited).
         self.clip_targets = bool(clip_targets)
-        self.row_qlo = up(binding.qlimits[:, 0].astype(np.float32).reshape(R), wp.float32)
+        # The per-row floats of the step kernels: action bounds, mimic coupling, joint limits (kernels/pd_step.py).
+        self.row_f = up(KS.row_float_table(rows, binding.qlimits.astype(np.float32).reshape(R, 2)), wp.float32)
+        self.row_qlo = up(binding.qlimits[:, 0].astype(np.float32).reshape(R), wp.float32)  # (EE kernels)
         self.row_qhi = up(binding.qlimits[:, 1].astype(np.float32).reshape(R), wp.float32)
         # Command delay: per-env d in [delay_min, delay_max] substeps, a ring of the last max_delay + 1 commands.
         self.delay_range = delay
@@ -148,10 +138,27 @@ class _Engine(_DrivePropertiesMixin):
         self.target_qvel = wp.zeros((E, R), dtype=wp.float32, device=dev)
         self.processed_action = wp.zeros((E, self.action_dim), dtype=wp.float32, device=dev)
         self.step = wp.zeros(E, dtype=wp.int32, device=dev)
-        self.row_step = wp.zeros((E, R), dtype=wp.int32, device=dev)
         self.dim = E * R  # one thread per (env, row), 1-D launches
         self.dim2 = (E, R)  # the same, 2-D: wp.tid() gives (env, row)
         self.per_substep = self._needs_per_substep_work()
+        # The step kernels' compile-time layout (one thread per env, rows unrolled: kernels/pd_step.py).
+        self.layout = KS.StepLayout(
+            kind=tuple(int(x) for x in rows.kind),
+            flags=tuple(int(x) for x in rows.flags),
+            act_col=tuple(int(x) for x in rows.act_col),
+            vel_col=tuple(int(x) for x in rows.vel_col),
+            mimic_src=tuple(int(x) for x in rows.mimic_src),
+            accel=tuple(int(x) for x in rows.accel),
+            q_off=tuple(int(x) for x in q_idx[0]) if strided else None,
+            qd_off=tuple(int(x) for x in qd_idx[0]) if strided else None,
+            action_dim=int(self.action_dim),
+            clip=self.clip_targets,
+            explicit=0 if self.coupled else self.explicit_mode,
+            delay=self.delay is not None,
+            delay_vel=self.delay_qd is not None,
+            effort=self.computed_effort is not None and not self.coupled,
+        )
+        self.block_dim = step_block_dim(dev, E)
         # Elided substeps: the host's substep count since the last set_action, and the Control whose drive targets
         # hold the current targets (its joint_target_q/qd arrays, kept alive so that their addresses stay unique).
         self.host_substeps = 0
@@ -257,26 +264,10 @@ class _Engine(_DrivePropertiesMixin):
             self.update_response(state)
         if self._launch_set_action is None:
             self._launch_set_action = _Launch(
-                K.set_action_kernel(self.clip_targets),
-                self.dim2,
+                KS.set_action_kernel(self.layout),
+                self.num_envs,
                 {
-                    "row_kind": self.row_kind,
-                    "row_flags": self.row_flags,
-                    "row_act_col": self.row_act_col,
-                    "row_vel_col": self.row_vel_col,
-                    "row_lo": self.row_lo,
-                    "row_hi": self.row_hi,
-                    "row_vlo": self.row_vlo,
-                    "row_vhi": self.row_vhi,
-                    "row_mimic_src": self.row_mimic_src,
-                    "row_follow_start": self.row_follow_start,
-                    "row_follow": self.row_follow,
-                    "row_mimic_mul": self.row_mimic_mul,
-                    "row_mimic_off": self.row_mimic_off,
-                    "row_qlo": self.row_qlo,
-                    "row_qhi": self.row_qhi,
-                    "lead_row": self.lead_row,
-                    "clip_targets": int(self.clip_targets),
+                    "row_f": self.row_f,
                     "q_idx": self.q_idx,
                     "qd_idx": self.qd_idx,
                     "q_stride": self.q_stride,
@@ -289,12 +280,12 @@ class _Engine(_DrivePropertiesMixin):
                     "target_qpos_out": self.target_qpos,
                     "target_qvel_out": self.target_qvel,
                     "step_out": self.step,
-                    "row_step_out": self.row_step,
                     "bad_action_count_out": self.bad_action_count,
                     "joint_target_q_out": None,
                     "joint_target_qd_out": None,
                 },
                 self.device,
+                block_dim=self.block_dim,
             )
         for part in self.ee_parts:  # EE rows' targets first; the joint launch leaves them alone (act_col -1)
             part.set_action(action, state)
@@ -324,11 +315,9 @@ class _Engine(_DrivePropertiesMixin):
         joint_f = control.joint_f if self.explicit else None
         if self._launch_substep is None:
             self._launch_substep = _Launch(
-                K.substep_kernel(self.delay is not None, self.computed_effort is not None and not self.coupled),
-                self.dim2,
+                KS.substep_kernel(self.layout),
+                self.num_envs,
                 {
-                    "row_kind": self.row_kind,
-                    "row_flags": self.row_flags,
                     "q_idx": self.q_idx,
                     "qd_idx": self.qd_idx,
                     "q_stride": self.q_stride,
@@ -336,9 +325,7 @@ class _Engine(_DrivePropertiesMixin):
                     "kp": self.kp,
                     "kd": self.kd,
                     "force_limit": self.force_limit,
-                    "row_accel": self.row_accel,
                     "num_substeps": self.num_substeps,
-                    "explicit_pd": 0 if self.coupled else self.explicit_mode,
                     "dt": self.sim_dt,
                     "max_delay": 0 if self.delay_range is None else int(self.delay_range[1]),
                     "joint_q_in": state.joint_q,
@@ -349,7 +336,6 @@ class _Engine(_DrivePropertiesMixin):
                     "target_qvel_in": self.target_qvel,
                     "delay_in": self.delay,
                     "step_out": self.step,
-                    "row_step_out": self.row_step,
                     "delay_head_out": self.delay_head,
                     "delay_q_out": self.delay_q,
                     "delay_qd_out": self.delay_qd,
@@ -362,6 +348,7 @@ class _Engine(_DrivePropertiesMixin):
                     "saturation_count_out": None if self.coupled else self.saturation_count,
                 },
                 self.device,
+                block_dim=self.block_dim,
             )
         ln = self._launch_substep
         ln.bind("joint_q_in", state.joint_q)
@@ -505,7 +492,6 @@ class _Engine(_DrivePropertiesMixin):
                 self.target_qpos,
                 self.target_qvel,
                 self.step,
-                self.row_step,
                 None if control is None else control.joint_target_q,
                 None if control is None else control.joint_target_qd,
                 None if (control is None or not self.explicit) else control.joint_f,

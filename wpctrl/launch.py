@@ -15,6 +15,16 @@ serial computation, so small blocks spread a few thousand envs over every SM (Wa
 puts 4,096 envs on 16 of an H200's 132 SMs). Ignored on the CPU."""
 
 
+def step_block_dim(device, num_envs: int) -> int:
+    """CUDA block size of the per-step kernels (one thread per env, kernels/pd_step.py): the largest of 256 / 128 /
+    64 threads that still gives every SM 4 blocks, else 32 (a few thousand envs then reach every SM)."""
+    sms = getattr(device, "sm_count", 0) or 1
+    for b in (256, 128, 64):
+        if num_envs >= 4 * sms * b:
+            return b
+    return 32
+
+
 class _Launch:
     """A recorded ``wp.launch`` whose parameters are re-bound (by name) only when they change."""
 

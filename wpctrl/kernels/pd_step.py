@@ -1,0 +1,333 @@
+"""The per-step PD kernels (``set_action`` and the solver substep), specialised at compile time on the row layout.
+
+Private module. One thread per env runs every row of the control mode, with the rows unrolled: a row's kind, flags,
+action columns, mimic source, acceleration-drive flag and (for replicated worlds) its coordinate / DOF index in env 0
+are compile-time constants of the kernel (:class:`StepLayout`, ``wp.static``). So a thread issues all its loads at
+once (its action row, then the measured coordinates of every row, no chain of table loads), checks its action row for
+NaN/Inf once, keeps a mimic source's fresh target in a register for its followers, and runs no branch on row tables.
+What stays a runtime array: the per-row float bounds ``row_f`` (one ``(rows, 8)`` table read uniformly by every
+thread, so configs that differ only in bounds share a kernel), the per-env drive properties and Newton's arrays.
+A control mode compiles its two kernels once (Warp's kernel cache keeps them across runs); modes with the same layout
+share them.
+
+Row float table ``row_f[r]``: ``lo, hi`` (action bounds of the row's position / velocity column), ``vlo, vhi`` (the
+velocity column of a position-velocity row), ``mimic_mul, mimic_off`` (a follower's coupling), ``qlo, qhi`` (joint
+limits [rad or m], for ``clip_targets``).
+
+Semantics are those of ManiSkill's controllers (``kernels/pd.py`` states the state arrays' meaning):
+
+- ``set_action``: an env whose action holds NaN/Inf is left untouched and counted; its substep counter keeps counting
+  (``host_substeps`` carries the substeps the host counted for an elided substep launch). Otherwise every position
+  row snapshots the measured coordinate (``start_qpos``) and computes its target (normalise, clip, absolute / delta
+  from the measured coordinate / delta on the previous target, optional clamp to the joint limits); a follower takes
+  ``target[source] * mul + off``; velocity columns set the velocity targets. Without per-substep work the kernel also
+  writes the drive targets into the Control (``joint_target_q_out`` / ``joint_target_qd_out`` given).
+- ``substep``: bumps the env's substep counter ``k`` (ManiSkill's ``_step``), interpolates ``start + k (target -
+  start) / K`` (held at K) on interpolating rows, pushes / pops the command delay ring, writes the drive targets and,
+  for explicit actuation, the clamped PD torque (naive, or stable: on the end-of-step state of a semi-implicit step).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+import warp as wp
+
+from .. import config as _cfg
+from .pd import _bidx, _interp, _scale
+
+ROW_F_LO, ROW_F_HI, ROW_F_VLO, ROW_F_VHI, ROW_F_MUL, ROW_F_OFF, ROW_F_QLO, ROW_F_QHI = range(8)
+ROW_F_WIDTH = 8
+
+
+class StepLayout(NamedTuple):
+    """What the step kernels are compiled for: the control mode's rows (tuples of ints, one entry per row) and its
+    options. ``q_off`` / ``qd_off`` are env 0's coordinate / DOF index of each row for a replicated layout (env e at
+    ``+ e * stride``), or ``None``: per-env ``(num_envs, rows)`` index tables."""
+
+    kind: tuple
+    flags: tuple
+    act_col: tuple
+    vel_col: tuple
+    mimic_src: tuple
+    accel: tuple
+    q_off: tuple | None
+    qd_off: tuple | None
+    action_dim: int
+    clip: bool = False
+    explicit: int = 0  # 0 off (implicit or coupled), 1 naive, 2 stable
+    delay: bool = False
+    delay_vel: bool = False  # the delay ring also holds velocity targets
+    effort: bool = False
+
+
+def row_float_table(rows: _cfg.Rows, qlimits: np.ndarray) -> np.ndarray:
+    """``(rows, 8)`` float32: the per-row bounds, mimic coupling and joint limits the step kernels read."""
+    t = np.zeros((rows.count, ROW_F_WIDTH), np.float32)
+    t[:, ROW_F_LO], t[:, ROW_F_HI] = rows.lo, rows.hi
+    t[:, ROW_F_VLO], t[:, ROW_F_VHI] = rows.vlo, rows.vhi
+    t[:, ROW_F_MUL], t[:, ROW_F_OFF] = rows.mimic_mul, rows.mimic_off
+    t[:, ROW_F_QLO], t[:, ROW_F_QHI] = qlimits[:, 0], qlimits[:, 1]
+    return t
+
+
+_SET_ACTION: dict[StepLayout, wp.Kernel] = {}
+_SUBSTEP: dict[StepLayout, wp.Kernel] = {}
+
+
+def set_action_kernel(layout: StepLayout) -> wp.Kernel:
+    """The set_action kernel of ``layout`` (compiled once per layout and process; Warp caches it on disk)."""
+    k = _SET_ACTION.get(layout)
+    if k is None:
+        k = _SET_ACTION[layout] = _make_set_action_kernel(layout)
+    return k
+
+
+def substep_kernel(layout: StepLayout) -> wp.Kernel:
+    """The substep kernel of ``layout``; set_action-only fields of the layout are ignored."""
+    key = layout._replace(act_col=(), vel_col=(), mimic_src=(), action_dim=0, clip=False)
+    k = _SUBSTEP.get(key)
+    if k is None:
+        k = _SUBSTEP[key] = _make_substep_kernel(key)
+    return k
+
+
+def _followers(mimic_src: tuple) -> list[tuple]:
+    return [tuple(m for m in range(len(mimic_src)) if mimic_src[m] == r) for r in range(len(mimic_src))]
+
+
+def _make_set_action_kernel(L: StepLayout) -> wp.Kernel:
+    R = len(L.kind)
+    A = L.action_dim
+    KIND, FLAGS, COL, VCOL, SRC, QOFF = L.kind, L.flags, L.act_col, L.vel_col, L.mimic_src, L.q_off
+    FOLLOW = _followers(SRC)
+    STRIDED = QOFF is not None
+    QOFF = QOFF if STRIDED else (0,) * R
+    CLIP = bool(L.clip)
+    POS, VEL = _cfg.ROW_POS, _cfg.ROW_VEL
+    NORM = tuple(int(f & _cfg.FLAG_NORMALIZE != 0) for f in FLAGS)
+    DELTA = tuple(int(f & _cfg.FLAG_DELTA != 0) for f in FLAGS)
+    TARGET = tuple(int(f & _cfg.FLAG_TARGET != 0) for f in FLAGS)
+    vec_a = wp.types.vector(length=max(A, 1), dtype=wp.float32)
+
+    def set_action(
+        # Rows:
+        row_f: wp.array2d[float],
+        # Envs x rows:
+        q_idx: wp.array2d[wp.int32],  # (num_envs, rows) for a non-replicated layout; unused otherwise
+        qd_idx: wp.array2d[wp.int32],
+        q_stride: int,
+        qd_stride: int,
+        host_substeps: int,
+        # In:
+        action_in: wp.array2d[float],  # (num_envs, action_dim)
+        joint_q_in: wp.array[float],  # [rad or m]
+        # Out:
+        processed_action_out: wp.array2d[float],
+        start_qpos_out: wp.array2d[float],  # [rad or m]
+        target_qpos_out: wp.array2d[float],  # in/out: the previous (virtual) target [rad or m]
+        target_qvel_out: wp.array2d[float],  # [rad/s or m/s]
+        step_out: wp.array[wp.int32],  # in/out (held envs)
+        bad_action_count_out: wp.array[wp.int32],  # in/out
+        joint_target_q_out: wp.array[float],  # optional: the drive targets, when no substep launch writes them
+        joint_target_qd_out: wp.array[float],  # optional
+    ):
+        env = wp.tid()
+        a = vec_a()
+        ok = int(1)
+        for c in range(wp.static(A)):
+            a[c] = action_in[env, c]
+            ok = ok & int(wp.isfinite(a[c]))
+        if ok == 0:  # hold the whole env; count it; its substep counter keeps counting
+            bad_action_count_out[env] = bad_action_count_out[env] + 1
+            step_out[env] = step_out[env] + host_substeps
+            return
+        step_out[env] = 0
+        for r in range(wp.static(R)):
+            if wp.static(SRC[r] < 0 and KIND[r] == POS):
+                qi = int(0)
+                if wp.static(STRIDED):
+                    qi = env * q_stride + wp.static(QOFF[r])
+                else:
+                    qi = q_idx[env, r]
+                q = joint_q_in[qi]
+                start_qpos_out[env, r] = q
+                t = float(0.0)
+                if wp.static(COL[r] >= 0):
+                    x = _scale(a[wp.static(COL[r])], row_f[r, 0], row_f[r, 1], wp.static(NORM[r]))
+                    processed_action_out[env, wp.static(COL[r])] = x
+                    if wp.static(DELTA[r] and TARGET[r]):
+                        t = target_qpos_out[env, r] + x
+                    elif wp.static(DELTA[r]):
+                        t = q + x
+                    else:
+                        t = x
+                    if wp.static(CLIP):  # the joint's limits: a virtual target cannot run past them
+                        t = wp.clamp(t, row_f[r, 6], row_f[r, 7])
+                    target_qpos_out[env, r] = t
+                else:
+                    t = target_qpos_out[env, r]  # outside the action (an EE row, a mimic map's spare joint)
+                if joint_target_q_out:
+                    joint_target_q_out[qi] = t
+                if wp.static(VCOL[r] >= 0):
+                    v = _scale(a[wp.static(VCOL[r])], row_f[r, 2], row_f[r, 3], wp.static(NORM[r]))
+                    processed_action_out[env, wp.static(VCOL[r])] = v
+                    target_qvel_out[env, r] = v
+                    if joint_target_qd_out:
+                        di = int(0)
+                        if wp.static(STRIDED):
+                            di = env * qd_stride + wp.static(L.qd_off[r] if STRIDED else 0)
+                        else:
+                            di = qd_idx[env, r]
+                        joint_target_qd_out[di] = v
+                # Followers: target[m] = target[source] * multiplier + offset.
+                for i in range(wp.static(len(FOLLOW[r]))):
+                    m = wp.static(FOLLOW[r][i])
+                    mi = int(0)
+                    if wp.static(STRIDED):
+                        mi = env * q_stride + wp.static(QOFF[FOLLOW[r][i]])
+                    else:
+                        mi = q_idx[env, m]
+                    start_qpos_out[env, m] = joint_q_in[mi]
+                    tm = t * row_f[m, 4] + row_f[m, 5]
+                    if wp.static(CLIP):
+                        tm = wp.clamp(tm, row_f[m, 6], row_f[m, 7])
+                    target_qpos_out[env, m] = tm
+                    if joint_target_q_out:
+                        joint_target_q_out[mi] = tm
+            elif wp.static(SRC[r] < 0 and KIND[r] == VEL):
+                v = _scale(a[wp.static(COL[r])], row_f[r, 0], row_f[r, 1], wp.static(NORM[r]))
+                processed_action_out[env, wp.static(COL[r])] = v
+                target_qvel_out[env, r] = v
+                if joint_target_qd_out:
+                    di = int(0)
+                    if wp.static(STRIDED):
+                        di = env * qd_stride + wp.static(L.qd_off[r] if STRIDED else 0)
+                    else:
+                        di = qd_idx[env, r]
+                    joint_target_qd_out[di] = v
+
+    return wp.kernel(set_action, name="wpctrl_set_action", enable_backward=False, module="unique")
+
+
+def _make_substep_kernel(L: StepLayout) -> wp.Kernel:
+    R = len(L.kind)
+    KIND, FLAGS, ACCEL = L.kind, L.flags, L.accel
+    STRIDED = L.q_off is not None
+    QOFF = L.q_off if STRIDED else (0,) * R
+    QDOFF = L.qd_off if STRIDED else (0,) * R
+    POS = _cfg.ROW_POS
+    VT = tuple(int(k != POS or (f & _cfg.FLAG_VEL_TARGET) != 0) for k, f in zip(KIND, FLAGS))
+    INTERP = tuple(int(f & _cfg.FLAG_INTERPOLATE != 0) for f in FLAGS)
+    EXPLICIT, STABLE = L.explicit != 0, L.explicit == 2
+    DELAY, DELAY_VEL, EFFORT = bool(L.delay), bool(L.delay_vel), bool(L.effort)
+    TORQUE = EXPLICIT or EFFORT
+
+    def substep(
+        # Envs x rows:
+        q_idx: wp.array2d[wp.int32],  # (num_envs, rows) for a non-replicated layout; unused otherwise
+        qd_idx: wp.array2d[wp.int32],
+        q_stride: int,
+        qd_stride: int,
+        # Drive properties (1 | num_envs, rows):
+        kp: wp.array2d[float],  # [N·m/rad or N/m; 1/s² for an acceleration drive]
+        kd: wp.array2d[float],  # [N·m·s/rad or N·s/m; 1/s]
+        force_limit: wp.array2d[float],  # [N·m or N]
+        num_substeps: int,
+        dt: float,  # [s] one solver substep
+        max_delay: int,  # [substeps]
+        # In:
+        joint_q_in: wp.array[float],  # [rad or m]
+        joint_qd_in: wp.array[float],  # [rad/s or m/s]
+        response_in: wp.array2d[float],  # (1 | num_envs, rows) r = (H^-1)_ii [1/(kg m²) or 1/kg]
+        start_qpos_in: wp.array2d[float],
+        target_qpos_in: wp.array2d[float],
+        target_qvel_in: wp.array2d[float],
+        delay_in: wp.array[wp.int32],  # with DELAY: (num_envs,) [substeps]
+        # Out:
+        step_out: wp.array[wp.int32],  # in/out: ManiSkill's _step
+        delay_head_out: wp.array2d[wp.int32],  # in/out, with DELAY: each row's ring-buffer slot
+        delay_q_out: wp.array3d[float],  # in/out, with DELAY: (max_delay + 1, num_envs, rows)
+        delay_qd_out: wp.array3d[float],  # in/out, with DELAY_VEL
+        joint_target_q_out: wp.array[float],
+        joint_target_qd_out: wp.array[float],
+        joint_f_out: wp.array[float],  # with explicit actuation [N·m or N]
+        computed_effort_out: wp.array2d[float],  # with EFFORT: PD law before the clamp [N·m or N]
+        applied_effort_out: wp.array2d[float],  # with EFFORT: after the clamp
+        saturation_count_out: wp.array2d[wp.int32],  # with EFFORT, in/out: substeps with |computed| > limit
+    ):
+        env = wp.tid()
+        k = step_out[env] + 1
+        step_out[env] = k
+        d = int(0)
+        if wp.static(DELAY):
+            d = wp.clamp(delay_in[env], 0, max_delay)
+        for r in range(wp.static(R)):
+            qi = int(0)
+            di = int(0)
+            if wp.static(STRIDED):
+                qi = env * q_stride + wp.static(QOFF[r])
+                di = env * qd_stride + wp.static(QDOFF[r])
+            else:
+                qi = q_idx[env, r]
+                di = qd_idx[env, r]
+            tq = float(0.0)
+            tqd = float(0.0)
+            if wp.static(VT[r]):
+                tqd = target_qvel_in[env, r]
+            if wp.static(KIND[r] == POS):
+                tq = target_qpos_in[env, r]
+                if wp.static(INTERP[r]):
+                    tq = _interp(start_qpos_in[env, r], tq, k, num_substeps)
+            if wp.static(DELAY):
+                # Push this substep's command, pop the one from delay[env] substeps ago (a reset filled the ring).
+                h = delay_head_out[env, r] + 1
+                if h > max_delay:
+                    h = 0
+                delay_head_out[env, r] = h
+                delay_q_out[h, env, r] = tq
+                if wp.static(DELAY_VEL):
+                    delay_qd_out[h, env, r] = tqd
+                s = h - d
+                if s < 0:
+                    s = s + max_delay + 1
+                tq = delay_q_out[s, env, r]
+                if wp.static(DELAY_VEL):
+                    tqd = delay_qd_out[s, env, r]
+            if wp.static(VT[r]):
+                joint_target_qd_out[di] = tqd
+            if wp.static(KIND[r] == POS):
+                joint_target_q_out[qi] = tq
+            if wp.static(TORQUE):
+                qd = joint_qd_in[di]
+                kpe = float(0.0)
+                e = float(0.0)
+                if wp.static(KIND[r] == POS):
+                    kpe = kp[_bidx(kp.shape[0], env), r]
+                    e = tq - joint_q_in[qi]
+                kde = kd[_bidx(kd.shape[0], env), r]
+                resp = float(1.0)
+                if wp.static(STABLE or ACCEL[r] != 0):
+                    resp = response_in[_bidx(response_in.shape[0], env), r]
+                if wp.static(ACCEL[r] != 0):  # acceleration drive: gains times the effective inertia 1/r
+                    kpe = kpe / resp
+                    kde = kde / resp
+                u = float(0.0)
+                if wp.static(STABLE):
+                    # PD on the end-of-step state of a semi-implicit Euler step, solved with the joint's response r:
+                    # u = Kp (q* - q - dt qd) + Kd (qd* - qd) over 1 + r dt (Kd + dt Kp)
+                    u = (kpe * (e - dt * qd) + kde * (tqd - qd)) / (1.0 + resp * dt * (kde + dt * kpe))
+                else:
+                    u = kpe * e + kde * (tqd - qd)
+                lim = force_limit[_bidx(force_limit.shape[0], env), r]
+                f = wp.clamp(u, -lim, lim)
+                if wp.static(EXPLICIT):
+                    joint_f_out[di] = f
+                if wp.static(EFFORT):
+                    computed_effort_out[env, r] = u
+                    applied_effort_out[env, r] = f
+                    if wp.abs(u) > lim:
+                        saturation_count_out[env, r] = saturation_count_out[env, r] + 1
+
+    return wp.kernel(substep, name="wpctrl_substep", enable_backward=False, module="unique")

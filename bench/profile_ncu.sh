@@ -53,7 +53,7 @@ launch__grid_size,launch__block_size
 : > "$REPORT"
 : > "$CSV"
 t0=$(date +%s)
-for spec in "implicit off" "implicit on" "explicit on"; do
+for spec in "implicit off" "implicit on" "explicit off" "explicit on"; do
   set -- $spec
   args=(bench/ncu_target.py --device cuda:0 --envs "$ENVS" --actuation "$1" --interpolate "$2" --steps 1)
   echo "=== $ENVS envs, actuation $1, interpolate $2 (at +$(( $(date +%s) - t0 ))s)" | tee -a "$LOG" "$REPORT"

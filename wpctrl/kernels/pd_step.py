@@ -100,16 +100,26 @@ def _followers(mimic_src: tuple) -> list[tuple]:
 def _make_set_action_kernel(L: StepLayout) -> wp.Kernel:
     R = len(L.kind)
     A = L.action_dim
-    KIND, FLAGS, COL, VCOL, SRC, QOFF = L.kind, L.flags, L.act_col, L.vel_col, L.mimic_src, L.q_off
-    FOLLOW = _followers(SRC)
-    STRIDED = QOFF is not None
-    QOFF = QOFF if STRIDED else (0,) * R
+    KIND, FLAGS, COL, VCOL, SRC = L.kind, L.flags, L.act_col, L.vel_col, L.mimic_src
+    STRIDED = L.q_off is not None
+    QOFF = L.q_off if STRIDED else (0,) * R
+    QDOFF = L.qd_off if STRIDED else (0,) * R
     CLIP = bool(L.clip)
     POS, VEL = _cfg.ROW_POS, _cfg.ROW_VEL
     NORM = tuple(int(f & _cfg.FLAG_NORMALIZE != 0) for f in FLAGS)
     DELTA = tuple(int(f & _cfg.FLAG_DELTA != 0) for f in FLAGS)
     TARGET = tuple(int(f & _cfg.FLAG_TARGET != 0) for f in FLAGS)
+    IS_POS = tuple(int(k == POS) for k in KIND)
+    # Position rows that own their target (followers take their source's), and those that read the previous one.
+    LEAD = tuple(int(KIND[r] == POS and SRC[r] < 0) for r in range(R))
+    READ_T = tuple(int(LEAD[r] and (COL[r] < 0 or (DELTA[r] and TARGET[r]))) for r in range(R))
+    WRITE_T = tuple(int(IS_POS[r] and not (SRC[r] < 0 and COL[r] < 0)) for r in range(R))
+    # Velocity targets: a velocity row's column, or a position-velocity row's second column.
+    VSRC = tuple(COL[r] if (KIND[r] == VEL and SRC[r] < 0) else (VCOL[r] if LEAD[r] else -1) for r in range(R))
+    VBOUND = tuple(0 if KIND[r] == VEL else 2 for r in range(R))  # row_f column of the velocity bounds
     vec_a = wp.types.vector(length=max(A, 1), dtype=wp.float32)
+    vec_r = wp.types.vector(length=max(R, 1), dtype=wp.float32)
+    vec_ri = wp.types.vector(length=max(R, 1), dtype=wp.int32)
 
     def set_action(
         # Rows:
@@ -134,6 +144,8 @@ def _make_set_action_kernel(L: StepLayout) -> wp.Kernel:
         joint_target_qd_out: wp.array[float],  # optional
     ):
         env = wp.tid()
+        # Loads first, all of them (one pass over each array's sectors), then the arithmetic, then the stores grouped
+        # by array: the compiler cannot move a load above a store to another array (they might alias).
         a = vec_a()
         ok = int(1)
         for c in range(wp.static(A)):
@@ -143,70 +155,67 @@ def _make_set_action_kernel(L: StepLayout) -> wp.Kernel:
             bad_action_count_out[env] = bad_action_count_out[env] + 1
             step_out[env] = step_out[env] + host_substeps
             return
-        step_out[env] = 0
+        qi = vec_ri()
+        di = vec_ri()
         for r in range(wp.static(R)):
-            if wp.static(SRC[r] < 0 and KIND[r] == POS):
-                qi = int(0)
-                if wp.static(STRIDED):
-                    qi = env * q_stride + wp.static(QOFF[r])
+            if wp.static(STRIDED):
+                qi[r] = env * q_stride + wp.static(QOFF[r])
+                di[r] = env * qd_stride + wp.static(QDOFF[r])
+            else:
+                qi[r] = q_idx[env, r]
+                di[r] = qd_idx[env, r]
+        q = vec_r()
+        t = vec_r()
+        for r in range(wp.static(R)):
+            if wp.static(IS_POS[r]):
+                q[r] = joint_q_in[qi[r]]
+            if wp.static(READ_T[r]):
+                t[r] = target_qpos_out[env, r]
+        # Targets of the rows that own one, then their followers: target[m] = target[source] * mul + off.
+        x = vec_a()
+        for r in range(wp.static(R)):
+            if wp.static(LEAD[r] and COL[r] >= 0):
+                c = wp.static(COL[r])
+                x[c] = _scale(a[c], row_f[r, 0], row_f[r, 1], wp.static(NORM[r]))
+                if wp.static(DELTA[r] and TARGET[r]):
+                    t[r] = t[r] + x[c]
+                elif wp.static(DELTA[r]):
+                    t[r] = q[r] + x[c]
                 else:
-                    qi = q_idx[env, r]
-                q = joint_q_in[qi]
-                start_qpos_out[env, r] = q
-                t = float(0.0)
-                if wp.static(COL[r] >= 0):
-                    x = _scale(a[wp.static(COL[r])], row_f[r, 0], row_f[r, 1], wp.static(NORM[r]))
-                    processed_action_out[env, wp.static(COL[r])] = x
-                    if wp.static(DELTA[r] and TARGET[r]):
-                        t = target_qpos_out[env, r] + x
-                    elif wp.static(DELTA[r]):
-                        t = q + x
-                    else:
-                        t = x
-                    if wp.static(CLIP):  # the joint's limits: a virtual target cannot run past them
-                        t = wp.clamp(t, row_f[r, 6], row_f[r, 7])
-                    target_qpos_out[env, r] = t
-                else:
-                    t = target_qpos_out[env, r]  # outside the action (an EE row, a mimic map's spare joint)
-                if joint_target_q_out:
-                    joint_target_q_out[qi] = t
-                if wp.static(VCOL[r] >= 0):
-                    v = _scale(a[wp.static(VCOL[r])], row_f[r, 2], row_f[r, 3], wp.static(NORM[r]))
-                    processed_action_out[env, wp.static(VCOL[r])] = v
-                    target_qvel_out[env, r] = v
-                    if joint_target_qd_out:
-                        di = int(0)
-                        if wp.static(STRIDED):
-                            di = env * qd_stride + wp.static(L.qd_off[r] if STRIDED else 0)
-                        else:
-                            di = qd_idx[env, r]
-                        joint_target_qd_out[di] = v
-                # Followers: target[m] = target[source] * multiplier + offset.
-                for i in range(wp.static(len(FOLLOW[r]))):
-                    m = wp.static(FOLLOW[r][i])
-                    mi = int(0)
-                    if wp.static(STRIDED):
-                        mi = env * q_stride + wp.static(QOFF[FOLLOW[r][i]])
-                    else:
-                        mi = q_idx[env, m]
-                    start_qpos_out[env, m] = joint_q_in[mi]
-                    tm = t * row_f[m, 4] + row_f[m, 5]
-                    if wp.static(CLIP):
-                        tm = wp.clamp(tm, row_f[m, 6], row_f[m, 7])
-                    target_qpos_out[env, m] = tm
-                    if joint_target_q_out:
-                        joint_target_q_out[mi] = tm
-            elif wp.static(SRC[r] < 0 and KIND[r] == VEL):
-                v = _scale(a[wp.static(COL[r])], row_f[r, 0], row_f[r, 1], wp.static(NORM[r]))
-                processed_action_out[env, wp.static(COL[r])] = v
-                target_qvel_out[env, r] = v
-                if joint_target_qd_out:
-                    di = int(0)
-                    if wp.static(STRIDED):
-                        di = env * qd_stride + wp.static(L.qd_off[r] if STRIDED else 0)
-                    else:
-                        di = qd_idx[env, r]
-                    joint_target_qd_out[di] = v
+                    t[r] = x[c]
+                if wp.static(CLIP):  # the joint's limits: a virtual target cannot run past them
+                    t[r] = wp.clamp(t[r], row_f[r, 6], row_f[r, 7])
+            if wp.static(VSRC[r] >= 0):
+                c = wp.static(VSRC[r])
+                x[c] = _scale(
+                    a[c], row_f[r, wp.static(VBOUND[r])], row_f[r, wp.static(VBOUND[r] + 1)], wp.static(NORM[r])
+                )
+        for r in range(wp.static(R)):
+            if wp.static(IS_POS[r] and SRC[r] >= 0):
+                t[r] = t[wp.static(max(SRC[r], 0))] * row_f[r, 4] + row_f[r, 5]
+                if wp.static(CLIP):
+                    t[r] = wp.clamp(t[r], row_f[r, 6], row_f[r, 7])
+        step_out[env] = 0
+        for c in range(wp.static(A)):
+            if wp.static(c in COL or c in VSRC):
+                processed_action_out[env, c] = x[c]
+        for r in range(wp.static(R)):
+            if wp.static(IS_POS[r]):
+                start_qpos_out[env, r] = q[r]
+        for r in range(wp.static(R)):
+            if wp.static(WRITE_T[r]):
+                target_qpos_out[env, r] = t[r]
+        for r in range(wp.static(R)):
+            if wp.static(VSRC[r] >= 0):
+                target_qvel_out[env, r] = x[wp.static(max(VSRC[r], 0))]
+        if joint_target_q_out:
+            for r in range(wp.static(R)):
+                if wp.static(IS_POS[r]):
+                    joint_target_q_out[qi[r]] = t[r]
+        if joint_target_qd_out:
+            for r in range(wp.static(R)):
+                if wp.static(VSRC[r] >= 0):
+                    joint_target_qd_out[di[r]] = x[wp.static(max(VSRC[r], 0))]
 
     return wp.kernel(set_action, name="wpctrl_set_action", enable_backward=False, module="unique")
 
@@ -218,11 +227,15 @@ def _make_substep_kernel(L: StepLayout) -> wp.Kernel:
     QOFF = L.q_off if STRIDED else (0,) * R
     QDOFF = L.qd_off if STRIDED else (0,) * R
     POS = _cfg.ROW_POS
+    IS_POS = tuple(int(k == POS) for k in KIND)
     VT = tuple(int(k != POS or (f & _cfg.FLAG_VEL_TARGET) != 0) for k, f in zip(KIND, FLAGS))
     INTERP = tuple(int(f & _cfg.FLAG_INTERPOLATE != 0) for f in FLAGS)
     EXPLICIT, STABLE = L.explicit != 0, L.explicit == 2
     DELAY, DELAY_VEL, EFFORT = bool(L.delay), bool(L.delay_vel), bool(L.effort)
     TORQUE = EXPLICIT or EFFORT
+    RESP = tuple(int(STABLE or ACCEL[r] != 0) for r in range(R))
+    vec_r = wp.types.vector(length=max(R, 1), dtype=wp.float32)
+    vec_ri = wp.types.vector(length=max(R, 1), dtype=wp.int32)
 
     def substep(
         # Envs x rows:
@@ -258,76 +271,107 @@ def _make_substep_kernel(L: StepLayout) -> wp.Kernel:
         saturation_count_out: wp.array2d[wp.int32],  # with EFFORT, in/out: substeps with |computed| > limit
     ):
         env = wp.tid()
+        # Loads first (each array's sectors in one pass), then the arithmetic, then the stores grouped by array.
         k = step_out[env] + 1
-        step_out[env] = k
-        d = int(0)
-        if wp.static(DELAY):
-            d = wp.clamp(delay_in[env], 0, max_delay)
+        qi = vec_ri()
+        di = vec_ri()
         for r in range(wp.static(R)):
-            qi = int(0)
-            di = int(0)
             if wp.static(STRIDED):
-                qi = env * q_stride + wp.static(QOFF[r])
-                di = env * qd_stride + wp.static(QDOFF[r])
+                qi[r] = env * q_stride + wp.static(QOFF[r])
+                di[r] = env * qd_stride + wp.static(QDOFF[r])
             else:
-                qi = q_idx[env, r]
-                di = qd_idx[env, r]
-            tq = float(0.0)
-            tqd = float(0.0)
+                qi[r] = q_idx[env, r]
+                di[r] = qd_idx[env, r]
+        tq = vec_r()
+        tqd = vec_r()
+        for r in range(wp.static(R)):
+            if wp.static(IS_POS[r]):
+                tq[r] = target_qpos_in[env, r]
+        for r in range(wp.static(R)):
             if wp.static(VT[r]):
-                tqd = target_qvel_in[env, r]
-            if wp.static(KIND[r] == POS):
-                tq = target_qpos_in[env, r]
-                if wp.static(INTERP[r]):
-                    tq = _interp(start_qpos_in[env, r], tq, k, num_substeps)
-            if wp.static(DELAY):
-                # Push this substep's command, pop the one from delay[env] substeps ago (a reset filled the ring).
+                tqd[r] = target_qvel_in[env, r]
+        for r in range(wp.static(R)):
+            if wp.static(INTERP[r]):
+                tq[r] = _interp(start_qpos_in[env, r], tq[r], k, num_substeps)
+        q = vec_r()
+        qd = vec_r()
+        kpe = vec_r()
+        kde = vec_r()
+        lim = vec_r()
+        resp = vec_r()
+        if wp.static(TORQUE):
+            kb = _bidx(kp.shape[0], env)
+            db = _bidx(kd.shape[0], env)
+            lb = _bidx(force_limit.shape[0], env)
+            rb = _bidx(response_in.shape[0], env)
+            for r in range(wp.static(R)):
+                if wp.static(IS_POS[r]):
+                    q[r] = joint_q_in[qi[r]]
+            for r in range(wp.static(R)):
+                qd[r] = joint_qd_in[di[r]]
+            for r in range(wp.static(R)):
+                if wp.static(IS_POS[r]):
+                    kpe[r] = kp[kb, r]
+            for r in range(wp.static(R)):
+                kde[r] = kd[db, r]
+            for r in range(wp.static(R)):
+                lim[r] = force_limit[lb, r]
+            for r in range(wp.static(R)):
+                if wp.static(RESP[r]):
+                    resp[r] = response_in[rb, r]
+        step_out[env] = k
+        if wp.static(DELAY):
+            # Push this substep's command, pop the one from delay[env] substeps ago (a reset filled the ring).
+            d = wp.clamp(delay_in[env], 0, max_delay)
+            for r in range(wp.static(R)):
                 h = delay_head_out[env, r] + 1
                 if h > max_delay:
                     h = 0
                 delay_head_out[env, r] = h
-                delay_q_out[h, env, r] = tq
+                delay_q_out[h, env, r] = tq[r]
                 if wp.static(DELAY_VEL):
-                    delay_qd_out[h, env, r] = tqd
+                    delay_qd_out[h, env, r] = tqd[r]
                 s = h - d
                 if s < 0:
                     s = s + max_delay + 1
-                tq = delay_q_out[s, env, r]
+                tq[r] = delay_q_out[s, env, r]
                 if wp.static(DELAY_VEL):
-                    tqd = delay_qd_out[s, env, r]
+                    tqd[r] = delay_qd_out[s, env, r]
+        for r in range(wp.static(R)):
             if wp.static(VT[r]):
-                joint_target_qd_out[di] = tqd
-            if wp.static(KIND[r] == POS):
-                joint_target_q_out[qi] = tq
-            if wp.static(TORQUE):
-                qd = joint_qd_in[di]
-                kpe = float(0.0)
+                joint_target_qd_out[di[r]] = tqd[r]
+        for r in range(wp.static(R)):
+            if wp.static(IS_POS[r]):
+                joint_target_q_out[qi[r]] = tq[r]
+        if wp.static(TORQUE):
+            u = vec_r()
+            f = vec_r()
+            for r in range(wp.static(R)):
                 e = float(0.0)
-                if wp.static(KIND[r] == POS):
-                    kpe = kp[_bidx(kp.shape[0], env), r]
-                    e = tq - joint_q_in[qi]
-                kde = kd[_bidx(kd.shape[0], env), r]
-                resp = float(1.0)
-                if wp.static(STABLE or ACCEL[r] != 0):
-                    resp = response_in[_bidx(response_in.shape[0], env), r]
+                if wp.static(IS_POS[r]):
+                    e = tq[r] - q[r]
+                kpr = kpe[r]
+                kdr = kde[r]
                 if wp.static(ACCEL[r] != 0):  # acceleration drive: gains times the effective inertia 1/r
-                    kpe = kpe / resp
-                    kde = kde / resp
-                u = float(0.0)
+                    kpr = kpr / resp[r]
+                    kdr = kdr / resp[r]
                 if wp.static(STABLE):
                     # PD on the end-of-step state of a semi-implicit Euler step, solved with the joint's response r:
                     # u = Kp (q* - q - dt qd) + Kd (qd* - qd) over 1 + r dt (Kd + dt Kp)
-                    u = (kpe * (e - dt * qd) + kde * (tqd - qd)) / (1.0 + resp * dt * (kde + dt * kpe))
+                    u[r] = (kpr * (e - dt * qd[r]) + kdr * (tqd[r] - qd[r])) / (1.0 + resp[r] * dt * (kdr + dt * kpr))
                 else:
-                    u = kpe * e + kde * (tqd - qd)
-                lim = force_limit[_bidx(force_limit.shape[0], env), r]
-                f = wp.clamp(u, -lim, lim)
-                if wp.static(EXPLICIT):
-                    joint_f_out[di] = f
-                if wp.static(EFFORT):
-                    computed_effort_out[env, r] = u
-                    applied_effort_out[env, r] = f
-                    if wp.abs(u) > lim:
+                    u[r] = kpr * e + kdr * (tqd[r] - qd[r])
+                f[r] = wp.clamp(u[r], -lim[r], lim[r])
+            if wp.static(EXPLICIT):
+                for r in range(wp.static(R)):
+                    joint_f_out[di[r]] = f[r]
+            if wp.static(EFFORT):
+                for r in range(wp.static(R)):
+                    computed_effort_out[env, r] = u[r]
+                for r in range(wp.static(R)):
+                    applied_effort_out[env, r] = f[r]
+                for r in range(wp.static(R)):
+                    if wp.abs(u[r]) > lim[r]:
                         saturation_count_out[env, r] = saturation_count_out[env, r] + 1
 
     return wp.kernel(substep, name="wpctrl_substep", enable_backward=False, module="unique")

@@ -71,6 +71,42 @@ def test_fused_response_matches_joint_space_response_and_featherstone():
                 assert np.abs(blk[e] - ref).max() <= 1e-5 * np.abs(ref).max()
 
 
+def test_unrolled_fused_kernel_matches_the_runtime_loop_kernel():
+    """The unrolled fused kernel (the default on CUDA: the articulation compiled in) against the runtime-loop one
+    (the CPU default), forced on the CPU: the same H^-1 block to float32 rounding, on random Panda configurations;
+    and the coupled drive built on it gives the same torques."""
+    from wpctrl.kernels.inertia import FusedChain
+
+    model = build_panda(E, armature=[0.1, 0.05, 0.02, 0.01, 0.0, 0.0, 0.003, 0.0, 0.0])
+    ctrl = _coupled_ctrl(model, 50.0)
+    eng = ctrl._engine
+    loop, unrolled = eng._fused, FusedChain(eng._fused.layout, model, unroll=True)
+    assert not loop.unroll and loop.kernel_key()[3] is None and unrolled.kernel_key()[3] is not None
+    s = model.state()
+    rng = np.random.default_rng(11)
+    for _ in range(3):
+        q, _ = _random_states(model, rng)
+        s.joint_q.assign(q)
+        got = []
+        for fc in (loop, unrolled):
+            resp = wp.zeros((E, eng.num_rows), dtype=wp.float32)
+            blk = wp.zeros((E, eng.num_rows, eng.num_rows), dtype=wp.float32)
+            fc.launch_response(s.joint_q, resp, blk)
+            got.append(blk.numpy().astype(np.float64))
+        scale = np.abs(got[0]).max(axis=(1, 2), keepdims=True)
+        assert (np.abs(got[1] - got[0]) <= 1e-6 * scale).all()
+    # The coupled drive with the unrolled inertia: same torques as with the runtime loops.
+    torques = []
+    for fc in (loop, unrolled):
+        eng._fused, eng._launch_coupled = fc, None
+        s, c, _, _, target = _setup(ctrl, model, np.random.default_rng(5))
+        ctrl.set_action(target, s)
+        ctrl.before_simulation_step(s, c)
+        torques.append(c.joint_f.numpy().astype(np.float64))
+    np.testing.assert_allclose(torques[1], torques[0], rtol=1e-5, atol=1e-4)
+    assert np.abs(torques[0]).max() > 1.0  # the drive pushes (a test of something)
+
+
 def _coupled_ctrl(model, force_limit, drive_mode="force", gripper_passive=False, kp=1e3, kd=1e2, **kw):
     arm = wpctrl.PDJointPosControllerConfig(
         PANDA_ARM_JOINTS, None, None, kp, kd, force_limit, normalize_action=False, drive_mode=drive_mode

@@ -121,3 +121,44 @@ def test_demo_on_cuda(tmp_path):
     from wpctrl.demo import main
 
     assert main(["--device", "cuda:0", "--envs", "64", "--seconds", "1", "--out", str(tmp_path), "--no-progress"]) == 0
+
+
+def test_cuda_fused_inertia_and_coupled_drive_match_cpu():
+    """The fused H^-1 kernel (unrolled on CUDA, runtime loops on the CPU) and the coupled drive built on it: CUDA
+    against CPU on the same random Panda configurations and targets."""
+    from conftest import build_panda
+
+    import wpctrl
+    from wpctrl.robots import PANDA_ARM_JOINTS, PANDA_GRIPPER_JOINTS
+
+    n = 64
+    out = {}
+    for device in ("cpu", "cuda:0"):
+        with wp.ScopedDevice(device):
+            model = build_panda(n, device=device)
+            cfg = {
+                "arm": wpctrl.PDJointPosControllerConfig(
+                    PANDA_ARM_JOINTS, None, None, 1e3, 1e2, 50.0, normalize_action=False
+                ),
+                "gripper": wpctrl.PDJointPosControllerConfig(
+                    PANDA_GRIPPER_JOINTS, None, None, 1e3, 1e2, 50.0, normalize_action=False
+                ),
+            }
+            ctrl = wpctrl.build_controller(cfg, model, 100, 100, "explicit", explicit_pd="coupled")
+            assert ctrl._engine._fused.unroll == (device != "cpu")
+            lo, hi = model.joint_limit_lower.numpy(), model.joint_limit_upper.numpy()
+            r = np.random.default_rng(3)
+            q = r.uniform(lo, hi).astype(np.float32)
+            qd = r.normal(0.0, 1.0, q.shape).astype(np.float32)
+            s, c = model.state(), model.control()
+            s.joint_q.assign(q)
+            s.joint_qd.assign(qd)
+            resp = wp.zeros((n, 9), dtype=wp.float32)
+            ctrl._engine._fused.launch_response(s.joint_q, resp)
+            target = (q.reshape(n, 9) + r.normal(0.0, 0.3, (n, 9))).astype(np.float32)
+            ctrl.set_action(wp.array(target, dtype=wp.float32), s)
+            ctrl.before_simulation_step(s, c)
+            out[device] = (resp.numpy().astype(np.float64), c.joint_f.numpy().astype(np.float64))
+    np.testing.assert_allclose(out["cuda:0"][0], out["cpu"][0], rtol=1e-5)
+    np.testing.assert_allclose(out["cuda:0"][1], out["cpu"][1], rtol=1e-4, atol=1e-3)
+    assert np.abs(out["cpu"][1]).max() > 1.0

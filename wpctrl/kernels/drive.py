@@ -40,15 +40,16 @@ PGS_SWEEPS = 16
 _ROW_POS = _cfg.ROW_POS
 _FLAG_VEL_TARGET = _cfg.FLAG_VEL_TARGET
 
-_cache: dict[tuple[int, int, int], wp.Kernel] = {}
+_cache: dict[tuple, wp.Kernel] = {}
 
 
-def coupled_kernel(nj: int, n: int, nr: int) -> wp.Kernel:
-    """The coupled drive kernel for an articulation of nj joints and n DOFs, nr controlled rows (cached)."""
-    key = (nj, n, nr)
+def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None = None) -> wp.Kernel:
+    """The coupled drive kernel for an articulation of nj joints and n DOFs, nr controlled rows (cached); the
+    inertia part unrolled with ``template`` (:meth:`wpctrl.kernels.inertia.ChainLayout.template`)."""
+    key = (nj, n, nr, template)
     if key in _cache:
         return _cache[key]
-    chain_rows_factor, MatR, VecR = chain_funcs(nj, n, nr)
+    chain_rows_factor, MatR, VecR = chain_funcs(nj, n, nr, template)
     row_pos = wp.constant(_ROW_POS)
     flag_vel = wp.constant(_FLAG_VEL_TARGET)
 

@@ -55,6 +55,11 @@ class ChainLayout:
     env_joint_base: np.ndarray  # (num_envs,) int32: global index of the articulation's first joint
     env_dof_base: np.ndarray  # (num_envs,) int32: global index of the articulation's first DOF
 
+    def template(self) -> tuple:
+        """The articulation's structure as compile-time constants of the unrolled kernels: (joint types, parents,
+        DOFs, ancestor masks, controlled rows' DOFs), tuples of ints."""
+        return tuple(tuple(int(x) for x in a) for a in (self.jtype, self.parent, self.dof, self.anc, self.row_dof))
+
 
 def chain_layout(model: newton.Model, joint_index: np.ndarray, dof_index: np.ndarray) -> tuple[ChainLayout | None, str]:
     """The fused-kernel layout of the articulation holding the controlled joints, or ``(None, reason)``.
@@ -136,14 +141,21 @@ def chain_layout(model: newton.Model, joint_index: np.ndarray, dof_index: np.nda
     )
 
 
-_funcs_cache: dict[tuple[int, int, int], tuple] = {}
+_funcs_cache: dict[tuple, tuple] = {}
 
 
-def chain_funcs(nj: int, n: int, nr: int):
+def chain_funcs(nj: int, n: int, nr: int, template: tuple | None = None, full: bool = True):
     """``(chain_rows_factor, MatR, VecR)``: the fused inertia ``@wp.func`` for nj joints, n DOFs and nr rows.
 
     ``chain_rows_factor(...)`` returns ``A`` (nr x nr float64), the controlled block of ``H^-1`` [1/(kg m^2) or 1/kg].
+    With ``template`` (:meth:`ChainLayout.template`) the articulation's structure is compiled in and every loop is
+    unrolled (:func:`_unrolled_chain_funcs`); ``full=False`` then fills only the diagonal of ``A``.
     """
+    if template is not None:
+        key = (nj, n, nr, template, bool(full))
+        if key not in _funcs_cache:
+            _funcs_cache[key] = _unrolled_chain_funcs(nj, n, nr, template, bool(full))
+        return _funcs_cache[key]
     key = (nj, n, nr)
     if key in _funcs_cache:
         return _funcs_cache[key]
@@ -290,15 +302,163 @@ def chain_funcs(nj: int, n: int, nr: int):
     return out
 
 
-_response_cache: dict[tuple[int, int, int], wp.Kernel] = {}
+def _unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool):
+    """The fused inertia function with the articulation's structure as compile-time constants (same signature and
+    result as :func:`chain_funcs`' runtime-loop version; the chain tables passed to it are not read).
+
+    Every loop is unrolled and every local matrix is indexed by constants, so on CUDA the matrices live in registers
+    instead of per-thread local memory, and H is only accumulated over the DOF pairs that move a body (its ancestor
+    mask, known at compile time)."""
+    JT, PAR, DOF, ANC, ROWD = template
+    MatN = wp.types.matrix(shape=(n, n), dtype=wp.float64)
+    MatN3 = wp.types.matrix(shape=(n, 3), dtype=wp.float64)
+    MatJ3 = wp.types.matrix(shape=(nj, 3), dtype=float)
+    MatJ4 = wp.types.matrix(shape=(nj, 4), dtype=float)
+    MatRN = wp.types.matrix(shape=(nr, n), dtype=wp.float64)
+    MatR = wp.types.matrix(shape=(nr, nr), dtype=wp.float64)
+    VecR = wp.types.vector(length=nr, dtype=wp.float64)
+    eps32 = wp.float64(_FLOAT32_EPS)
+    REV = [0] * n  # 1: the DOF is revolute
+    for k in range(nj):
+        if DOF[k] >= 0:
+            REV[DOF[k]] = int(JT[k] == J_REVOLUTE)
+    MOV = [tuple(i for i in range(n) if (ANC[k] >> i) & 1) for k in range(nj)]  # the DOFs that move body k
+    # DOF pairs (i >= j) moving body k, with whether both are revolute (an angular term).
+    PAIRS = [tuple((a, b, REV[a] and REV[b]) for a in MOV[k] for b in MOV[k] if b <= a) for k in range(nj)]
+    FULL = bool(full)
+
+    @wp.func
+    def chain_rows_factor(
+        num_dofs: int,
+        jb: int,
+        db: int,
+        chain_type: wp.array[wp.int32],
+        chain_parent: wp.array[wp.int32],
+        chain_dof: wp.array[wp.int32],
+        chain_anc: wp.array[wp.int32],
+        row_dof: wp.array[wp.int32],
+        joint_q_start: wp.array[wp.int32],
+        joint_qd_start: wp.array[wp.int32],
+        joint_X_p: wp.array[wp.transform],
+        joint_X_c: wp.array[wp.transform],
+        joint_axis: wp.array[wp.vec3],
+        joint_child: wp.array[wp.int32],
+        joint_armature: wp.array[float],
+        body_mass: wp.array[float],
+        body_com: wp.array[wp.vec3],
+        body_inertia: wp.array[wp.mat33],
+        joint_q: wp.array[float],
+    ):
+        H = MatN()
+        ax = MatN3()  # DOF axes in world
+        pt = MatN3()  # DOF anchor points in world [m]
+        bp = MatJ3()  # child-body world positions
+        bq = MatJ4()  # child-body world rotations (x, y, z, w)
+        for k in range(wp.static(nj)):
+            j = jb + k
+            Xw = wp.transform_identity()
+            if wp.static(PAR[k] >= 0):
+                pk = wp.static(max(PAR[k], 0))
+                Xw = wp.transform(
+                    wp.vec3(bp[pk, 0], bp[pk, 1], bp[pk, 2]), wp.quat(bq[pk, 0], bq[pk, 1], bq[pk, 2], bq[pk, 3])
+                )
+            Xj = Xw * joint_X_p[j]
+            Xm = wp.transform_identity()
+            if wp.static(JT[k] != J_FIXED):
+                a = joint_axis[joint_qd_start[j]]
+                qv = joint_q[joint_q_start[j]]
+                d = wp.static(max(DOF[k], 0))
+                aw = wp.transform_vector(Xj, a)
+                ow = wp.transform_get_translation(Xj)
+                ax[d] = wp.vec3d(wp.float64(aw[0]), wp.float64(aw[1]), wp.float64(aw[2]))
+                pt[d] = wp.vec3d(wp.float64(ow[0]), wp.float64(ow[1]), wp.float64(ow[2]))
+                if wp.static(JT[k] == J_REVOLUTE):
+                    Xm = wp.transform(wp.vec3(0.0), wp.quat_from_axis_angle(a, qv))
+                else:
+                    Xm = wp.transform(a * qv, wp.quat_identity())
+            Xb = Xj * Xm * wp.transform_inverse(joint_X_c[j])
+            p = wp.transform_get_translation(Xb)
+            r = wp.transform_get_rotation(Xb)
+            bp[k] = p
+            bq[k] = wp.vec4(r[0], r[1], r[2], r[3])
+            # This body's contribution to H over the DOF pairs that move it.
+            if wp.static(len(MOV[k]) > 0):
+                b = joint_child[j]
+                m = wp.float64(body_mass[b])
+                cw = wp.transform_point(Xb, body_com[b])
+                c = wp.vec3d(wp.float64(cw[0]), wp.float64(cw[1]), wp.float64(cw[2]))
+                R = wp.quat_to_matrix(r)
+                Iw32 = R * body_inertia[b] * wp.transpose(R)
+                Iw = wp.mat33d(
+                    wp.float64(Iw32[0, 0]), wp.float64(Iw32[0, 1]), wp.float64(Iw32[0, 2]),
+                    wp.float64(Iw32[1, 0]), wp.float64(Iw32[1, 1]), wp.float64(Iw32[1, 2]),
+                    wp.float64(Iw32[2, 0]), wp.float64(Iw32[2, 1]), wp.float64(Iw32[2, 2]),
+                )  # fmt: skip
+                jv = MatN3()  # COM velocity per unit rate of each DOF that moves this body [m/s]
+                Ijw = MatN3()  # I_world times the angular velocity per unit rate (revolute DOFs)
+                for ii in range(wp.static(len(MOV[k]))):
+                    i = wp.static(MOV[k][ii])
+                    if wp.static(REV[MOV[k][ii]]):
+                        jv[i] = wp.cross(ax[i], c - pt[i])
+                        Ijw[i] = Iw * ax[i]
+                    else:
+                        jv[i] = ax[i]
+                for pp in range(wp.static(len(PAIRS[k]))):
+                    i = wp.static(PAIRS[k][pp][0])
+                    i2 = wp.static(PAIRS[k][pp][1])
+                    h = H[i, i2] + m * wp.dot(jv[i], jv[i2])
+                    if wp.static(PAIRS[k][pp][2]):
+                        h = h + wp.dot(Ijw[i], ax[i2])
+                    H[i, i2] = h
+        for i in range(wp.static(n)):
+            H[i, i] = H[i, i] + wp.float64(joint_armature[db + i])
+        # Cholesky H = L L^T in place (lower triangle), pivots floored as in Newton's JointSpaceResponse.
+        for jc in range(wp.static(n)):
+            s = H[jc, jc]
+            for k in range(wp.static(jc)):
+                s -= H[jc, k] * H[jc, k]
+            s = wp.max(s, eps32 * wp.max(wp.abs(H[jc, jc]), wp.float64(1.0)))
+            dg = wp.sqrt(s)
+            H[jc, jc] = dg
+            inv = wp.float64(1.0) / dg
+            for i in range(wp.static(jc + 1), wp.static(n)):
+                tt = H[i, jc]
+                for k in range(wp.static(jc)):
+                    tt -= H[i, k] * H[jc, k]
+                H[i, jc] = tt * inv
+        # y_r = L^-1 e_{d_r}: forward substitution from row d_r (entries above it are 0).
+        Y = MatRN()
+        for rr in range(wp.static(nr)):
+            for i in range(wp.static(ROWD[rr]), wp.static(n)):
+                tt = wp.float64(0.0)
+                if wp.static(i == ROWD[rr]):
+                    tt = wp.float64(1.0)
+                for k in range(wp.static(ROWD[rr]), wp.static(i)):
+                    tt -= H[i, k] * Y[rr, k]
+                Y[rr, i] = tt / H[i, i]
+        A = MatR()
+        for rr in range(wp.static(nr)):
+            for cc in range(wp.static(rr + 1 if FULL else 1)):
+                c2 = wp.static(cc if FULL else rr)
+                v = wp.float64(0.0)
+                for k in range(wp.static(max(ROWD[rr], ROWD[cc if FULL else rr])), wp.static(n)):
+                    v += Y[rr, k] * Y[c2, k]
+                A[rr, c2] = v
+                A[c2, rr] = v
+        return A
+
+    return (chain_rows_factor, MatR, VecR)
 
 
-def response_kernel(nj: int, n: int, nr: int) -> wp.Kernel:
-    """The fused response kernel for nj joints, n DOFs, nr controlled rows (cached)."""
-    key = (nj, n, nr)
+_response_cache: dict[tuple, wp.Kernel] = {}
+
+
+def response_kernel(nj: int, n: int, nr: int, template: tuple | None = None) -> wp.Kernel:
+    """The fused response kernel for nj joints, n DOFs, nr controlled rows (cached); unrolled with ``template``."""
+    key = (nj, n, nr, template)
     if key in _response_cache:
         return _response_cache[key]
-    chain_rows_factor, _, _ = chain_funcs(nj, n, nr)
+    chain_rows_factor, _, _ = chain_funcs(nj, n, nr, template)
 
     @wp.kernel(enable_backward=False, module="unique")
     def _fused_response_kernel(
@@ -349,12 +509,18 @@ def response_kernel(nj: int, n: int, nr: int) -> wp.Kernel:
 
 
 class FusedChain:
-    """Device tables of a :class:`ChainLayout` and the model arrays the fused kernels read."""
+    """Device tables of a :class:`ChainLayout` and the model arrays the fused kernels read.
 
-    def __init__(self, layout: ChainLayout, model: newton.Model):
+    ``unroll`` (default: on CUDA devices) compiles the articulation's structure into the kernels with every loop
+    unrolled (:func:`_unrolled_chain_funcs`): on a GPU the local matrices then stay in registers (H200, 4k Pandas:
+    see bench/README.md). On the CPU backend the unrolled kernel takes far longer to compile for little gain, so the
+    runtime-loop kernel is the default there."""
+
+    def __init__(self, layout: ChainLayout, model: newton.Model, unroll: bool | None = None):
         dev = model.device
         self.layout = layout
         self.model = model
+        self.unroll = bool(dev.is_cuda) if unroll is None else bool(unroll)
 
         def up(a):
             return wp.array(np.ascontiguousarray(a, dtype=np.int32), dtype=wp.int32, device=dev)
@@ -392,8 +558,14 @@ class FusedChain:
             "num_dofs": self.layout.num_dofs,
         }
 
-    def kernel_key(self) -> tuple[int, int, int]:
-        return (self.layout.num_joints, self.layout.num_dofs, self.num_rows)
+    def kernel_key(self) -> tuple:
+        """``(joints, DOFs, rows, template or None)``: what the fused kernels are compiled for."""
+        return (
+            self.layout.num_joints,
+            self.layout.num_dofs,
+            self.num_rows,
+            self.layout.template() if self.unroll else None,
+        )
 
     def launch_response(self, joint_q: wp.array, response_out: wp.array, block_out: wp.array | None = None) -> None:
         """One launch over all envs: ``response_out[env, r] = (H^-1)_rr`` (and the block, if given)."""

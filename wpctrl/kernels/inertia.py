@@ -317,6 +317,7 @@ def _unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool)
     MatRN = wp.types.matrix(shape=(nr, n), dtype=wp.float64)
     MatR = wp.types.matrix(shape=(nr, nr), dtype=wp.float64)
     VecR = wp.types.vector(length=nr, dtype=wp.float64)
+    VecN = wp.types.vector(length=n, dtype=wp.float64)
     eps32 = wp.float64(_FLOAT32_EPS)
     REV = [0] * n  # 1: the DOF is revolute
     for k in range(nj):
@@ -412,7 +413,9 @@ def _unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool)
                     H[i, i2] = h
         for i in range(wp.static(n)):
             H[i, i] = H[i, i] + wp.float64(joint_armature[db + i])
-        # Cholesky H = L L^T in place (lower triangle), pivots floored as in Newton's JointSpaceResponse.
+        # Cholesky H = L L^T in place (lower triangle), pivots floored as in Newton's JointSpaceResponse; the
+        # reciprocals of the pivots are kept (n float64 divisions in all, none in the substitutions below).
+        inv = VecN()
         for jc in range(wp.static(n)):
             s = H[jc, jc]
             for k in range(wp.static(jc)):
@@ -420,12 +423,12 @@ def _unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool)
             s = wp.max(s, eps32 * wp.max(wp.abs(H[jc, jc]), wp.float64(1.0)))
             dg = wp.sqrt(s)
             H[jc, jc] = dg
-            inv = wp.float64(1.0) / dg
+            inv[jc] = wp.float64(1.0) / dg
             for i in range(wp.static(jc + 1), wp.static(n)):
                 tt = H[i, jc]
                 for k in range(wp.static(jc)):
                     tt -= H[i, k] * H[jc, k]
-                H[i, jc] = tt * inv
+                H[i, jc] = tt * inv[jc]
         # y_r = L^-1 e_{d_r}: forward substitution from row d_r (entries above it are 0).
         Y = MatRN()
         for rr in range(wp.static(nr)):
@@ -435,7 +438,7 @@ def _unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool)
                     tt = wp.float64(1.0)
                 for k in range(wp.static(ROWD[rr]), wp.static(i)):
                     tt -= H[i, k] * Y[rr, k]
-                Y[rr, i] = tt / H[i, i]
+                Y[rr, i] = tt * inv[i]
         A = MatR()
         for rr in range(wp.static(nr)):
             for cc in range(wp.static(rr + 1 if FULL else 1)):

@@ -319,24 +319,47 @@ def _make_substep_kernel(L: StepLayout) -> wp.Kernel:
             for r in range(wp.static(R)):
                 if wp.static(RESP[r]):
                     resp[r] = response_in[rb, r]
-        step_out[env] = k
+        sat = vec_ri()
+        if wp.static(EFFORT):
+            for r in range(wp.static(R)):
+                sat[r] = saturation_count_out[env, r]
         if wp.static(DELAY):
-            # Push this substep's command, pop the one from delay[env] substeps ago (a reset filled the ring).
+            # Push this substep's command, pop the one from delay[env] substeps ago (a reset filled the ring). Every
+            # ring read comes before the writes: a pop from the slot being pushed (delay 0) takes the new command.
             d = wp.clamp(delay_in[env], 0, max_delay)
+            hs = vec_ri()
             for r in range(wp.static(R)):
                 h = delay_head_out[env, r] + 1
                 if h > max_delay:
                     h = 0
-                delay_head_out[env, r] = h
-                delay_q_out[h, env, r] = tq[r]
+                hs[r] = h
+            old_q = vec_r()
+            old_qd = vec_r()
+            for r in range(wp.static(R)):
+                sl = hs[r] - d
+                if sl < 0:
+                    sl = sl + max_delay + 1
+                if sl != hs[r]:
+                    old_q[r] = delay_q_out[sl, env, r]
+                    if wp.static(DELAY_VEL):
+                        old_qd[r] = delay_qd_out[sl, env, r]
+                else:
+                    old_q[r] = tq[r]
+                    old_qd[r] = tqd[r]
+            step_out[env] = k
+            for r in range(wp.static(R)):
+                delay_head_out[env, r] = hs[r]
+            for r in range(wp.static(R)):
+                delay_q_out[hs[r], env, r] = tq[r]
+            if wp.static(DELAY_VEL):
+                for r in range(wp.static(R)):
+                    delay_qd_out[hs[r], env, r] = tqd[r]
+            for r in range(wp.static(R)):
+                tq[r] = old_q[r]
                 if wp.static(DELAY_VEL):
-                    delay_qd_out[h, env, r] = tqd[r]
-                s = h - d
-                if s < 0:
-                    s = s + max_delay + 1
-                tq[r] = delay_q_out[s, env, r]
-                if wp.static(DELAY_VEL):
-                    tqd[r] = delay_qd_out[s, env, r]
+                    tqd[r] = old_qd[r]
+        else:
+            step_out[env] = k
         for r in range(wp.static(R)):
             if wp.static(VT[r]):
                 joint_target_qd_out[di[r]] = tqd[r]
@@ -372,6 +395,6 @@ def _make_substep_kernel(L: StepLayout) -> wp.Kernel:
                     applied_effort_out[env, r] = f[r]
                 for r in range(wp.static(R)):
                     if wp.abs(u[r]) > lim[r]:
-                        saturation_count_out[env, r] = saturation_count_out[env, r] + 1
+                        saturation_count_out[env, r] = sat[r] + 1
 
     return wp.kernel(substep, name="wpctrl_substep", enable_backward=False, module="unique")

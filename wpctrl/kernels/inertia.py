@@ -141,6 +141,29 @@ def chain_layout(model: newton.Model, joint_index: np.ndarray, dof_index: np.nda
     )
 
 
+@wp.func
+def _body_world_inertia(
+    Xb: wp.transform,
+    b: int,
+    body_mass: wp.array[float],
+    body_com: wp.array[wp.vec3],
+    body_inertia: wp.array[wp.mat33],
+):
+    """Body ``b`` at world pose ``Xb``: its mass [kg], world COM [m] and world inertia about its COM [kg m^2], float64
+    (the inertia rotated in float32, as Newton stores it)."""
+    m = wp.float64(body_mass[b])
+    cw = wp.transform_point(Xb, body_com[b])
+    c = wp.vec3d(wp.float64(cw[0]), wp.float64(cw[1]), wp.float64(cw[2]))
+    R = wp.quat_to_matrix(wp.transform_get_rotation(Xb))
+    Iw32 = R * body_inertia[b] * wp.transpose(R)
+    Iw = wp.mat33d(
+        wp.float64(Iw32[0, 0]), wp.float64(Iw32[0, 1]), wp.float64(Iw32[0, 2]),
+        wp.float64(Iw32[1, 0]), wp.float64(Iw32[1, 1]), wp.float64(Iw32[1, 2]),
+        wp.float64(Iw32[2, 0]), wp.float64(Iw32[2, 1]), wp.float64(Iw32[2, 2]),
+    )  # fmt: skip
+    return m, c, Iw
+
+
 _funcs_cache: dict[tuple, tuple] = {}
 
 
@@ -232,17 +255,7 @@ def chain_funcs(nj: int, n: int, nr: int, template: tuple | None = None, full: b
             bp[k] = p
             bq[k] = wp.vec4(r[0], r[1], r[2], r[3])
             # This body's contribution to H over the DOFs that move it.
-            b = joint_child[j]
-            m = wp.float64(body_mass[b])
-            cw = wp.transform_point(Xb, body_com[b])
-            c = wp.vec3d(wp.float64(cw[0]), wp.float64(cw[1]), wp.float64(cw[2]))
-            R = wp.quat_to_matrix(r)
-            Iw32 = R * body_inertia[b] * wp.transpose(R)
-            Iw = wp.mat33d(
-                wp.float64(Iw32[0, 0]), wp.float64(Iw32[0, 1]), wp.float64(Iw32[0, 2]),
-                wp.float64(Iw32[1, 0]), wp.float64(Iw32[1, 1]), wp.float64(Iw32[1, 2]),
-                wp.float64(Iw32[2, 0]), wp.float64(Iw32[2, 1]), wp.float64(Iw32[2, 2]),
-            )  # fmt: skip
+            m, c, Iw = _body_world_inertia(Xb, joint_child[j], body_mass, body_com, body_inertia)
             mask = chain_anc[k]
             jv = MatN3()  # COM velocity per unit rate of each DOF that moves this body [m/s]
             jw = MatN3()  # angular velocity per unit rate [rad/s]
@@ -384,17 +397,7 @@ def _unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool)
             bq[k] = wp.vec4(r[0], r[1], r[2], r[3])
             # This body's contribution to H over the DOF pairs that move it.
             if wp.static(len(MOV[k]) > 0):
-                b = joint_child[j]
-                m = wp.float64(body_mass[b])
-                cw = wp.transform_point(Xb, body_com[b])
-                c = wp.vec3d(wp.float64(cw[0]), wp.float64(cw[1]), wp.float64(cw[2]))
-                R = wp.quat_to_matrix(r)
-                Iw32 = R * body_inertia[b] * wp.transpose(R)
-                Iw = wp.mat33d(
-                    wp.float64(Iw32[0, 0]), wp.float64(Iw32[0, 1]), wp.float64(Iw32[0, 2]),
-                    wp.float64(Iw32[1, 0]), wp.float64(Iw32[1, 1]), wp.float64(Iw32[1, 2]),
-                    wp.float64(Iw32[2, 0]), wp.float64(Iw32[2, 1]), wp.float64(Iw32[2, 2]),
-                )  # fmt: skip
+                m, c, Iw = _body_world_inertia(Xb, joint_child[j], body_mass, body_com, body_inertia)
                 jv = MatN3()  # COM velocity per unit rate of each DOF that moves this body [m/s]
                 Ijw = MatN3()  # I_world times the angular velocity per unit rate (revolute DOFs)
                 for ii in range(wp.static(len(MOV[k]))):

@@ -97,13 +97,35 @@ def _followers(mimic_src: tuple) -> list[tuple]:
     return [tuple(m for m in range(len(mimic_src)) if mimic_src[m] == r) for r in range(len(mimic_src))]
 
 
+def _make_row_indices(L: StepLayout):
+    """``row_indices(env, ...) -> (qi, di)``: every row's coordinate / DOF index in Newton's flat arrays for ``env``,
+    as ``env * stride`` plus env 0's (compile-time) index for a replicated layout, else from the index tables."""
+    R = len(L.kind)
+    STRIDED = L.q_off is not None
+    QOFF = L.q_off if STRIDED else (0,) * R
+    QDOFF = L.qd_off if STRIDED else (0,) * R
+    vec_ri = wp.types.vector(length=max(R, 1), dtype=wp.int32)
+
+    @wp.func
+    def row_indices(env: int, q_idx: wp.array2d[wp.int32], qd_idx: wp.array2d[wp.int32], q_stride: int, qd_stride: int):
+        qi = vec_ri()
+        di = vec_ri()
+        for r in range(wp.static(R)):
+            if wp.static(STRIDED):
+                qi[r] = env * q_stride + wp.static(QOFF[r])
+                di[r] = env * qd_stride + wp.static(QDOFF[r])
+            else:
+                qi[r] = q_idx[env, r]
+                di[r] = qd_idx[env, r]
+        return qi, di
+
+    return row_indices
+
+
 def _make_set_action_kernel(L: StepLayout) -> wp.Kernel:
     R = len(L.kind)
     A = L.action_dim
     KIND, FLAGS, COL, VCOL, SRC = L.kind, L.flags, L.act_col, L.vel_col, L.mimic_src
-    STRIDED = L.q_off is not None
-    QOFF = L.q_off if STRIDED else (0,) * R
-    QDOFF = L.qd_off if STRIDED else (0,) * R
     CLIP = bool(L.clip)
     POS, VEL = _cfg.ROW_POS, _cfg.ROW_VEL
     NORM = tuple(int(f & _cfg.FLAG_NORMALIZE != 0) for f in FLAGS)
@@ -119,7 +141,7 @@ def _make_set_action_kernel(L: StepLayout) -> wp.Kernel:
     VBOUND = tuple(0 if KIND[r] == VEL else 2 for r in range(R))  # row_f column of the velocity bounds
     vec_a = wp.types.vector(length=max(A, 1), dtype=wp.float32)
     vec_r = wp.types.vector(length=max(R, 1), dtype=wp.float32)
-    vec_ri = wp.types.vector(length=max(R, 1), dtype=wp.int32)
+    row_indices = _make_row_indices(L)
 
     def set_action(
         # Rows:
@@ -155,15 +177,7 @@ def _make_set_action_kernel(L: StepLayout) -> wp.Kernel:
             bad_action_count_out[env] = bad_action_count_out[env] + 1
             step_out[env] = step_out[env] + host_substeps
             return
-        qi = vec_ri()
-        di = vec_ri()
-        for r in range(wp.static(R)):
-            if wp.static(STRIDED):
-                qi[r] = env * q_stride + wp.static(QOFF[r])
-                di[r] = env * qd_stride + wp.static(QDOFF[r])
-            else:
-                qi[r] = q_idx[env, r]
-                di[r] = qd_idx[env, r]
+        qi, di = row_indices(env, q_idx, qd_idx, q_stride, qd_stride)
         q = vec_r()
         t = vec_r()
         for r in range(wp.static(R)):
@@ -223,9 +237,6 @@ def _make_set_action_kernel(L: StepLayout) -> wp.Kernel:
 def _make_substep_kernel(L: StepLayout) -> wp.Kernel:
     R = len(L.kind)
     KIND, FLAGS, ACCEL = L.kind, L.flags, L.accel
-    STRIDED = L.q_off is not None
-    QOFF = L.q_off if STRIDED else (0,) * R
-    QDOFF = L.qd_off if STRIDED else (0,) * R
     POS = _cfg.ROW_POS
     IS_POS = tuple(int(k == POS) for k in KIND)
     VT = tuple(int(k != POS or (f & _cfg.FLAG_VEL_TARGET) != 0) for k, f in zip(KIND, FLAGS))
@@ -236,6 +247,7 @@ def _make_substep_kernel(L: StepLayout) -> wp.Kernel:
     RESP = tuple(int(STABLE or ACCEL[r] != 0) for r in range(R))
     vec_r = wp.types.vector(length=max(R, 1), dtype=wp.float32)
     vec_ri = wp.types.vector(length=max(R, 1), dtype=wp.int32)
+    row_indices = _make_row_indices(L)
 
     def substep(
         # Envs x rows:
@@ -273,15 +285,7 @@ def _make_substep_kernel(L: StepLayout) -> wp.Kernel:
         env = wp.tid()
         # Loads first (each array's sectors in one pass), then the arithmetic, then the stores grouped by array.
         k = step_out[env] + 1
-        qi = vec_ri()
-        di = vec_ri()
-        for r in range(wp.static(R)):
-            if wp.static(STRIDED):
-                qi[r] = env * q_stride + wp.static(QOFF[r])
-                di[r] = env * qd_stride + wp.static(QDOFF[r])
-            else:
-                qi[r] = q_idx[env, r]
-                di[r] = qd_idx[env, r]
+        qi, di = row_indices(env, q_idx, qd_idx, q_stride, qd_stride)
         tq = vec_r()
         tqd = vec_r()
         for r in range(wp.static(R)):

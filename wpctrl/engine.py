@@ -74,6 +74,17 @@ class _Engine(_DrivePropertiesMixin):
         def up(a, dtype):
             return wp.array(np.ascontiguousarray(a), dtype=dtype, device=dev)
 
+        def per_env(cols: int, dtype=wp.float32, fill=None) -> wp.array:
+            """A ``(num_envs, cols)`` array stored column-major (a transposed ``(cols, num_envs)`` buffer): the
+            one-thread-per-env step kernels then access it coalesced (a warp reads one column of 32 envs, 128 B),
+            while every kernel and view still indexes it ``[env, col]``."""
+            buf = wp.zeros((cols, E), dtype=dtype, device=dev)
+            view = buf.transpose()
+            if fill is not None:
+                np_dtype = np.int32 if dtype == wp.int32 else np.float32
+                view.assign(np.ascontiguousarray(np.broadcast_to(np.asarray(fill, dtype=np_dtype), (E, cols))))
+            return view
+
         self.row_kind = up(rows.kind, wp.int32)
         self.row_flags = up(rows.flags, wp.int32)
         self.row_q_off = up(binding.q_off, wp.int32)
@@ -91,10 +102,10 @@ class _Engine(_DrivePropertiesMixin):
         self.q_idx = up(q_idx, wp.int32)
         self.qd_idx = up(qd_idx, wp.int32)
         # Per-env drive properties (num_envs, rows), from the config; the nominal (config) values for "scale" draws.
-        self.kp = up(np.tile(rows.kp, (E, 1)), wp.float32)
-        self.kd = up(np.tile(rows.kd, (E, 1)), wp.float32)
-        self.force_limit = up(np.tile(rows.force_limit, (E, 1)), wp.float32)
-        self.friction = up(np.tile(rows.friction, (E, 1)), wp.float32)
+        self.kp = per_env(R, fill=rows.kp)
+        self.kd = per_env(R, fill=rows.kd)
+        self.force_limit = per_env(R, fill=rows.force_limit)
+        self.friction = per_env(R, fill=rows.friction)
         self.nominal = up(np.stack([rows.kp, rows.kd, rows.force_limit, rows.friction]).reshape(4, R), wp.float32)
         self.rng_counter = wp.zeros(1, dtype=wp.int32, device=dev)
         self.seed = int(seed)
@@ -110,22 +121,22 @@ class _Engine(_DrivePropertiesMixin):
         if delay is not None:
             D = int(delay[1])
             self.delay = wp.full(E, int(delay[0]), dtype=wp.int32, device=dev)
-            self.delay_head = wp.zeros((E, R), dtype=wp.int32, device=dev)
-            self.delay_q = wp.zeros((D + 1, E, R), dtype=wp.float32, device=dev)
+            self.delay_head = per_env(R, wp.int32)
+            self.delay_q = wp.zeros((D + 1, R, E), dtype=wp.float32, device=dev).transpose((0, 2, 1))
             vel_rows = (rows.kind != cfg.ROW_POS) | ((rows.flags & cfg.FLAG_VEL_TARGET) != 0)
             if vel_rows.any():  # velocity targets are 0 on plain position rows: no history needed then
-                self.delay_qd = wp.zeros((D + 1, E, R), dtype=wp.float32, device=dev)
+                self.delay_qd = wp.zeros((D + 1, R, E), dtype=wp.float32, device=dev).transpose((0, 2, 1))
         # Effort readout [N·m or N].
         self.computed_effort = self.applied_effort = self.saturation_count = None
         if track_effort:
-            self.computed_effort = wp.zeros((E, R), dtype=wp.float32, device=dev)
-            self.applied_effort = wp.zeros((E, R), dtype=wp.float32, device=dev)
-            self.saturation_count = wp.zeros((E, R), dtype=wp.int32, device=dev)
+            self.computed_effort = per_env(R)
+            self.applied_effort = per_env(R)
+            self.saturation_count = per_env(R, wp.int32)
         self.row_accel = up(rows.accel.astype(np.int32), wp.int32)
         self.has_accel = bool(rows.accel.any())
         # The joint-space response r = (H^-1)_ii per env and row: acceleration drives and stable explicit PD need it.
         self.needs_response = self.has_accel or self.explicit_mode >= 2
-        self.response = wp.ones((E if self.needs_response else 1, max(R, 1)), dtype=wp.float32, device=dev)
+        self.response = per_env(max(R, 1), fill=1.0) if self.needs_response else wp.ones((1, max(R, 1)), device=dev)
         self._jsr = None
         self._fused = None  # fused H / Cholesky kernel (wpctrl.kernels.inertia) where the articulation allows it
         self.coupled_iterations = wp.zeros(E if self.coupled else 1, dtype=wp.int32, device=dev)
@@ -133,10 +144,11 @@ class _Engine(_DrivePropertiesMixin):
         if self.needs_response:
             self._init_response(model, binding)
 
-        self.start_qpos = wp.zeros((E, R), dtype=wp.float32, device=dev)
-        self.target_qpos = wp.zeros((E, R), dtype=wp.float32, device=dev)
-        self.target_qvel = wp.zeros((E, R), dtype=wp.float32, device=dev)
-        self.processed_action = wp.zeros((E, self.action_dim), dtype=wp.float32, device=dev)
+        # State per (env, row), column-major (per_env): ManiSkill's _start_qpos, _target_qpos, _target_qvel.
+        self.start_qpos = per_env(R)
+        self.target_qpos = per_env(R)
+        self.target_qvel = per_env(R)
+        self.processed_action = per_env(self.action_dim)
         self.step = wp.zeros(E, dtype=wp.int32, device=dev)
         self.dim = E * R  # one thread per (env, row), 1-D launches
         self.dim2 = (E, R)  # the same, 2-D: wp.tid() gives (env, row)

@@ -74,12 +74,18 @@ class _Engine(_DrivePropertiesMixin):
         def up(a, dtype):
             return wp.array(np.ascontiguousarray(a), dtype=dtype, device=dev)
 
+        E_pad = -(-E // 32) * 32 + 32
+        if E_pad & (E_pad - 1) == 0:
+            E_pad += 32
+
         def per_env(cols: int, dtype=wp.float32, fill=None) -> wp.array:
-            """A ``(num_envs, cols)`` array stored column-major (a transposed ``(cols, num_envs)`` buffer): the
+            """A ``(num_envs, cols)`` array stored column-major (a transposed ``(cols, E_pad)`` buffer): the
             one-thread-per-env step kernels then access it coalesced (a warp reads one column of 32 envs, 128 B),
-            while every kernel and view still indexes it ``[env, col]``."""
-            buf = wp.zeros((cols, E), dtype=dtype, device=dev)
-            view = buf.transpose()
+            while every kernel and view still indexes it ``[env, col]``. The column stride ``E_pad`` is a multiple of
+            32 elements that is not a power of two: with a power-of-two stride (e.g. 2^20 envs) a thread's rows fall
+            on the same DRAM channel / L2 set and camp there."""
+            buf = wp.zeros((cols, E_pad), dtype=dtype, device=dev)
+            view = buf[:, :E].transpose()
             if fill is not None:
                 np_dtype = np.int32 if dtype == wp.int32 else np.float32
                 view.assign(np.ascontiguousarray(np.broadcast_to(np.asarray(fill, dtype=np_dtype), (E, cols))))
@@ -122,10 +128,10 @@ class _Engine(_DrivePropertiesMixin):
             D = int(delay[1])
             self.delay = wp.full(E, int(delay[0]), dtype=wp.int32, device=dev)
             self.delay_head = per_env(R, wp.int32)
-            self.delay_q = wp.zeros((D + 1, R, E), dtype=wp.float32, device=dev).transpose((0, 2, 1))
+            self.delay_q = wp.zeros((D + 1, R, E_pad), dtype=wp.float32, device=dev)[:, :, :E].transpose((0, 2, 1))
             vel_rows = (rows.kind != cfg.ROW_POS) | ((rows.flags & cfg.FLAG_VEL_TARGET) != 0)
             if vel_rows.any():  # velocity targets are 0 on plain position rows: no history needed then
-                self.delay_qd = wp.zeros((D + 1, R, E), dtype=wp.float32, device=dev).transpose((0, 2, 1))
+                self.delay_qd = wp.zeros((D + 1, R, E_pad), dtype=wp.float32, device=dev)[:, :, :E].transpose((0, 2, 1))
         # Effort readout [N·m or N].
         self.computed_effort = self.applied_effort = self.saturation_count = None
         if track_effort:

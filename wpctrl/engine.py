@@ -84,6 +84,8 @@ class _Engine(_DrivePropertiesMixin):
             while every kernel and view still indexes it ``[env, col]``. The column stride ``E_pad`` is a multiple of
             32 elements that is not a power of two: with a power-of-two stride (e.g. 2^20 envs) a thread's rows fall
             on the same DRAM channel / L2 set and camp there."""
+            if cols == 0:
+                return wp.zeros((E, 0), dtype=dtype, device=dev)
             buf = wp.zeros((cols, E_pad), dtype=dtype, device=dev)
             view = buf[:, :E].transpose()
             if fill is not None:

@@ -59,7 +59,7 @@ stage launch_params 60 $PY bench/launch_params.py --device "$DEVICE" --envs "${L
   --repeats "$REPEATS" --out "$WORK"
 cp "$WORK"/controller_step_cuda*.md "$OUT"/ 2>/dev/null
 rm -f "$OUT"/controller_step_cuda_block*.md
-(cd "$WORK" && tar -cf "$OUT/launch_json.tar" ./*.json ./*.md 2>/dev/null)
+if ls "$WORK"/*.json >/dev/null 2>&1; then (cd "$WORK" && tar -cf "$OUT/launch_json.tar" ./*.json ./*.md 2>/dev/null); fi
 [[ ",$STAGES," == *",ncu,"* ]] && stage ncu 330 env OUT="$OUT" PYTHON="$PY" bash bench/profile_ncu.sh
 echo "=== done in $(( $(date +%s) - t0 ))s" | tee -a "$LOG"
 ls -la "$OUT" | tee -a "$LOG"

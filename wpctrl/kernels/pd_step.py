@@ -10,6 +10,12 @@ thread, so configs that differ only in bounds share a kernel), the per-env drive
 A control mode compiles its two kernels once (Warp's kernel cache keeps them across runs); modes with the same layout
 share them.
 
+Every kernel body is written as: all loads, then the arithmetic, then the stores grouped by array. The compiler may not
+move a load above a store to another array that might alias it, so interleaving them row by row would cost a memory
+round trip per row (and, at 1M envs, re-fetch the sectors evicted in between). The controller's own
+``(num_envs, rows)`` arrays are column-major views (``_Engine``'s ``per_env``), so a warp's access of one row is 32
+consecutive values; Newton's per-world arrays are read and written where they are.
+
 Row float table ``row_f[r]``: ``lo, hi`` (action bounds of the row's position / velocity column), ``vlo, vhi`` (the
 velocity column of a position-velocity row), ``mimic_mul, mimic_off`` (a follower's coupling), ``qlo, qhi`` (joint
 limits [rad or m], for ``clip_targets``).

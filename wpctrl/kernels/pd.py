@@ -31,13 +31,7 @@ from .. import config as _cfg
 wp.set_module_options({"enable_backward": False})
 
 ROW_POS = wp.constant(_cfg.ROW_POS)
-ROW_VEL = wp.constant(_cfg.ROW_VEL)
-ROW_PASSIVE = wp.constant(_cfg.ROW_PASSIVE)
 
-FLAG_NORMALIZE = wp.constant(_cfg.FLAG_NORMALIZE)
-FLAG_DELTA = wp.constant(_cfg.FLAG_DELTA)
-FLAG_TARGET = wp.constant(_cfg.FLAG_TARGET)
-FLAG_INTERPOLATE = wp.constant(_cfg.FLAG_INTERPOLATE)
 FLAG_VEL_TARGET = wp.constant(_cfg.FLAG_VEL_TARGET)
 
 

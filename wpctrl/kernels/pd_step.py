@@ -43,7 +43,15 @@ import warp as wp
 from .. import config as _cfg
 from .pd import _bidx, _interp, _scale
 
-ROW_F_LO, ROW_F_HI, ROW_F_VLO, ROW_F_VHI, ROW_F_MUL, ROW_F_OFF, ROW_F_QLO, ROW_F_QHI = range(8)
+# Columns of the row float table ``row_f``.
+ROW_F_LO = wp.constant(0)
+ROW_F_HI = wp.constant(1)
+ROW_F_VLO = wp.constant(2)
+ROW_F_VHI = wp.constant(3)
+ROW_F_MUL = wp.constant(4)
+ROW_F_OFF = wp.constant(5)
+ROW_F_QLO = wp.constant(6)
+ROW_F_QHI = wp.constant(7)
 ROW_F_WIDTH = 8
 
 
@@ -99,10 +107,6 @@ def substep_kernel(layout: StepLayout) -> wp.Kernel:
     return k
 
 
-def _followers(mimic_src: tuple) -> list[tuple]:
-    return [tuple(m for m in range(len(mimic_src)) if mimic_src[m] == r) for r in range(len(mimic_src))]
-
-
 def _make_row_indices(L: StepLayout):
     """``row_indices(env, ...) -> (qi, di)``: every row's coordinate / DOF index in Newton's flat arrays for ``env``,
     as ``env * stride`` plus env 0's (compile-time) index for a replicated layout, else from the index tables."""
@@ -144,7 +148,7 @@ def _make_set_action_kernel(L: StepLayout) -> wp.Kernel:
     WRITE_T = tuple(int(IS_POS[r] and not (SRC[r] < 0 and COL[r] < 0)) for r in range(R))
     # Velocity targets: a velocity row's column, or a position-velocity row's second column.
     VSRC = tuple(COL[r] if (KIND[r] == VEL and SRC[r] < 0) else (VCOL[r] if LEAD[r] else -1) for r in range(R))
-    VBOUND = tuple(0 if KIND[r] == VEL else 2 for r in range(R))  # row_f column of the velocity bounds
+    VBOUND = tuple(ROW_F_LO if KIND[r] == VEL else ROW_F_VLO for r in range(R))  # row_f column of the velocity bounds
     vec_a = wp.types.vector(length=max(A, 1), dtype=wp.float32)
     vec_r = wp.types.vector(length=max(R, 1), dtype=wp.float32)
     row_indices = _make_row_indices(L)
@@ -196,7 +200,7 @@ def _make_set_action_kernel(L: StepLayout) -> wp.Kernel:
         for r in range(wp.static(R)):
             if wp.static(LEAD[r] and COL[r] >= 0):
                 c = wp.static(COL[r])
-                x[c] = _scale(a[c], row_f[r, 0], row_f[r, 1], wp.static(NORM[r]))
+                x[c] = _scale(a[c], row_f[r, ROW_F_LO], row_f[r, ROW_F_HI], wp.static(NORM[r]))
                 if wp.static(DELTA[r] and TARGET[r]):
                     t[r] = t[r] + x[c]
                 elif wp.static(DELTA[r]):
@@ -204,7 +208,7 @@ def _make_set_action_kernel(L: StepLayout) -> wp.Kernel:
                 else:
                     t[r] = x[c]
                 if wp.static(CLIP):  # the joint's limits: a virtual target cannot run past them
-                    t[r] = wp.clamp(t[r], row_f[r, 6], row_f[r, 7])
+                    t[r] = wp.clamp(t[r], row_f[r, ROW_F_QLO], row_f[r, ROW_F_QHI])
             if wp.static(VSRC[r] >= 0):
                 c = wp.static(VSRC[r])
                 x[c] = _scale(
@@ -212,9 +216,9 @@ def _make_set_action_kernel(L: StepLayout) -> wp.Kernel:
                 )
         for r in range(wp.static(R)):
             if wp.static(IS_POS[r] and SRC[r] >= 0):
-                t[r] = t[wp.static(max(SRC[r], 0))] * row_f[r, 4] + row_f[r, 5]
+                t[r] = t[wp.static(max(SRC[r], 0))] * row_f[r, ROW_F_MUL] + row_f[r, ROW_F_OFF]
                 if wp.static(CLIP):
-                    t[r] = wp.clamp(t[r], row_f[r, 6], row_f[r, 7])
+                    t[r] = wp.clamp(t[r], row_f[r, ROW_F_QLO], row_f[r, ROW_F_QHI])
         step_out[env] = 0
         for c in range(wp.static(A)):
             if wp.static(c in COL or c in VSRC):

@@ -128,6 +128,22 @@ def wpctrl_bytes_estimate(
     return sa + num_substeps * (8 + 4 * n * per_row)
 
 
+def _copy_fns(name: str, nbytes: int, tdev, cuda: bool) -> dict:
+    """``{name: eager copy, name + "_graph": the same copy replayed from a CUDA graph}`` of a float32 buffer of half
+    ``nbytes`` into another (it reads half and writes half, moving ``nbytes`` in all); no graph off CUDA."""
+    src = torch.ones(max(1, nbytes // 8), dtype=torch.float32, device=tdev)
+    dst = torch.empty_like(src)
+    fns = {name: lambda: dst.copy_(src)}
+    if cuda:
+        g = torch.cuda.CUDAGraph()
+        dst.copy_(src)
+        torch.cuda.synchronize()
+        with torch.cuda.graph(g):
+            dst.copy_(src)
+        fns[name + "_graph"] = g.replay
+    return fns
+
+
 def run_one(args, setup, mode_name: str, interp: bool, sync: Sync, device) -> list[dict]:
     ctrl, state, control = setup.ctrl, setup.state, setup.control
     n_envs = setup.num_envs
@@ -195,32 +211,12 @@ def run_one(args, setup, mode_name: str, interp: bool, sync: Sync, device) -> li
     same_bytes = n_envs * wpctrl_bytes_estimate(
         mode, K, interp, elided=not ctrl._engine.per_substep, explicit=args.actuation == "explicit"
     )
-    if "floor" in args.variants:
-        # One copy of half the bytes: it reads half and writes half, moving floor_bytes in all.
-        count = max(1, floor_bytes // 8)
-        src = torch.ones(count, dtype=torch.float32, device=tdev)
-        dst = torch.empty_like(src)
-        fns["floor"] = lambda: dst.copy_(src)
-        # The same for the bytes wpctrl's kernels actually move (per-env gains, counters, snapshots included).
-        src2 = torch.ones(max(1, same_bytes // 8), dtype=torch.float32, device=tdev)
-        dst2 = torch.empty_like(src2)
-        fns["floor_same"] = lambda: dst2.copy_(src2)
-
     extra = {}
-    if "floor" in fns and sync.cuda:
-        # The same copy replayed from a CUDA graph (no Python launch cost): the floor is the faster of the two.
-        g = torch.cuda.CUDAGraph()
-        fns["floor"]()
-        torch.cuda.synchronize()
-        with torch.cuda.graph(g):
-            fns["floor"]()
-        fns["floor_graph"] = g.replay
-        g2 = torch.cuda.CUDAGraph()
-        fns["floor_same"]()
-        torch.cuda.synchronize()
-        with torch.cuda.graph(g2):
-            fns["floor_same"]()
-        fns["floor_same_graph"] = g2.replay
+    if "floor" in args.variants:
+        # The floor: one copy of the bytes the step must move; "floor_same": of the bytes wpctrl's kernels move
+        # (per-env gains, counters, snapshots included). Each eager and, on CUDA, replayed from a graph.
+        fns.update(_copy_fns("floor", floor_bytes, tdev, sync.cuda))
+        fns.update(_copy_fns("floor_same", same_bytes, tdev, sync.cuda))
     # Samples round-robin over the variants, so that a noisy phase of the machine hits them all alike.
     times = measure_interleaved(
         fns, sync, repeats=args.repeats, min_time=args.min_time, warmup=args.warmup, clock=args.clock
@@ -233,9 +229,7 @@ def run_one(args, setup, mode_name: str, interp: bool, sync: Sync, device) -> li
             times["floor"] = fg
     t_same = None
     if "floor_same" in times:
-        t_same = times.pop("floor_same")["median_s"]
-        if "floor_same_graph" in times:
-            t_same = min(t_same, times.pop("floor_same_graph")["median_s"])
+        t_same = min(times.pop(k)["median_s"] for k in ("floor_same", "floor_same_graph") if k in times)
         extra["floor_same_bytes_s"] = t_same
 
     rows = []

@@ -121,8 +121,9 @@ class _Engine(_DrivePropertiesMixin):
         self.clip_targets = bool(clip_targets)
         # The per-row floats of the step kernels: action bounds, mimic coupling, joint limits (kernels/pd_step.py).
         self.row_f = up(KS.row_float_table(rows, binding.qlimits.astype(np.float32).reshape(R, 2)), wp.float32)
-        self.row_qlo = up(binding.qlimits[:, 0].astype(np.float32).reshape(R), wp.float32)  # (EE kernels)
-        self.row_qhi = up(binding.qlimits[:, 1].astype(np.float32).reshape(R), wp.float32)
+        # Views of its joint-limit columns, for the EE kernels (Warp cannot slice an empty dimension).
+        self.row_qlo = self.row_f[:, KS.ROW_F_QLO] if R else wp.zeros(0, dtype=wp.float32, device=dev)
+        self.row_qhi = self.row_f[:, KS.ROW_F_QHI] if R else wp.zeros(0, dtype=wp.float32, device=dev)
         # Command delay: per-env d in [delay_min, delay_max] substeps, a ring of the last max_delay + 1 commands.
         self.delay_range = delay
         self.delay = self.delay_head = self.delay_q = self.delay_qd = None

@@ -1,0 +1,157 @@
+"""The fused inertia function compiled for one articulation: every loop unrolled (the CUDA default of
+:class:`wpctrl.kernels.inertia.FusedChain`).
+
+Private module. Same signature and result as the runtime-loop function of :func:`wpctrl.kernels.inertia.chain_funcs`
+(forward kinematics from ``joint_q``, H over the bodies plus armature, float64 Cholesky, the controlled block of
+``H^-1``), with the articulation's structure (joint types, parents, DOFs, ancestor masks, controlled rows) as
+compile-time constants. On CUDA its local matrices are then indexed by constants only and stay in registers.
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+from .inertia import _FLOAT32_EPS, J_FIXED, J_REVOLUTE, _body_world_inertia
+
+wp.set_module_options({"enable_backward": False})
+
+
+def unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool):
+    """The fused inertia function with the articulation's structure as compile-time constants (same signature and
+    result as :func:`chain_funcs`' runtime-loop version; the chain tables passed to it are not read).
+
+    Every loop is unrolled and every local matrix is indexed by constants, so on CUDA the matrices live in registers
+    instead of per-thread local memory, and H is only accumulated over the DOF pairs that move a body (its ancestor
+    mask, known at compile time)."""
+    JT, PAR, DOF, ANC, ROWD = template
+    MatN = wp.types.matrix(shape=(n, n), dtype=wp.float64)
+    MatN3 = wp.types.matrix(shape=(n, 3), dtype=wp.float64)
+    MatJ3 = wp.types.matrix(shape=(nj, 3), dtype=float)
+    MatJ4 = wp.types.matrix(shape=(nj, 4), dtype=float)
+    MatRN = wp.types.matrix(shape=(nr, n), dtype=wp.float64)
+    MatR = wp.types.matrix(shape=(nr, nr), dtype=wp.float64)
+    VecR = wp.types.vector(length=nr, dtype=wp.float64)
+    VecN = wp.types.vector(length=n, dtype=wp.float64)
+    eps32 = wp.float64(_FLOAT32_EPS)
+    REV = [0] * n  # 1: the DOF is revolute
+    for k in range(nj):
+        if DOF[k] >= 0:
+            REV[DOF[k]] = int(JT[k] == J_REVOLUTE)
+    MOV = [tuple(i for i in range(n) if (ANC[k] >> i) & 1) for k in range(nj)]  # the DOFs that move body k
+    # DOF pairs (i >= j) moving body k, with whether both are revolute (an angular term).
+    PAIRS = [tuple((a, b, REV[a] and REV[b]) for a in MOV[k] for b in MOV[k] if b <= a) for k in range(nj)]
+    FULL = bool(full)
+
+    @wp.func
+    def chain_rows_factor(
+        num_dofs: int,
+        jb: int,
+        db: int,
+        chain_type: wp.array[wp.int32],
+        chain_parent: wp.array[wp.int32],
+        chain_dof: wp.array[wp.int32],
+        chain_anc: wp.array[wp.int32],
+        row_dof: wp.array[wp.int32],
+        joint_q_start: wp.array[wp.int32],
+        joint_qd_start: wp.array[wp.int32],
+        joint_X_p: wp.array[wp.transform],
+        joint_X_c: wp.array[wp.transform],
+        joint_axis: wp.array[wp.vec3],
+        joint_child: wp.array[wp.int32],
+        joint_armature: wp.array[float],
+        body_mass: wp.array[float],
+        body_com: wp.array[wp.vec3],
+        body_inertia: wp.array[wp.mat33],
+        joint_q: wp.array[float],
+    ):
+        H = MatN()
+        ax = MatN3()  # DOF axes in world
+        pt = MatN3()  # DOF anchor points in world [m]
+        bp = MatJ3()  # child-body world positions
+        bq = MatJ4()  # child-body world rotations (x, y, z, w)
+        for k in range(wp.static(nj)):
+            j = jb + k
+            Xw = wp.transform_identity()
+            if wp.static(PAR[k] >= 0):
+                pk = wp.static(max(PAR[k], 0))
+                Xw = wp.transform(
+                    wp.vec3(bp[pk, 0], bp[pk, 1], bp[pk, 2]), wp.quat(bq[pk, 0], bq[pk, 1], bq[pk, 2], bq[pk, 3])
+                )
+            Xj = Xw * joint_X_p[j]
+            Xm = wp.transform_identity()
+            if wp.static(JT[k] != J_FIXED):
+                a = joint_axis[joint_qd_start[j]]
+                qv = joint_q[joint_q_start[j]]
+                d = wp.static(max(DOF[k], 0))
+                aw = wp.transform_vector(Xj, a)
+                ow = wp.transform_get_translation(Xj)
+                ax[d] = wp.vec3d(wp.float64(aw[0]), wp.float64(aw[1]), wp.float64(aw[2]))
+                pt[d] = wp.vec3d(wp.float64(ow[0]), wp.float64(ow[1]), wp.float64(ow[2]))
+                if wp.static(JT[k] == J_REVOLUTE):
+                    Xm = wp.transform(wp.vec3(0.0), wp.quat_from_axis_angle(a, qv))
+                else:
+                    Xm = wp.transform(a * qv, wp.quat_identity())
+            Xb = Xj * Xm * wp.transform_inverse(joint_X_c[j])
+            p = wp.transform_get_translation(Xb)
+            r = wp.transform_get_rotation(Xb)
+            bp[k] = p
+            bq[k] = wp.vec4(r[0], r[1], r[2], r[3])
+            # This body's contribution to H over the DOF pairs that move it.
+            if wp.static(len(MOV[k]) > 0):
+                m, c, Iw = _body_world_inertia(Xb, joint_child[j], body_mass, body_com, body_inertia)
+                jv = MatN3()  # COM velocity per unit rate of each DOF that moves this body [m/s]
+                Ijw = MatN3()  # I_world times the angular velocity per unit rate (revolute DOFs)
+                for ii in range(wp.static(len(MOV[k]))):
+                    i = wp.static(MOV[k][ii])
+                    if wp.static(REV[MOV[k][ii]]):
+                        jv[i] = wp.cross(ax[i], c - pt[i])
+                        Ijw[i] = Iw * ax[i]
+                    else:
+                        jv[i] = ax[i]
+                for pp in range(wp.static(len(PAIRS[k]))):
+                    i = wp.static(PAIRS[k][pp][0])
+                    i2 = wp.static(PAIRS[k][pp][1])
+                    h = H[i, i2] + m * wp.dot(jv[i], jv[i2])
+                    if wp.static(PAIRS[k][pp][2]):
+                        h = h + wp.dot(Ijw[i], ax[i2])
+                    H[i, i2] = h
+        for i in range(wp.static(n)):
+            H[i, i] = H[i, i] + wp.float64(joint_armature[db + i])
+        # Cholesky H = L L^T in place (lower triangle), pivots floored as in Newton's JointSpaceResponse; the
+        # reciprocals of the pivots are kept (n float64 divisions in all, none in the substitutions below).
+        inv = VecN()
+        for jc in range(wp.static(n)):
+            s = H[jc, jc]
+            for k in range(wp.static(jc)):
+                s -= H[jc, k] * H[jc, k]
+            s = wp.max(s, eps32 * wp.max(wp.abs(H[jc, jc]), wp.float64(1.0)))
+            dg = wp.sqrt(s)
+            H[jc, jc] = dg
+            inv[jc] = wp.float64(1.0) / dg
+            for i in range(wp.static(jc + 1), wp.static(n)):
+                tt = H[i, jc]
+                for k in range(wp.static(jc)):
+                    tt -= H[i, k] * H[jc, k]
+                H[i, jc] = tt * inv[jc]
+        # y_r = L^-1 e_{d_r}: forward substitution from row d_r (entries above it are 0).
+        Y = MatRN()
+        for rr in range(wp.static(nr)):
+            for i in range(wp.static(ROWD[rr]), wp.static(n)):
+                tt = wp.float64(0.0)
+                if wp.static(i == ROWD[rr]):
+                    tt = wp.float64(1.0)
+                for k in range(wp.static(ROWD[rr]), wp.static(i)):
+                    tt -= H[i, k] * Y[rr, k]
+                Y[rr, i] = tt * inv[i]
+        A = MatR()
+        for rr in range(wp.static(nr)):
+            for cc in range(wp.static(rr + 1 if FULL else 1)):
+                c2 = wp.static(cc if FULL else rr)
+                v = wp.float64(0.0)
+                for k in range(wp.static(max(ROWD[rr], ROWD[cc if FULL else rr])), wp.static(n)):
+                    v += Y[rr, k] * Y[c2, k]
+                A[rr, c2] = v
+                A[c2, rr] = v
+        return A
+
+    return (chain_rows_factor, MatR, VecR)

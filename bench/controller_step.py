@@ -332,9 +332,9 @@ def main(argv=None):
     )
     args = parse_run_args(p, argv)
     if args.block_dim:
-        import wpctrl.engine
+        import wpctrl.engine.core
 
-        wpctrl.engine.step_block_dim = lambda device, num_envs: args.block_dim
+        wpctrl.engine.core.step_block_dim = lambda device, num_envs: args.block_dim
     device, sync, meta = start_run(p, args, cpu_envs="1,64,1k,4k,16k", cuda_envs="1,64,1k,4k,16k,64k,256k,1M")
     envs = parse_envs(args.envs)
     interps = {"both": [False, True], "on": [True], "off": [False]}[args.interpolate]

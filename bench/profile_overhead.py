@@ -45,7 +45,7 @@ from bench.reference_torch import TorchCombinedController  # noqa: E402
 
 
 def profile(args, n_envs: int, device, sync: Sync) -> tuple[list[dict], str]:
-    from wpctrl.inputs import _action_array
+    from wpctrl.controllers.inputs import _action_array
 
     model = build_panda_model(n_envs, device)
     setup = real_setup(

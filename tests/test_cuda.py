@@ -102,7 +102,7 @@ def test_cuda_torch_zero_copy():
     torch = pytest.importorskip("torch")
     if not torch.cuda.is_available():
         pytest.skip("torch has no CUDA")
-    from wpctrl.inputs import _action_array
+    from wpctrl.controllers.inputs import _action_array
 
     t = torch.rand(64, 8, device="cuda:0")
     view = _action_array(t, 64, 8, wp.get_device("cuda:0"), None)

@@ -587,7 +587,7 @@ def test_torch_numpy_warp_inputs_identical_and_zero_copy():
     for r in results[1:]:
         np.testing.assert_array_equal(r[0], results[0][0])
         np.testing.assert_array_equal(r[1], results[0][1])
-    from wpctrl.inputs import _action_array
+    from wpctrl.controllers.inputs import _action_array
 
     t = torch.from_numpy(a.copy())
     view = _action_array(t, n, 8, wp.get_device("cpu"), None)

@@ -10,12 +10,13 @@ from .config import (
     ControllerConfig,
     MimicJointError,
     PassiveControllerConfig,
+    PDEEPosControllerConfig,
+    PDEEPoseControllerConfig,
     PDJointPosControllerConfig,
     PDJointPosMimicControllerConfig,
     PDJointPosVelControllerConfig,
     PDJointVelControllerConfig,
 )
-from .config_ee import PDEEPosControllerConfig, PDEEPoseControllerConfig
 
 # The controllers (which import newton, ~4 s) load on first use, so that ``python -m wpctrl demo`` can say what it is
 # doing before the heavy imports and kernel compilation start.
@@ -23,26 +24,28 @@ _LAZY = {
     "BaseController",
     "CombinedController",
     "PassiveController",
+    "PDEEPosController",
+    "PDEEPoseController",
     "PDJointPosController",
     "PDJointPosMimicController",
     "PDJointPosVelController",
     "PDJointVelController",
     "build_controller",
 }
-_LAZY_EE = {"PDEEPosController", "PDEEPoseController"}  # wpctrl.controllers_ee
 
 if TYPE_CHECKING:
     from .controllers import (
         BaseController,
         CombinedController,
         PassiveController,
+        PDEEPosController,
+        PDEEPoseController,
         PDJointPosController,
         PDJointPosMimicController,
         PDJointPosVelController,
         PDJointVelController,
         build_controller,
     )
-    from .controllers_ee import PDEEPosController, PDEEPoseController
 
 
 def __getattr__(name: str):
@@ -50,15 +53,15 @@ def __getattr__(name: str):
         import importlib
 
         return importlib.import_module(".distributed", __name__)
-    if name in _LAZY or name in _LAZY_EE:
-        from . import controllers, controllers_ee
+    if name in _LAZY:
+        from . import controllers
 
-        return getattr(controllers_ee if name in _LAZY_EE else controllers, name)
+        return getattr(controllers, name)
     raise AttributeError(f"module 'wpctrl' has no attribute {name!r}")
 
 
 def __dir__():
-    return sorted(set(globals()) | _LAZY | _LAZY_EE | {"distributed"})
+    return sorted(set(globals()) | _LAZY | {"distributed"})
 
 
 __version__ = "0.1.0"

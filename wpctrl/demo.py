@@ -41,7 +41,7 @@ COMPILE_NOTICE = "compiling kernels (first run only: ~1.5 min on a 2-core CPU; l
 def explicit_pd_choices() -> tuple[str, ...]:
     """The controller's own list of explicit PD laws (``build_controller(explicit_pd=...)``): a new law shows up
     in the demo without an edit here."""
-    from .controllers import _EXPLICIT_PD
+    from .controllers.base import _EXPLICIT_PD
 
     return tuple(_EXPLICIT_PD)
 

@@ -36,7 +36,7 @@ from wpctrl.config import (
     PDJointPosVelControllerConfig,
     PDJointVelControllerConfig,
 )
-from wpctrl.config_ee import PDEEPosControllerConfig, PDEEPoseControllerConfig
+from wpctrl.config.ee import PDEEPosControllerConfig, PDEEPoseControllerConfig
 
 __all__ = [
     "PANDA_ARM_JOINTS",

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from .. import config as _cfg
+from ..config import rows as _cfg
 from .inertia import chain_funcs
 from .pd import _bidx
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import newton
 import warp as wp
 
-from .. import config_ee as _ce
+from ..config import ee as _ce
 
 wp.set_module_options({"enable_backward": False})
 

@@ -26,19 +26,15 @@ import newton
 import numpy as np
 import warp as wp
 
-from ..launch import PER_ENV_BLOCK_DIM
+from .dims import PER_ENV_BLOCK_DIM
+from .inertia_unrolled import unrolled_chain_funcs
+from .spatial import _FLOAT32_EPS, J_FIXED, J_PRISMATIC, J_REVOLUTE, _body_world_inertia  # noqa: F401
 
 wp.set_module_options({"enable_backward": False})
 
 MAX_CHAIN_DOFS = 24
 """Largest articulation DOF count of the fused kernels (the ancestor masks are int32 bitmasks; local matrices are
 N x N float64, so the per-thread footprint grows as N^2: a 9-DOF Panda uses 81 doubles for H)."""
-
-J_FIXED = 0
-J_REVOLUTE = 1
-J_PRISMATIC = 2
-
-_FLOAT32_EPS = float(np.finfo(np.float32).eps)
 
 
 @dataclass
@@ -141,29 +137,6 @@ def chain_layout(model: newton.Model, joint_index: np.ndarray, dof_index: np.nda
     )
 
 
-@wp.func
-def _body_world_inertia(
-    Xb: wp.transform,
-    b: int,
-    body_mass: wp.array[float],
-    body_com: wp.array[wp.vec3],
-    body_inertia: wp.array[wp.mat33],
-):
-    """Body ``b`` at world pose ``Xb``: its mass [kg], world COM [m] and world inertia about its COM [kg m^2], float64
-    (the inertia rotated in float32, as Newton stores it)."""
-    m = wp.float64(body_mass[b])
-    cw = wp.transform_point(Xb, body_com[b])
-    c = wp.vec3d(wp.float64(cw[0]), wp.float64(cw[1]), wp.float64(cw[2]))
-    R = wp.quat_to_matrix(wp.transform_get_rotation(Xb))
-    Iw32 = R * body_inertia[b] * wp.transpose(R)
-    Iw = wp.mat33d(
-        wp.float64(Iw32[0, 0]), wp.float64(Iw32[0, 1]), wp.float64(Iw32[0, 2]),
-        wp.float64(Iw32[1, 0]), wp.float64(Iw32[1, 1]), wp.float64(Iw32[1, 2]),
-        wp.float64(Iw32[2, 0]), wp.float64(Iw32[2, 1]), wp.float64(Iw32[2, 2]),
-    )  # fmt: skip
-    return m, c, Iw
-
-
 _funcs_cache: dict[tuple, tuple] = {}
 
 
@@ -177,8 +150,6 @@ def chain_funcs(nj: int, n: int, nr: int, template: tuple | None = None, full: b
     if template is not None:
         key = (nj, n, nr, template, bool(full))
         if key not in _funcs_cache:
-            from .inertia_unrolled import unrolled_chain_funcs  # (that module imports this one's helpers)
-
             _funcs_cache[key] = unrolled_chain_funcs(nj, n, nr, template, bool(full))
         return _funcs_cache[key]
     key = (nj, n, nr)

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from .inertia import _FLOAT32_EPS, J_FIXED, J_REVOLUTE, _body_world_inertia
+from .spatial import _FLOAT32_EPS, J_FIXED, J_REVOLUTE, _body_world_inertia
 
 wp.set_module_options({"enable_backward": False})
 

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from .. import config as _cfg
+from ..config import rows as _cfg
 
 wp.set_module_options({"enable_backward": False})
 

@@ -40,7 +40,7 @@ from typing import NamedTuple
 import numpy as np
 import warp as wp
 
-from .. import config as _cfg
+from ..config import rows as _cfg
 from .pd import _bidx, _interp, _scale
 
 # Columns of the row float table ``row_f``.

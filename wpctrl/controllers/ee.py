@@ -1,7 +1,7 @@
 """ManiSkill-shaped end-effector controller classes (PDEEPos / PDEEPose) over the shared engine.
 
 An EE controller is a :class:`~wpctrl.controllers.PDJointPosController` whose targets come from the EE kernels
-(:mod:`wpctrl.ee`); it adds ``target_pose``, ``ee_pose``, ``ik_success`` and the ``{"target_pose": ...}`` state.
+(:mod:`wpctrl.engine.ee`); it adds ``target_pose``, ``ee_pose``, ``ik_success`` and the ``{"target_pose": ...}`` state.
 """
 
 from __future__ import annotations
@@ -9,8 +9,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from . import config_ee as cfg_ee
-from .controllers import PDJointPosController
+from .base import PDJointPosController
 from .inputs import _as_rows_array
 
 
@@ -76,7 +75,3 @@ class PDEEPosController(PDJointPosController):
 
 class PDEEPoseController(PDEEPosController):
     """End-effector pose control: position + rotation (Euler XYZ increments clipped by norm, ManiSkill's sign)."""
-
-
-cfg_ee.PDEEPosControllerConfig.controller_cls = PDEEPosController
-cfg_ee.PDEEPoseControllerConfig.controller_cls = PDEEPoseController

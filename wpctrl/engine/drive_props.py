@@ -10,8 +10,8 @@ import newton
 import numpy as np
 import warp as wp
 
-from . import config as cfg
-from .kernels import actuation as KA
+from ..config import rows as cfg
+from ..kernels import actuation as KA
 
 DRIVE_FIELDS = ("stiffness", "damping", "force_limit", "friction")
 """The per-env drive properties, in the order of the actuation kernels' property index p."""

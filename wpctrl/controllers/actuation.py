@@ -23,7 +23,7 @@ from collections.abc import Sequence
 import numpy as np
 import warp as wp
 
-from .drive_props import DRIVE_FIELDS
+from ..engine.drive_props import DRIVE_FIELDS
 from .inputs import _env_selection, _is_torch
 
 _RAND_MODES = ("scale", "abs")
@@ -98,7 +98,7 @@ class _Shape:
 
 
 class ActuationMixin:
-    """Per-env drive properties, their randomisation, delay and effort readout (see :mod:`wpctrl.actuation`)."""
+    """Per-env drive properties, their randomisation, delay and effort readout (:mod:`wpctrl.controllers.actuation`)."""
 
     # -- per-env drive properties ---------------------------------------------------------------------------------
 

@@ -15,12 +15,12 @@ import newton
 import numpy as np
 import warp as wp
 
-from . import config as cfg
-from . import config_ee as cfg_ee
+from ..binding import bind_joints
+from ..config import ee as cfg_ee
+from ..config import rows as cfg
+from ..engine.core import _Engine
+from ..engine.ee import attach_ee_parts
 from .actuation import ActuationMixin, check_actuation_options
-from .binding import bind_joints
-from .ee import attach_ee_parts
-from .engine import _Engine
 from .inputs import _action_array, _as_rows_array, _claim, _env_selection, _raise_on_nonfinite, _type_name
 
 _ACTUATIONS = ("implicit", "explicit")
@@ -477,81 +477,3 @@ class PassiveController(BaseController):
 
 class CombinedController(BaseController):
     """A control mode ``{uid: config}``: one flat action in dict insertion order, see :attr:`action_mapping`."""
-
-
-cfg.PDJointPosControllerConfig.controller_cls = PDJointPosController
-cfg.PDJointPosMimicControllerConfig.controller_cls = PDJointPosMimicController
-cfg.PDJointVelControllerConfig.controller_cls = PDJointVelController
-cfg.PDJointPosVelControllerConfig.controller_cls = PDJointPosVelController
-cfg.PassiveControllerConfig.controller_cls = PassiveController
-
-
-def build_controller(
-    config,
-    model: newton.Model,
-    control_freq: int = 20,
-    sim_freq: int = 100,
-    actuation: str = "implicit",
-    *,
-    solver: Any = None,
-    nan_policy: str = "hold",
-    explicit_pd: str = "naive",
-    inertia_update: str = "control",
-    delay=None,
-    track_effort: bool = False,
-    clip_targets: str = "none",
-    seed: int = 0,
-) -> BaseController:
-    """Build the controller for one config or a ManiSkill control-mode dict ``{uid: config}``.
-
-    Args:
-        config: A controller config, or a dict of them (a combined controller with a flat action).
-        model: The finalized Newton model; every world must hold the configs' joints. Drive properties are
-            written into it (gains, target modes, effort limits, friction).
-        control_freq: Control steps per second [Hz].
-        sim_freq: Solver steps per second [Hz]; a multiple of ``control_freq``.
-        actuation: ``"implicit"`` (the solver's built-in PD tracks ``Control.joint_target_q/qd``) or
-            ``"explicit"`` (wpctrl's kernel writes clamped PD torques into ``Control.joint_f``; built-in drive off).
-        solver: Optional solver already built on ``model``: notified of the changed drive properties.
-        nan_policy: ``"hold"`` (an env whose action holds NaN/Inf keeps its previous targets; counted in
-            ``bad_action_count``; graph-capturable) or ``"raise"`` (ValueError before any launch; costs a host sync).
-        explicit_pd: With ``actuation="explicit"``: ``"naive"`` (``clamp(Kp (q* - q) + Kd (qd* - qd))``) or
-            ``"stable"`` (the same law on the predicted end-of-substep state, solved with each joint's response
-            r = (H^-1)_ii: ``(Kp (q* - q - dt qd) + Kd (qd* - qd)) / (1 + r dt (Kd + dt Kp))``, then clamped;
-            stable at implicit-drive gains), or ``"coupled"`` (PhysX's articulation drive: the same law solved
-            jointly for all rows with the full inverse-inertia block ``A`` of the articulation, recomputed from
-            ``joint_q`` every substep, and the force limits enforced inside the solve:
-            ``tau = clamp(b - diag(dt Kd + dt^2 Kp) A tau)``; one extra launch per substep; see the README section
-            "PhysX-faithful drive (coupled)").
-        inertia_update: When r = (H^-1)_ii is recomputed (acceleration drives, stable PD): once per control step
-            in ``set_action`` (``"control"``) or before every substep (``"substep"``).
-        delay: Command latency [substeps]: None (off), an int, or ``(min, max)`` drawn uniformly per env at each
-            reset of that env (device RNG). The drive targets (implicit: ``Control.joint_target_q/qd``; explicit:
-            the PD law's targets, with the current measured state) are those of d substeps ago; a reset fills the
-            env's history with the reset pose. ``ctrl.delay`` reads and writes d. Costs (max + 1) x num_envs x
-            n_joints float32 (twice when a row has a velocity target).
-        track_effort: Write ``computed_effort``/``applied_effort``/``saturation_count`` every substep (off: no bytes).
-        clip_targets: ``"none"`` (ManiSkill) or ``"joint_limits"``: every position target (after delta, virtual
-            target and mimic) is clamped to the joint's limits from the model before it is stored.
-        seed: Seed of the device RNG that draws the delays.
-    """
-    kw = dict(
-        actuation=actuation,
-        solver=solver,
-        nan_policy=nan_policy,
-        explicit_pd=explicit_pd,
-        inertia_update=inertia_update,
-        delay=delay,
-        track_effort=track_effort,
-        clip_targets=clip_targets,
-        seed=seed,
-    )
-    if isinstance(config, Mapping):
-        return CombinedController(config, model, control_freq, sim_freq, **kw)
-    if not isinstance(config, cfg.ControllerConfig):
-        raise cfg.ConfigError(f"config: expected a controller config or a dict of them, got {type(config).__name__}")
-    return type(config).controller_cls(config, model, control_freq, sim_freq, **kw)
-
-
-# The end-effector classes set ``controller_cls`` on their configs (a dict mixing EE and joint configs needs them).
-from . import controllers_ee  # noqa: E402, F401

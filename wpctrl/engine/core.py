@@ -25,15 +25,16 @@ import newton
 import numpy as np
 import warp as wp
 
-from . import config as cfg
-from .binding import JointBinding
+from ..binding import JointBinding
+from ..config import rows as cfg
+from ..kernels import actuation as KA
+from ..kernels import drive as KD
+from ..kernels import inertia as KI
+from ..kernels import pd as K
+from ..kernels import pd_step as KS
+from ..kernels.dims import PER_ENV_BLOCK_DIM, step_block_dim
 from .drive_props import _DrivePropertiesMixin
-from .kernels import actuation as KA
-from .kernels import drive as KD
-from .kernels import inertia as KI
-from .kernels import pd as K
-from .kernels import pd_step as KS
-from .launch import PER_ENV_BLOCK_DIM, _index_table, _Launch, _Targets, step_block_dim
+from .launch import _index_table, _Launch, _Targets
 
 
 class _Engine(_DrivePropertiesMixin):

@@ -22,10 +22,11 @@ import newton
 import numpy as np
 import warp as wp
 
-from .config import ConfigError
-from .config_ee import MAX_EE_DOF, EESpec
-from .kernels import ee as KE
-from .launch import PER_ENV_BLOCK_DIM, _Launch
+from ..config import ConfigError
+from ..config.ee import MAX_EE_DOF, EESpec
+from ..kernels import ee as KE
+from ..kernels.dims import PER_ENV_BLOCK_DIM
+from .launch import _Launch
 
 logger = logging.getLogger("wpctrl")
 
@@ -111,7 +112,7 @@ def _rotate(q, v):
 
 def _known_frame(link: str, labels, bodies0):
     """A Panda link merged away (e.g. ``panda_hand_tcp``) from wpctrl.robots' URDF facts: ([body], offset) or None."""
-    from .robots import PANDA_FRAMES
+    from ..robots import PANDA_FRAMES
 
     entry = PANDA_FRAMES.get(link)
     if entry is None or entry[0] is None:
@@ -134,7 +135,7 @@ def _is_merged_root(spec: EESpec) -> bool:
         children = {j.find("child").get("link") for j in root.findall("joint")}
         roots = [lk.get("name") for lk in root.findall("link") if lk.get("name") not in children]
         return roots == [name]
-    from .robots import PANDA_FRAMES
+    from ..robots import PANDA_FRAMES
 
     return name in PANDA_FRAMES and PANDA_FRAMES[name][0] is None
 

@@ -17,8 +17,8 @@ from typing import Literal, Union
 
 import numpy as np
 
-from . import config as cfg
-from .config import ConfigError, ControllerConfig, DriveMode
+from . import rows as cfg
+from .joint import ConfigError, ControllerConfig, DriveMode, PDJointPosControllerConfig
 
 POS_FRAMES = ("root_translation", "body_translation")
 POSE_FRAMES = (
@@ -250,7 +250,7 @@ def ee_rows(c: PDEEPosControllerConfig, qlimits: np.ndarray) -> tuple[cfg.Rows, 
 
     # Joint rows: position rows (drive, interpolation, NaN hold, reset as any joint controller) whose targets the
     # EE kernel writes; act_col -1 tells the joint kernel to keep them.
-    base = cfg.PDJointPosControllerConfig(
+    base = PDJointPosControllerConfig(
         names,
         None,
         None,

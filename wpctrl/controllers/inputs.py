@@ -11,7 +11,7 @@ import weakref
 import numpy as np
 import warp as wp
 
-from .kernels import pd as K
+from ..kernels import pd as K
 
 
 def _torch():

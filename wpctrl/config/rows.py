@@ -1,27 +1,29 @@
-"""Host-side controller configs that mirror ManiSkill 3's joint-controller dataclasses.
+"""Rows: the flat, per-joint description of a control mode that one kernel launch handles.
 
-Class names, field names, field order and defaults are ManiSkill's, so a ManiSkill control-mode dict ports by
-changing an import. This module never touches a device: it validates configs and turns them into per-joint
-*rows* (plain numpy tables) that the binding and the controllers upload.
-
-Units: positions in rad (revolute) or m (prismatic), velocities in rad/s or m/s, stiffness in N·m/rad (N/m),
-damping in N·m·s/rad (N·s/m), force limits in N·m (N).
+Validates configs (:mod:`wpctrl.config.joint`) and turns them into per-joint rows (plain numpy tables) that the
+binding and the engine upload. Host only.
 """
 
 from __future__ import annotations
 
-import logging
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
-from typing import Literal, Union
+from dataclasses import dataclass
 
 import numpy as np
 
-logger = logging.getLogger("wpctrl")
-
-DriveMode = Literal["force", "acceleration"]
-_DRIVE_MODES = ("force", "acceleration")
+from .joint import (
+    _DRIVE_MODES,
+    ConfigError,
+    ControllerConfig,
+    MimicJointError,
+    PassiveControllerConfig,
+    PDJointPosControllerConfig,
+    PDJointPosMimicControllerConfig,
+    PDJointPosVelControllerConfig,
+    PDJointVelControllerConfig,
+    logger,
+)
 
 # Row kinds (one row per controlled joint).
 ROW_POS = 0
@@ -38,96 +40,6 @@ FLAG_TARGET = 4
 FLAG_INTERPOLATE = 8
 FLAG_VEL_TARGET = 16
 """The row's velocity drive target comes from the action (PDJointPosVel)."""
-
-
-class ConfigError(ValueError):
-    """A controller config (or its binding to a model) is invalid. The message names the field."""
-
-
-class MimicJointError(ConfigError, TypeError):
-    """A mimic entry names a joint outside ``joint_names`` (ManiSkill raises ``TypeError`` here)."""
-
-
-@dataclass
-class ControllerConfig:
-    joint_names: list[str]
-    """Names of the joints this controller drives, matched against the Newton model's joint labels."""
-
-    # A class variable (not a dataclass field), as in ManiSkill; set by ``wpctrl.controllers``.
-    controller_cls = None
-
-
-@dataclass
-class PDJointPosControllerConfig(ControllerConfig):
-    lower: Union[None, float, Sequence[float]]
-    """Lower action bound [rad or m] (a delta bound with ``use_delta``); None takes the joint's lower limit."""
-    upper: Union[None, float, Sequence[float]]
-    """Upper action bound [rad or m]; None takes the joint's upper limit."""
-    stiffness: Union[float, Sequence[float]]
-    """Drive stiffness Kp [N·m/rad or N/m]."""
-    damping: Union[float, Sequence[float]]
-    """Drive damping Kd [N·m·s/rad or N·s/m]."""
-    force_limit: Union[float, Sequence[float]] = 1e10
-    """Drive effort limit [N·m or N]."""
-    friction: Union[float, Sequence[float]] = 0.0
-    """Joint friction [N·m or N], written to ``Model.joint_friction``."""
-    use_delta: bool = False
-    """Action is a delta: added to the measured position (or to the virtual target with ``use_target``)."""
-    use_target: bool = False
-    """With ``use_delta``: accumulate deltas on the previous (virtual) target instead of the measured position."""
-    interpolate: bool = False
-    """Ramp the drive target linearly from the measured position to the target over the control step's substeps."""
-    normalize_action: bool = True
-    """Action in [-1, 1] is clipped, then mapped affinely onto [lower, upper]."""
-    drive_mode: Union[Sequence[DriveMode], DriveMode] = "force"
-    """"force" or "acceleration", for all joints or per joint."""
-
-
-@dataclass
-class PDJointPosMimicControllerConfig(PDJointPosControllerConfig):
-    mimic: dict[str, dict[str, float]] = field(default_factory=dict)
-    """``{mimic_joint: {"joint": control_joint, "multiplier": 1.0, "offset": 0.0}}``: the mimic joint's target is
-    ``target[control] * multiplier + offset``. Empty with two joints: the second joint commands the first."""
-
-
-@dataclass
-class PDJointVelControllerConfig(ControllerConfig):
-    lower: Union[float, Sequence[float]]
-    """Lower velocity bound [rad/s or m/s]."""
-    upper: Union[float, Sequence[float]]
-    """Upper velocity bound [rad/s or m/s]."""
-    damping: Union[float, Sequence[float]]
-    """Drive damping Kd [N·m·s/rad or N·s/m]; stiffness is 0."""
-    force_limit: Union[float, Sequence[float]] = 1e10
-    """Drive effort limit [N·m or N]."""
-    friction: Union[float, Sequence[float]] = 0.0
-    """Joint friction [N·m or N]."""
-    normalize_action: bool = True
-    """Action in [-1, 1] is clipped, then mapped affinely onto [lower, upper]."""
-    drive_mode: Union[Sequence[DriveMode], DriveMode] = "force"
-    """"force" or "acceleration", for all joints or per joint."""
-
-
-@dataclass
-class PDJointPosVelControllerConfig(PDJointPosControllerConfig):
-    vel_lower: Union[float, Sequence[float]] = -1.0
-    """Lower velocity-target bound [rad/s or m/s]."""
-    vel_upper: Union[float, Sequence[float]] = 1.0
-    """Upper velocity-target bound [rad/s or m/s]."""
-
-
-@dataclass
-class PassiveControllerConfig(ControllerConfig):
-    damping: Union[float, Sequence[float]]
-    """Damping toward a zero velocity target [N·m·s/rad or N·s/m]; stiffness is 0."""
-    force_limit: Union[float, Sequence[float]] = 1e10
-    """Drive effort limit [N·m or N]."""
-    friction: Union[float, Sequence[float]] = 0.0
-    """Joint friction [N·m or N]."""
-
-
-# --------------------------------------------------------------------------------------------------------------
-# Rows: the flat, per-joint description of a control mode that one kernel launch handles.
 
 
 @dataclass

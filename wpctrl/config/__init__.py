@@ -1,0 +1,60 @@
+"""Configs: host dataclasses that mirror ManiSkill 3's controller configs, and the per-joint rows they become.
+
+Never touches a device. :mod:`.joint` (joint controllers), :mod:`.ee` (end-effector controllers), :mod:`.rows`
+(validation and the flat per-joint tables one kernel launch handles).
+"""
+
+from .ee import EE_CONFIGS, MAX_EE_DOF, EESpec, PDEEPosControllerConfig, PDEEPoseControllerConfig, ee_rows
+from .joint import (
+    ConfigError,
+    ControllerConfig,
+    DriveMode,
+    MimicJointError,
+    PassiveControllerConfig,
+    PDJointPosControllerConfig,
+    PDJointPosMimicControllerConfig,
+    PDJointPosVelControllerConfig,
+    PDJointVelControllerConfig,
+)
+from .rows import (
+    FLAG_DELTA,
+    FLAG_INTERPOLATE,
+    FLAG_NORMALIZE,
+    FLAG_TARGET,
+    FLAG_VEL_TARGET,
+    ROW_PASSIVE,
+    ROW_POS,
+    ROW_VEL,
+    Rows,
+    check_mode_dict,
+    config_rows,
+)
+
+__all__ = [
+    "EE_CONFIGS",
+    "FLAG_DELTA",
+    "FLAG_INTERPOLATE",
+    "FLAG_NORMALIZE",
+    "FLAG_TARGET",
+    "FLAG_VEL_TARGET",
+    "MAX_EE_DOF",
+    "ROW_PASSIVE",
+    "ROW_POS",
+    "ROW_VEL",
+    "ConfigError",
+    "ControllerConfig",
+    "DriveMode",
+    "EESpec",
+    "MimicJointError",
+    "PDEEPosControllerConfig",
+    "PDEEPoseControllerConfig",
+    "PDJointPosControllerConfig",
+    "PDJointPosMimicControllerConfig",
+    "PDJointPosVelControllerConfig",
+    "PDJointVelControllerConfig",
+    "PassiveControllerConfig",
+    "Rows",
+    "check_mode_dict",
+    "config_rows",
+    "ee_rows",
+]

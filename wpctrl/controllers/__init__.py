@@ -1,0 +1,31 @@
+"""Controllers: the ManiSkill-shaped API over one control mode's device engine.
+
+:mod:`.base` (joint controllers, the combined controller), :mod:`.ee` (end-effector controllers), :mod:`.actuation`
+(per-env drive properties, delay and effort readout), :mod:`.inputs` (action and env-id conversion), :mod:`.build`
+(``build_controller``).
+"""
+
+from .base import (
+    BaseController,
+    CombinedController,
+    PassiveController,
+    PDJointPosController,
+    PDJointPosMimicController,
+    PDJointPosVelController,
+    PDJointVelController,
+)
+from .build import build_controller
+from .ee import PDEEPosController, PDEEPoseController
+
+__all__ = [
+    "BaseController",
+    "CombinedController",
+    "PDEEPosController",
+    "PDEEPoseController",
+    "PDJointPosController",
+    "PDJointPosMimicController",
+    "PDJointPosVelController",
+    "PDJointVelController",
+    "PassiveController",
+    "build_controller",
+]

@@ -4,6 +4,7 @@ Never touches a device. :mod:`.joint` (joint controllers), :mod:`.ee` (end-effec
 (validation and the flat per-joint tables one kernel launch handles).
 """
 
+from .base import PDBaseForwardVelControllerConfig, PDBaseVelControllerConfig
 from .ee import EE_CONFIGS, MAX_EE_DOF, EESpec, PDEEPosControllerConfig, PDEEPoseControllerConfig, ee_rows
 from .joint import (
     ConfigError,
@@ -46,6 +47,8 @@ __all__ = [
     "DriveMode",
     "EESpec",
     "MimicJointError",
+    "PDBaseForwardVelControllerConfig",
+    "PDBaseVelControllerConfig",
     "PDEEPosControllerConfig",
     "PDEEPoseControllerConfig",
     "PDJointPosControllerConfig",

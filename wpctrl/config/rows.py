@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .base import PDBaseForwardVelControllerConfig, PDBaseVelControllerConfig
 from .joint import (
     _DRIVE_MODES,
     ConfigError,
@@ -72,6 +73,18 @@ class Rows:
     action_high: np.ndarray
     normalized: bool
     action_dim: int
+    # Ego-centric base rows (PDBaseVel / PDBaseForwardVel): the planar velocity target of an x (axis 0) or y (axis 1)
+    # row is the action's (vx, vy) rotated by the measured position of row ``yaw_row`` (its controller's third joint).
+    yaw_row: np.ndarray | None = None  # int32 row index, -1: not a rotated base row
+    base_axis: np.ndarray | None = None  # int32: 0 x, 1 y, -1 none
+    bx_col: np.ndarray | None = None  # int32 action column of vx (-1: 0)
+    by_col: np.ndarray | None = None  # int32 action column of vy (-1: 0, the forward-only base)
+
+    def __post_init__(self):
+        n = len(self.joint_names)
+        for k in ("yaw_row", "base_axis", "bx_col", "by_col"):
+            if getattr(self, k) is None:
+                setattr(self, k, np.full(n, -1, np.int32))
 
     @property
     def count(self) -> int:
@@ -87,9 +100,9 @@ class Rows:
         for p in parts:
             for k in _ROW_ARRAYS:
                 a = getattr(p, k).copy()
-                if k in ("act_col", "vel_col"):
+                if k in ("act_col", "vel_col", "bx_col", "by_col"):
                     a[a >= 0] += col0
-                elif k == "mimic_src":
+                elif k in ("mimic_src", "yaw_row"):
                     a[a >= 0] += row0
                 arrays[k].append(a)
             names += p.joint_names
@@ -125,6 +138,10 @@ _ROW_ARRAYS = {
     "force_limit": np.float32,
     "friction": np.float32,
     "accel": np.bool_,
+    "yaw_row": np.int32,
+    "base_axis": np.int32,
+    "bx_col": np.int32,
+    "by_col": np.int32,
 }
 
 
@@ -384,11 +401,14 @@ def _pos_rows(config, qlimits: np.ndarray, *, mimic: bool = False, posvel: bool 
     )
 
 
-def _vel_rows(config) -> Rows:
+def _vel_rows(config, bounds: tuple[np.ndarray, np.ndarray] | None = None) -> Rows:
     names = _joint_names(config)
     n = len(names)
-    lo = _per_joint(config, "lower", config.lower, n).astype(np.float32)
-    hi = _per_joint(config, "upper", config.upper, n).astype(np.float32)
+    if bounds is None:
+        lo = _per_joint(config, "lower", config.lower, n).astype(np.float32)
+        hi = _per_joint(config, "upper", config.upper, n).astype(np.float32)
+    else:
+        lo, hi = (b.astype(np.float32) for b in bounds)
     if not isinstance(config.normalize_action, (bool, np.bool_)):
         raise ConfigError(f"{_name(config)}.normalize_action: expected a bool, got {config.normalize_action!r}")
     _check_box(config, lo, hi, names, bool(config.normalize_action), "lower/upper")
@@ -415,6 +435,36 @@ def _vel_rows(config) -> Rows:
         normalized=bool(config.normalize_action),
         action_dim=n,
     )
+
+
+def _base_rows(config, forward: bool) -> Rows:
+    """Rows of a mobile base: velocity rows whose x / y targets are the planar action rotated by the measured yaw."""
+    names = _joint_names(config)
+    n = len(names)
+    if n < 3 or (forward and n != 3):
+        want = "exactly 3 joints" if forward else "at least 3 joints"
+        raise ConfigError(
+            f"{_name(config)}.joint_names: expected {want} (the base's x, y and yaw joints, in that order), got {n}: "
+            f"{names}"
+        )
+    if forward:
+        # ManiSkill's forward base: action [v, w], bounds broadcast to 2 (not one per joint).
+        a_lo = _per_joint(config, "lower", config.lower, 2).astype(np.float32)
+        a_hi = _per_joint(config, "upper", config.upper, 2).astype(np.float32)
+        if not isinstance(config.normalize_action, (bool, np.bool_)):
+            raise ConfigError(f"{_name(config)}.normalize_action: expected a bool, got {config.normalize_action!r}")
+        _check_box(config, a_lo, a_hi, ["forward velocity", "yaw rate"], bool(config.normalize_action), "lower/upper")
+        rows = _vel_rows(config, bounds=(np.array([a_lo[0], 0, a_lo[1]]), np.array([a_hi[0], 0, a_hi[1]])))
+        rows.act_col[:] = [0, -1, 1]
+        rows.action_low, rows.action_high, rows.action_dim = a_lo, a_hi, 2
+        rows.bx_col[:2] = 0
+    else:
+        rows = _vel_rows(config)
+        rows.bx_col[:2] = 0
+        rows.by_col[:2] = 1
+    rows.yaw_row[:2] = 2
+    rows.base_axis[:2] = [0, 1]
+    return rows
 
 
 def _passive_rows(config) -> Rows:
@@ -460,6 +510,10 @@ def config_rows(config: ControllerConfig, qlimits: np.ndarray) -> Rows:
         return _pos_rows(config, qlimits, posvel=True)
     if isinstance(config, PDJointPosControllerConfig):
         return _pos_rows(config, qlimits)
+    if isinstance(config, PDBaseForwardVelControllerConfig):
+        return _base_rows(config, forward=True)
+    if isinstance(config, PDBaseVelControllerConfig):
+        return _base_rows(config, forward=False)
     if isinstance(config, PDJointVelControllerConfig):
         return _vel_rows(config)
     if isinstance(config, PassiveControllerConfig):

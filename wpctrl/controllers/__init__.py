@@ -9,6 +9,8 @@ from .base import (
     BaseController,
     CombinedController,
     PassiveController,
+    PDBaseForwardVelController,
+    PDBaseVelController,
     PDJointPosController,
     PDJointPosMimicController,
     PDJointPosVelController,
@@ -20,6 +22,8 @@ from .ee import PDEEPosController, PDEEPoseController
 __all__ = [
     "BaseController",
     "CombinedController",
+    "PDBaseForwardVelController",
+    "PDBaseVelController",
     "PDEEPosController",
     "PDEEPoseController",
     "PDJointPosController",

@@ -18,6 +18,7 @@ import warp as wp
 from ..binding import bind_joints
 from ..config import ee as cfg_ee
 from ..config import rows as cfg
+from ..engine import gravity
 from ..engine.core import _Engine
 from ..engine.ee import attach_ee_parts
 from .actuation import ActuationMixin, check_actuation_options
@@ -61,6 +62,7 @@ class BaseController(ActuationMixin):
         track_effort: bool = False,
         clip_targets: str = "none",
         seed: int = 0,
+        balance_passive_force: bool | None = None,
     ):
         self.config = config
         self.control_freq = control_freq
@@ -79,12 +81,20 @@ class BaseController(ActuationMixin):
         self.explicit_pd = explicit_pd
         actuation_options = check_actuation_options(delay, track_effort, clip_targets, seed)
         self.clip_targets = clip_targets
+        balance = True  # ManiSkill's default: a single config counts as on
         if isinstance(config, Mapping):
             configs = dict(config)
-            configs.pop("balance_passive_force", None)  # a ManiSkill agent option, not a controller
+            balance = configs.pop("balance_passive_force", True)  # an agent-level option, not a controller
             cfg.check_mode_dict(configs)
         else:
             configs = {"": config}
+        if balance_passive_force is not None:
+            balance = balance_passive_force
+        if not isinstance(balance, (bool, np.bool_)):
+            raise cfg.ConfigError(f"balance_passive_force: expected True or False, got {balance!r}")
+        self.balance_passive_force = bool(balance)
+        if self.balance_passive_force:
+            gravity.check_solver(solver)
         names: list[str] = []
         for c in configs.values():
             if not isinstance(c, cfg.ControllerConfig):
@@ -139,11 +149,13 @@ class BaseController(ActuationMixin):
         self.action_space = _batched(self.single_action_space, self.num_envs)
 
         changed = self._engine.apply_drive_properties()
+        if self.balance_passive_force:
+            gravity.apply(model, gravity.robot_bodies(model, binding.joint_index))
         model_state = _ModelState(model)
         self._engine.update_response(model_state)  # per-env gains of implicit acceleration drives
         self._engine.solver = solver
         if solver is not None:
-            solver.notify_model_changed(newton.ModelFlags.JOINT_DOF_FORCE_PROPERTIES)
+            solver.notify_model_changed(self._model_flags())
             if changed and type(solver).__name__ == "SolverMuJoCo":
                 warnings.warn(
                     "wpctrl changed Model.joint_target_mode after the MuJoCo solver was built; MuJoCo creates its "
@@ -163,6 +175,7 @@ class BaseController(ActuationMixin):
         self.nan_policy = parent.nan_policy
         self.explicit_pd = parent.explicit_pd
         self.clip_targets = parent.clip_targets
+        self.balance_passive_force = parent.balance_passive_force
         self._engine = parent._engine
         self._rows = rows_slice
         self._cols = cols_slice
@@ -270,8 +283,17 @@ class BaseController(ActuationMixin):
         drives, :meth:`set_drive_properties`, :meth:`randomize_drive_properties`). Use it when the solver is built
         after the controller (as MuJoCo requires)."""
         self._require_owner("attach_solver")
+        if self.balance_passive_force:
+            gravity.check_solver(solver)
         self._engine.solver = solver
-        solver.notify_model_changed(newton.ModelFlags.JOINT_DOF_FORCE_PROPERTIES)
+        solver.notify_model_changed(self._model_flags())
+
+    def _model_flags(self):
+        """What this controller changed in the model: drive properties, and (balance_passive_force) gravcomp."""
+        flags = newton.ModelFlags.JOINT_DOF_FORCE_PROPERTIES
+        if self.balance_passive_force:
+            flags |= newton.ModelFlags.BODY_INERTIAL_PROPERTIES
+        return flags
 
     @property
     def response(self) -> wp.array | None:
@@ -462,6 +484,16 @@ class PDJointVelController(BaseController):
     def target_qpos(self):
         """A velocity controller has no position target (None)."""
         return None
+
+
+class PDBaseVelController(PDJointVelController):
+    """Ego-centric base velocity (ManiSkill's PDBaseVelController): the action's ``[vx, vy]`` is rotated by the
+    measured yaw (the third joint's position at ``set_action``) into the world frame of the base's x / y joints."""
+
+
+class PDBaseForwardVelController(PDJointVelController):
+    """Forward-only ego-centric base velocity (ManiSkill's PDBaseForwardVelController): action ``[v, w]``, velocity
+    targets ``[v cos(yaw), v sin(yaw), w]`` with the measured yaw."""
 
 
 class PDJointPosVelController(PDJointPosController):

@@ -11,12 +11,15 @@ from typing import Any
 
 import newton
 
+from ..config import base as cfg_base
 from ..config import ee as cfg_ee
 from ..config import rows as cfg
 from .base import (
     BaseController,
     CombinedController,
     PassiveController,
+    PDBaseForwardVelController,
+    PDBaseVelController,
     PDJointPosController,
     PDJointPosMimicController,
     PDJointPosVelController,
@@ -31,6 +34,8 @@ cfg.PDJointPosVelControllerConfig.controller_cls = PDJointPosVelController
 cfg.PassiveControllerConfig.controller_cls = PassiveController
 
 
+cfg_base.PDBaseVelControllerConfig.controller_cls = PDBaseVelController
+cfg_base.PDBaseForwardVelControllerConfig.controller_cls = PDBaseForwardVelController
 cfg_ee.PDEEPosControllerConfig.controller_cls = PDEEPosController
 cfg_ee.PDEEPoseControllerConfig.controller_cls = PDEEPoseController
 
@@ -50,6 +55,7 @@ def build_controller(
     track_effort: bool = False,
     clip_targets: str = "none",
     seed: int = 0,
+    balance_passive_force: bool | None = None,
 ) -> BaseController:
     """Build the controller for one config or a ManiSkill control-mode dict ``{uid: config}``.
 
@@ -83,6 +89,13 @@ def build_controller(
         clip_targets: ``"none"`` (ManiSkill) or ``"joint_limits"``: every position target (after delta, virtual
             target and mimic) is clamped to the joint's limits from the model before it is stored.
         seed: Seed of the device RNG that draws the delays.
+        balance_passive_force: ManiSkill's agent-level switch: gravity does not act on the controlled robot's links
+            (every body of the articulations that hold the controlled joints, in every env). None (default) takes
+            the mode dict's ``"balance_passive_force"`` entry, True when absent or for a single config, as
+            ManiSkill. It sets the model's per-body ``mujoco:gravcomp`` to 1 on those bodies (exact gravity removal
+            in SolverMuJoCo, which must be built after the controller or notified of
+            ``ModelFlags.BODY_INERTIAL_PROPERTIES``); other solvers ignore that attribute, so a solver other than
+            SolverMuJoCo given here or to ``attach_solver`` is refused while it is on.
     """
     kw = dict(
         actuation=actuation,
@@ -94,6 +107,7 @@ def build_controller(
         track_effort=track_effort,
         clip_targets=clip_targets,
         seed=seed,
+        balance_passive_force=balance_passive_force,
     )
     if isinstance(config, Mapping):
         return CombinedController(config, model, control_freq, sim_freq, **kw)

@@ -179,6 +179,10 @@ class _Engine(_DrivePropertiesMixin):
             delay=self.delay is not None,
             delay_vel=self.delay_qd is not None,
             effort=self.computed_effort is not None and not self.coupled,
+            yaw_row=tuple(int(x) for x in rows.yaw_row) if (rows.base_axis >= 0).any() else (),
+            base_axis=tuple(int(x) for x in rows.base_axis) if (rows.base_axis >= 0).any() else (),
+            bx_col=tuple(int(x) for x in rows.bx_col) if (rows.base_axis >= 0).any() else (),
+            by_col=tuple(int(x) for x in rows.by_col) if (rows.base_axis >= 0).any() else (),
         )
         self.block_dim = step_block_dim(dev, E)
         # Elided substeps: the host's substep count since the last set_action, and the Control whose drive targets

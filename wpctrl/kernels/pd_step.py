@@ -74,6 +74,11 @@ class StepLayout(NamedTuple):
     delay: bool = False
     delay_vel: bool = False  # the delay ring also holds velocity targets
     effort: bool = False
+    # Ego-centric base rows (set_action only): yaw source row, axis (0 x, 1 y, -1 none), vx / vy action columns.
+    yaw_row: tuple = ()
+    base_axis: tuple = ()
+    bx_col: tuple = ()
+    by_col: tuple = ()
 
 
 def row_float_table(rows: _cfg.Rows, qlimits: np.ndarray) -> np.ndarray:
@@ -100,7 +105,9 @@ def set_action_kernel(layout: StepLayout) -> wp.Kernel:
 
 def substep_kernel(layout: StepLayout) -> wp.Kernel:
     """The substep kernel of ``layout``; set_action-only fields of the layout are ignored."""
-    key = layout._replace(act_col=(), vel_col=(), mimic_src=(), action_dim=0, clip=False)
+    key = layout._replace(
+        act_col=(), vel_col=(), mimic_src=(), action_dim=0, clip=False, yaw_row=(), base_axis=(), bx_col=(), by_col=()
+    )
     k = _SUBSTEP.get(key)
     if k is None:
         k = _SUBSTEP[key] = _make_substep_kernel(key)
@@ -148,6 +155,14 @@ def _make_set_action_kernel(L: StepLayout) -> wp.Kernel:
     WRITE_T = tuple(int(IS_POS[r] and not (SRC[r] < 0 and COL[r] < 0)) for r in range(R))
     # Velocity targets: a velocity row's column, or a position-velocity row's second column.
     VSRC = tuple(COL[r] if (KIND[r] == VEL and SRC[r] < 0) else (VCOL[r] if LEAD[r] else -1) for r in range(R))
+    # Ego-centric base rows: (vx, vy) rotated by the measured yaw of row YAW[r] (ManiSkill's pd_base_vel).
+    BASE = L.base_axis or (-1,) * R
+    YAW = L.yaw_row or (-1,) * R
+    BX = L.bx_col or (-1,) * R
+    BY = L.by_col or (-1,) * R
+    HAS_VT = tuple(int(VSRC[r] >= 0 or BASE[r] >= 0) for r in range(R))
+    YAW_SRC = {YAW[r] for r in range(R) if BASE[r] >= 0}
+    READ_Q = tuple(int(IS_POS[r] or r in YAW_SRC) for r in range(R))
     VBOUND = tuple(ROW_F_LO if KIND[r] == VEL else ROW_F_VLO for r in range(R))  # row_f column of the velocity bounds
     vec_a = wp.types.vector(length=max(A, 1), dtype=wp.float32)
     vec_r = wp.types.vector(length=max(R, 1), dtype=wp.float32)
@@ -191,7 +206,7 @@ def _make_set_action_kernel(L: StepLayout) -> wp.Kernel:
         q = vec_r()
         t = vec_r()
         for r in range(wp.static(R)):
-            if wp.static(IS_POS[r]):
+            if wp.static(READ_Q[r]):
                 q[r] = joint_q_in[qi[r]]
             if wp.static(READ_T[r]):
                 t[r] = target_qpos_out[env, r]
@@ -219,6 +234,26 @@ def _make_set_action_kernel(L: StepLayout) -> wp.Kernel:
                 t[r] = t[wp.static(max(SRC[r], 0))] * row_f[r, ROW_F_MUL] + row_f[r, ROW_F_OFF]
                 if wp.static(CLIP):
                     t[r] = wp.clamp(t[r], row_f[r, ROW_F_QLO], row_f[r, ROW_F_QHI])
+        # Velocity targets: the scaled action column, or for a base row the planar action in the world frame,
+        # R(yaw) [vx, vy] with R = [[c, -s], [s, c]] of the measured yaw (a missing vy column is 0: forward-only base).
+        vt = vec_r()
+        for r in range(wp.static(R)):
+            if wp.static(BASE[r] >= 0):
+                yaw = q[wp.static(max(YAW[r], 0))]
+                cy = wp.cos(yaw)
+                sy = wp.sin(yaw)
+                ax = float(0.0)
+                ay = float(0.0)
+                if wp.static(BX[r] >= 0):
+                    ax = x[wp.static(max(BX[r], 0))]
+                if wp.static(BY[r] >= 0):
+                    ay = x[wp.static(max(BY[r], 0))]
+                if wp.static(BASE[r] == 0):
+                    vt[r] = cy * ax + (-sy) * ay
+                else:
+                    vt[r] = sy * ax + cy * ay
+            elif wp.static(VSRC[r] >= 0):
+                vt[r] = x[wp.static(max(VSRC[r], 0))]
         step_out[env] = 0
         for c in range(wp.static(A)):
             if wp.static(c in COL or c in VSRC):
@@ -230,16 +265,16 @@ def _make_set_action_kernel(L: StepLayout) -> wp.Kernel:
             if wp.static(WRITE_T[r]):
                 target_qpos_out[env, r] = t[r]
         for r in range(wp.static(R)):
-            if wp.static(VSRC[r] >= 0):
-                target_qvel_out[env, r] = x[wp.static(max(VSRC[r], 0))]
+            if wp.static(HAS_VT[r]):
+                target_qvel_out[env, r] = vt[r]
         if joint_target_q_out:
             for r in range(wp.static(R)):
                 if wp.static(IS_POS[r]):
                     joint_target_q_out[qi[r]] = t[r]
         if joint_target_qd_out:
             for r in range(wp.static(R)):
-                if wp.static(VSRC[r] >= 0):
-                    joint_target_qd_out[di[r]] = x[wp.static(max(VSRC[r], 0))]
+                if wp.static(HAS_VT[r]):
+                    joint_target_qd_out[di[r]] = vt[r]
 
     return wp.kernel(set_action, name="wpctrl_set_action", enable_backward=False, module="unique")
 

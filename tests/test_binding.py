@@ -14,7 +14,10 @@ def _slow_table(model, names):
     labels = list(model.joint_label)
     jworld, jtype, qd = model.joint_world.numpy(), model.joint_type.numpy(), model.joint_qd_start.numpy()
     return np.stack(
-        [_resolve(names, labels, np.nonzero(jworld == w)[0].tolist(), w, jtype, qd) for w in range(model.world_count)]
+        [
+            _resolve(names, labels, np.nonzero(jworld == w)[0].tolist(), w, jtype, qd)[0]
+            for w in range(model.world_count)
+        ]
     )
 
 
@@ -24,7 +27,7 @@ def test_replicated_fast_path_matches_the_per_world_search():
     model = b.finalize(device="cpu")
     names = PANDA_ARM_JOINTS[::-1]
     labels = list(model.joint_label)
-    fast = _replicated_table(
+    fast, _ = _replicated_table(
         model, names, labels, model.joint_world.numpy(), model.joint_type.numpy(), model.joint_qd_start.numpy(), 5
     )
     assert fast is not None

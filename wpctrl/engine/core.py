@@ -238,7 +238,11 @@ class _Engine(_DrivePropertiesMixin):
         if layout is not None:
             self._fused = KI.FusedChain(layout, model)
         elif self.coupled:
-            raise cfg.ConfigError(f"explicit_pd: 'coupled' needs a fixed-base serial/tree articulation ({why})")
+            raise cfg.ConfigError(
+                f"explicit_pd: 'coupled' needs a fixed-base articulation of revolute / prismatic joints ({why}); use "
+                f"explicit_pd='stable' (its per-joint response includes floating roots and multi-axis joints) or "
+                f"actuation='implicit'"
+            )
         else:
             self._jsr = JointSpaceResponse(model)
 

@@ -37,7 +37,6 @@ class JointBinding:
     joint_names: list[str]
     num_envs: int
     joint_index: np.ndarray  # (num_envs, rows) int32, Newton joint ids
-    axis: np.ndarray  # (rows,) int32: the row's axis within its joint (0 for 1-DOF joints; a D6 joint's k-th axis)
     coord_index: np.ndarray  # (num_envs, rows) int32
     dof_index: np.ndarray  # (num_envs, rows) int32
     q_base: np.ndarray  # (num_envs,) int32
@@ -45,6 +44,7 @@ class JointBinding:
     q_off: np.ndarray  # (rows,) int32
     qd_off: np.ndarray  # (rows,) int32
     qlimits: np.ndarray  # (rows, 2) float32 [rad or m], env 0's limits (as ManiSkill's get_qlimits()[0])
+    axis: np.ndarray | None = None  # (rows,) int32: the row's axis in its joint (0: 1-DOF; k: a D6 joint's k-th)
 
 
 def _short(label: str) -> str:

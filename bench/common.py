@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import copy
 import datetime
-import inspect
 import json
 import os
 import platform
@@ -141,12 +140,12 @@ def synthetic_setup(
     rebuilt over the same rows with the per-world index tables tiled to ``num_envs`` worlds at ``replicate``'s stride,
     over flat State/Control arrays tiled from the small model's first world. Kernels see exactly the layout that a
     replicated model of ``num_envs`` Pandas has (tests/test_bench_reference.py checks it against a real model).
-    Uses wpctrl internals (``engine._Engine``, ``binding.JointBinding``): bench-only.
+    Uses wpctrl internals (``engine._Engine``, ``engine.make_plan``, ``binding.JointBinding``): bench-only.
     """
     import wpctrl
     from bench.reference_torch import layout_from_model, tile_layout
     from wpctrl.binding import JointBinding
-    from wpctrl.engine import _Engine
+    from wpctrl.engine import _Engine, make_plan
 
     t0 = time.perf_counter()
     small = wpctrl.build_controller(
@@ -176,22 +175,11 @@ def synthetic_setup(
     )
     dev = small_model.device
     shim = _WideModel(dev, num_envs * cs, num_envs * ds)
-    # Rebuild with the small engine's options (passing only those this wpctrl version's _Engine takes).
-    extra = {
-        "explicit_pd": "stable" if getattr(eng0, "explicit_mode", 1) == 2 else "naive",
-        "inertia_update": getattr(eng0, "inertia_update", "control"),
-        "sim_dt": getattr(eng0, "sim_dt", 1.0 / sim_freq),
-        # issue 10's actuation options, as the small engine holds them
-        "delay": getattr(eng0, "delay_range", None),
-        "track_effort": getattr(eng0, "computed_effort", None) is not None,
-        "clip_targets": getattr(eng0, "clip_targets", False),
-        "seed": getattr(eng0, "seed", 0),
-    }
-    params = inspect.signature(_Engine).parameters
-    extra = {k: v for k, v in extra.items() if k in params}
-    if getattr(eng0, "needs_response", False):
+    # Rebuild the small engine's plan over the wide binding; the shim model takes no model writes.
+    if eng0.needs_response:
         raise NotImplementedError("synthetic layout: controllers that need the joint-space response need a real model")
-    engine = _Engine(eng0.rows, binding, shim, eng0.num_substeps, actuation, **extra)
+    plan = make_plan(eng0.rows, binding, eng0.plan.options, eng0.plan.ee_specs)
+    engine = _Engine(plan, shim, write_model=False)
     ctrl = copy.copy(small)
     ctrl._engine = engine
     ctrl.children = {}  # the small controller's child views point at the small engine

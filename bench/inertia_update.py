@@ -48,9 +48,9 @@ def _use_joint_space_response(ctrl, model) -> None:
     """Route the controller's response update through Newton's JointSpaceResponse (the pre-fused path)."""
     from newton.actuators import JointSpaceResponse
 
-    eng = ctrl._engine
-    eng._fused = None
-    eng._jsr = JointSpaceResponse(model)
+    part = ctrl._engine.response_part
+    part._fused = None
+    part._jsr = JointSpaceResponse(model)
 
 
 def newton_implicit_actuator(n: int, device):

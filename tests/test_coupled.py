@@ -98,7 +98,8 @@ def test_unrolled_fused_kernel_matches_the_runtime_loop_kernel():
     # The coupled drive with the unrolled inertia: same torques as with the runtime loops.
     torques = []
     for fc in (loop, unrolled):
-        eng._fused, eng._launch_coupled = fc, None
+        part = eng.part("coupled")
+        part._fused, part._launch = fc, None
         s, c, _, _, target = _setup(ctrl, model, np.random.default_rng(5))
         ctrl.set_action(target, s)
         ctrl.before_simulation_step(s, c)
@@ -150,8 +151,9 @@ def test_coupled_without_active_limits_is_the_linear_implicit_solution():
     # Per-env gains, as (num_envs, rows) arrays (bound at the first substep).
     kp = np.array([[1e3] * 9, [400.0] * 9, [2e3] * 9], np.float32)
     kd = np.array([[1e2] * 9, [40.0] * 9, [50.0] * 9], np.float32)
-    ctrl._engine.kp = wp.array(kp)
-    ctrl._engine.kd = wp.array(kd)
+    drive = ctrl._engine.part("drive")  # per-env gain arrays (bound at the first substep)
+    drive.kp = wp.array(kp)
+    drive.kd = wp.array(kd)
     s, c, q, qd, target = _setup(ctrl, model, np.random.default_rng(1))
     ctrl.set_action(target, s)
     ctrl.before_simulation_step(s, c)

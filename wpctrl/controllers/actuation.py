@@ -23,7 +23,7 @@ from collections.abc import Sequence
 import numpy as np
 import warp as wp
 
-from ..engine.drive_props import DRIVE_FIELDS
+from ..engine.parts.drive import DRIVE_FIELDS
 from .inputs import _env_selection, _is_torch
 
 _RAND_MODES = ("scale", "abs")
@@ -152,7 +152,7 @@ class ActuationMixin:
                 values[p] = np.broadcast_to(arrays[k].astype(np.float32), (batch, n))
         enabled = [int(k in arrays) for k in DRIVE_FIELDS]
         dev_values = wp.array(values, dtype=wp.float32, device=eng.device)
-        eng.set_drive(dev_values, enabled, ids, mask, self._rows.start, n)
+        eng.part("drive").set(eng, dev_values, enabled, ids, mask, self._rows.start, n)
 
     def randomize_drive_properties(
         self, env_ids=None, stiffness=None, damping=None, force_limit=None, friction=None, mode="scale", seed=0
@@ -186,7 +186,8 @@ class ActuationMixin:
             return
         ids, mask = self._selection(env_ids)
         n = self._rows.stop - self._rows.start
-        self._engine.randomize_drive(lo, hi, enabled, mode == "abs", int(seed), ids, mask, self._rows.start, n)
+        eng = self._engine
+        eng.part("drive").randomize(eng, lo, hi, enabled, mode == "abs", int(seed), ids, mask, self._rows.start, n)
 
     # -- delay ----------------------------------------------------------------------------------------------------
 

@@ -18,9 +18,9 @@ import warp as wp
 from ..binding import bind_joints
 from ..config import ee as cfg_ee
 from ..config import rows as cfg
-from ..engine import gravity
 from ..engine.core import _Engine
-from ..engine.ee import attach_ee_parts
+from ..engine.parts import gravity
+from ..engine.plan import Options, make_plan
 from .actuation import ActuationMixin, check_actuation_options
 from .inputs import _action_array, _as_rows_array, _claim, _env_selection, _raise_on_nonfinite, _type_name
 
@@ -102,33 +102,42 @@ class BaseController(ActuationMixin):
             names += cfg._joint_names(c)
         binding = bind_joints(model, names)  # once for the whole mode
         parts: list[tuple[str, Any, cfg.Rows]] = []
-        ee_specs: dict[str, cfg_ee.EESpec] = {}
-        r0 = 0
+        ee_specs: dict[int, tuple] = {}  # first row -> (first action column, rows, EESpec)
+        r0 = c0 = 0
         for uid, c in configs.items():
             n = len(c.joint_names)
             if isinstance(c, cfg_ee.EE_CONFIGS):  # end-effector controllers: position rows + an EE launch
-                rows, ee_specs[uid] = cfg_ee.ee_rows(c, binding.qlimits[r0 : r0 + n])
+                rows, spec = cfg_ee.ee_rows(c, binding.qlimits[r0 : r0 + n])
+                ee_specs[r0] = (c0, rows.count, spec)
             else:
                 rows = cfg.config_rows(c, binding.qlimits[r0 : r0 + n])
             parts.append((uid, c, rows))
             r0 += n
+            c0 += rows.action_dim
         all_rows = cfg.Rows.concat([p[2] for p in parts])
-        self._engine = _Engine(
-            all_rows,
-            binding,
-            model,
-            num_substeps,
-            actuation,
+        options = Options(
+            num_substeps=num_substeps,
+            actuation=actuation,
             explicit_pd=explicit_pd,
             inertia_update=inertia_update,
             sim_dt=1.0 / sim_freq,
+            balance_passive_force=self.balance_passive_force,
             **actuation_options,
         )
+        # The engine: plan (host) -> device state -> parts' model writes -> the first reset; nothing after it.
+        self._engine = _Engine(make_plan(all_rows, binding, options, ee_specs), model, solver)
+        if solver is not None and self._engine.mode_changed and type(solver).__name__ == "SolverMuJoCo":
+            warnings.warn(
+                "wpctrl changed Model.joint_target_mode after the MuJoCo solver was built; MuJoCo creates its "
+                "actuators at construction, so build the controller before the solver",
+                stacklevel=3,
+            )
         self._rows = slice(0, all_rows.count)
         self._cols = slice(0, all_rows.action_dim)
         self._owner = True
-        ee_parts = attach_ee_parts(self._engine, parts, ee_specs)
-        self._ee = ee_parts.get("")
+        ee = self._engine.part("ee")
+        ee_parts = {} if ee is None else ee.parts  # by first row
+        self._ee = ee_parts.get(0) if not isinstance(config, Mapping) else None
         self.children: dict[str, BaseController] = {}
         if isinstance(config, Mapping):
             r0 = c0 = 0
@@ -136,7 +145,7 @@ class BaseController(ActuationMixin):
                 child_cls = type(c).controller_cls
                 child = child_cls.__new__(child_cls)
                 child._init_view(c, self, slice(r0, r0 + rows.count), slice(c0, c0 + rows.action_dim), rows)
-                child._ee = ee_parts.get(uid)
+                child._ee = ee_parts.get(r0)
                 self.children[uid] = child
                 r0 += rows.count
                 c0 += rows.action_dim
@@ -147,25 +156,6 @@ class BaseController(ActuationMixin):
         else:
             self._set_spaces(parts[0][2])
         self.action_space = _batched(self.single_action_space, self.num_envs)
-
-        changed = self._engine.apply_drive_properties()
-        if self.balance_passive_force:
-            gravity.apply(model, gravity.robot_bodies(model, binding.joint_index))
-        model_state = _ModelState(model)
-        self._engine.update_response(model_state)  # per-env gains of implicit acceleration drives
-        self._engine.solver = solver
-        if solver is not None:
-            solver.notify_model_changed(self._model_flags())
-            if changed and type(solver).__name__ == "SolverMuJoCo":
-                warnings.warn(
-                    "wpctrl changed Model.joint_target_mode after the MuJoCo solver was built; MuJoCo creates its "
-                    "actuators at construction, so build the controller before the solver",
-                    stacklevel=2,
-                )
-        # Targets start at the model's initial pose (the first reset() re-initialises every env from the state).
-        self._engine.reset(model_state, None, None, None, first=False)
-        for part in ee_parts.values():
-            wp.copy(part.target_pose, part.ee_pose)  # a defined target pose before any step
 
     def _init_view(self, config, parent: BaseController, rows_slice: slice, cols_slice: slice, rows: cfg.Rows):
         self.config = config
@@ -283,17 +273,7 @@ class BaseController(ActuationMixin):
         drives, :meth:`set_drive_properties`, :meth:`randomize_drive_properties`). Use it when the solver is built
         after the controller (as MuJoCo requires)."""
         self._require_owner("attach_solver")
-        if self.balance_passive_force:
-            gravity.check_solver(solver)
-        self._engine.solver = solver
-        solver.notify_model_changed(self._model_flags())
-
-    def _model_flags(self):
-        """What this controller changed in the model: drive properties, and (balance_passive_force) gravcomp."""
-        flags = newton.ModelFlags.JOINT_DOF_FORCE_PROPERTIES
-        if self.balance_passive_force:
-            flags |= newton.ModelFlags.BODY_INERTIAL_PROPERTIES
-        return flags
+        self._engine.attach_solver(solver)
 
     @property
     def response(self) -> wp.array | None:
@@ -431,14 +411,6 @@ class BaseController(ActuationMixin):
     def __repr__(self) -> str:
         inner = ", ".join(self.joint_names)
         return f"{type(self).__name__}(dof={self.action_dim}, num_envs={self.num_envs}, joints=({inner}))"
-
-
-class _ModelState:
-    """The model's initial joint state, shaped like a State for the construction-time reset."""
-
-    def __init__(self, model: newton.Model):
-        self.joint_q = model.joint_q
-        self.joint_qd = model.joint_qd
 
 
 def _num_substeps(control_freq, sim_freq) -> int:

@@ -1,7 +1,8 @@
 """ManiSkill-shaped end-effector controller classes (PDEEPos / PDEEPose) over the shared engine.
 
 An EE controller is a :class:`~wpctrl.controllers.PDJointPosController` whose targets come from the EE kernels
-(:mod:`wpctrl.engine.ee`); it adds ``target_pose``, ``ee_pose``, ``ik_success`` and the ``{"target_pose": ...}`` state.
+(:mod:`wpctrl.engine.parts.ee`); it adds ``target_pose``, ``ee_pose``, ``ik_success`` and the ``{"target_pose": ...}``
+state.
 """
 
 from __future__ import annotations

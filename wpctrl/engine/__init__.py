@@ -1,9 +1,12 @@
-"""The device engine of one control mode: its arrays, its recorded kernel launches, the model's drive properties.
+"""The device engine of one control mode: plan → state → launches, each option a part.
 
-:mod:`.core` (the engine of one control mode), :mod:`.launch` (recorded launches), :mod:`.drive_props` (per-env drive
-properties and their mirror in the model), :mod:`.ee` (the end-effector part: chain binding, EE launches).
+:mod:`.plan` (the host-only plan: rows, index tables, options, active parts, the step kernels' layout), :mod:`.state`
+(the device arrays every mode has, allocation, lookup of kernel arguments by name), :mod:`.parts` (one module per
+option: drive properties, joint-space response and the coupled drive, delay, effort readout, end effectors, gravity
+compensation), :mod:`.core` (:class:`_Engine`: runs the stages), :mod:`.launch` (recorded launches).
 """
 
 from .core import _Engine
+from .plan import Options, Plan, make_plan
 
-__all__ = ["_Engine"]
+__all__ = ["Options", "Plan", "_Engine", "make_plan"]

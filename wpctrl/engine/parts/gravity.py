@@ -14,7 +14,8 @@ import newton
 import numpy as np
 import warp as wp
 
-from ..config import ConfigError
+from ...config import ConfigError
+from . import Part
 
 
 def robot_bodies(model: newton.Model, joint_index: np.ndarray) -> np.ndarray:
@@ -79,3 +80,16 @@ def check_solver(solver) -> None:
         f"'balance_passive_force': False) and handle gravity yourself, e.g. model.set_gravity((0, 0, 0)) when each "
         f"world holds only the robot"
     )
+
+
+class BalancePassiveForce(Part):
+    """At build: gravity off every body of the controlled robot (the controller layer checked the solver first)."""
+
+    name = "gravity"
+
+    def __init__(self, plan, alloc):
+        self.bodies = None
+
+    def build(self, engine, model, solver) -> None:
+        self.bodies = robot_bodies(model, engine.plan.binding.joint_index)
+        apply(model, self.bodies)

@@ -22,11 +22,12 @@ import newton
 import numpy as np
 import warp as wp
 
-from ..config import ConfigError
-from ..config.ee import MAX_EE_DOF, EESpec
-from ..kernels import ee as KE
-from ..kernels.dims import PER_ENV_BLOCK_DIM
-from .launch import _Launch
+from ...config import ConfigError
+from ...config.ee import MAX_EE_DOF, EESpec
+from ...kernels import ee as KE
+from ...kernels.dims import PER_ENV_BLOCK_DIM
+from ..launch import _Launch
+from . import Part
 
 logger = logging.getLogger("wpctrl")
 
@@ -112,7 +113,7 @@ def _rotate(q, v):
 
 def _known_frame(link: str, labels, bodies0):
     """A Panda link merged away (e.g. ``panda_hand_tcp``) from wpctrl.robots' URDF facts: ([body], offset) or None."""
-    from ..robots import PANDA_FRAMES
+    from ...robots import PANDA_FRAMES
 
     entry = PANDA_FRAMES.get(link)
     if entry is None or entry[0] is None:
@@ -135,7 +136,7 @@ def _is_merged_root(spec: EESpec) -> bool:
         children = {j.find("child").get("link") for j in root.findall("joint")}
         roots = [lk.get("name") for lk in root.findall("link") if lk.get("name") not in children]
         return roots == [name]
-    from ..robots import PANDA_FRAMES
+    from ...robots import PANDA_FRAMES
 
     return name in PANDA_FRAMES and PANDA_FRAMES[name][0] is None
 
@@ -158,6 +159,7 @@ class EEPart:
         self.target_pose = wp.zeros((E, 7), dtype=wp.float32, device=dev)
         self.ee_pose = wp.zeros((E, 7), dtype=wp.float32, device=dev)
         self.ik_success = wp.ones(E, dtype=wp.int32, device=dev)
+        self.initialized = False
         self._launch = None
         self._chain_params = {
             "chain_joint": self.chain_joint,
@@ -389,19 +391,30 @@ class EEPart:
         return pose, jac
 
 
-def attach_ee_parts(engine, parts, ee_specs: dict) -> dict:
-    """Attach the EE launches of a mode's end-effector controllers to its engine; ``{uid: EEPart}``.
+class EndEffectors(Part):
+    """The mode's end-effector controllers: each an :class:`EEPart` (its launch before the joint set_action launch,
+    which leaves its rows' targets alone, and after the joint reset)."""
 
-    ``parts`` lists ``(uid, config, rows)`` in the mode's row and action-column order."""
-    out = {}
-    r0 = c0 = 0
-    for uid, _, rows in parts:
-        if uid in ee_specs:
-            out[uid] = EEPart(ee_specs[uid], engine, r0, c0, rows.count)
-            engine.ee_parts.append(out[uid])
-        r0 += rows.count
-        c0 += rows.action_dim
-    return out
+    name = "ee"
+
+    def __init__(self, plan, alloc):
+        self.specs = plan.ee_specs  # {first row: (first action column, rows, spec)}
+        self.parts: dict[int, EEPart] = {}
+
+    def build(self, engine, model, solver) -> None:
+        for row0, (col0, n, spec) in self.specs.items():
+            self.parts[row0] = EEPart(spec, engine, row0, col0, n)
+
+    def before_set_action(self, engine, action, state) -> None:
+        for part in self.parts.values():
+            part.set_action(action, state)
+
+    def after_reset(self, engine, state, env_ids, env_mask) -> None:
+        for part in self.parts.values():
+            part.reset(state, env_ids, env_mask)
+            if not part.initialized:  # the build's reset: a defined target pose before any step
+                wp.copy(part.target_pose, part.ee_pose)
+                part.initialized = True
 
 
-__all__ = ["EEPart", "MAX_EE_DOF", "attach_ee_parts"]
+__all__ = ["EEPart", "EndEffectors", "MAX_EE_DOF"]

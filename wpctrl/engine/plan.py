@@ -1,0 +1,202 @@
+"""The plan of one control mode: everything the engine decides on the host before it allocates a byte on the device.
+
+Plain data (numpy tables, tuples, ints): rows, index tables, the options, which parts are on, and the compile-time
+layout of the step kernels. Printable (``print(ctrl._engine.plan)``) and testable without a device. The engine's
+other two stages follow it in one direction: :mod:`.state` allocates the device arrays the plan needs, and
+:mod:`.core` records the launches over them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..binding import JointBinding
+from ..config import rows as cfg
+from ..config.ee import EESpec
+from ..kernels import pd_step as KS
+from .launch import _index_table
+
+EXPLICIT_MODES = {"naive": 1, "stable": 2, "coupled": 3}
+
+
+@dataclass(frozen=True)
+class Options:
+    """``build_controller``'s engine options, validated by the controller layer."""
+
+    num_substeps: int
+    actuation: str = "implicit"
+    explicit_pd: str = "naive"
+    inertia_update: str = "control"
+    sim_dt: float = 0.01
+    delay: tuple[int, int] | None = None
+    track_effort: bool = False
+    clip_targets: bool = False
+    seed: int = 0
+    balance_passive_force: bool = False
+
+
+@dataclass
+class Plan:
+    """What one control mode runs: its rows, where they live in the model, its options and active parts."""
+
+    rows: cfg.Rows
+    binding: JointBinding
+    options: Options
+    ee_specs: dict[int, EESpec] = field(default_factory=dict)  # first row of each EE controller -> its spec
+    # Index tables: the coordinate / DOF index of (env, row) is table[env or 0, row] + env * stride.
+    q_idx: np.ndarray = None
+    qd_idx: np.ndarray = None
+    q_stride: int = 0
+    qd_stride: int = 0
+    row_f: np.ndarray = None  # (rows, 8) float32: bounds, mimic coupling, joint limits
+    layout: KS.StepLayout = None
+    parts: tuple[str, ...] = ()
+
+    # -- derived --------------------------------------------------------------------------------------------------
+
+    @property
+    def num_envs(self) -> int:
+        return self.binding.num_envs
+
+    @property
+    def num_rows(self) -> int:
+        return self.rows.count
+
+    @property
+    def action_dim(self) -> int:
+        return self.rows.action_dim
+
+    @property
+    def explicit(self) -> bool:
+        return self.options.actuation == "explicit"
+
+    @property
+    def explicit_mode(self) -> int:
+        """0 implicit, 1 naive, 2 stable, 3 coupled explicit PD."""
+        return EXPLICIT_MODES[self.options.explicit_pd] if self.explicit else 0
+
+    @property
+    def coupled(self) -> bool:
+        return self.explicit_mode == 3
+
+    @property
+    def has_accel(self) -> bool:
+        return bool(self.rows.accel.any())
+
+    @property
+    def needs_response(self) -> bool:
+        """Acceleration drives and stable / coupled explicit PD use the joint-space response r = (H^-1)_ii."""
+        return self.has_accel or self.explicit_mode >= 2
+
+    @property
+    def strided(self) -> bool:
+        return self.q_idx.shape[0] == 1
+
+    @property
+    def per_substep(self) -> bool:
+        """Whether something must run before every solver substep: explicit torques (they depend on the measured
+        state), interpolation (the target moves), a command delay (the ring buffer shifts), the effort readout (it
+        reads the measured state), or a per-substep inertia update. Otherwise the drive targets are constant over the
+        control step and the substep launch is elided."""
+        o = self.options
+        interpolates = bool((self.rows.flags & cfg.FLAG_INTERPOLATE).any())
+        inertia_per_substep = self.needs_response and o.inertia_update == "substep"
+        return self.explicit or interpolates or o.delay is not None or o.track_effort or inertia_per_substep
+
+    def __str__(self) -> str:
+        r = self.rows
+        kinds = {cfg.ROW_POS: "pos", cfg.ROW_VEL: "vel", cfg.ROW_PASSIVE: "passive"}
+        lines = [
+            f"Plan: {self.num_envs} envs x {self.num_rows} rows, action_dim {self.action_dim}, "
+            f"K = {self.options.num_substeps}, {self.options.actuation}"
+            + (f" ({self.options.explicit_pd})" if self.explicit else ""),
+            f"  layout: {'replicated (stride ' + str(self.q_stride) + ')' if self.strided else 'per-env tables'}; "
+            f"per-substep launch: {'yes' if self.per_substep else 'no (elided)'}",
+            f"  parts: {', '.join(self.parts) or '-'}",
+        ]
+        for i, name in enumerate(r.joint_names):
+            extra = []
+            if r.act_col[i] >= 0:
+                extra.append(f"col {r.act_col[i]}")
+            if r.mimic_src[i] >= 0:
+                extra.append(f"mimics row {r.mimic_src[i]}")
+            if r.base_axis[i] >= 0:
+                extra.append(f"base {'xy'[r.base_axis[i]]} (yaw row {r.yaw_row[i]})")
+            lines.append(f"  row {i:2d} {name:24s} {kinds[int(r.kind[i])]:7s} {', '.join(extra)}")
+        return "\n".join(lines)
+
+
+def make_plan(rows: cfg.Rows, binding: JointBinding, options: Options, ee_specs: dict | None = None) -> Plan:
+    """The plan of ``rows`` bound by ``binding`` (host only)."""
+    E, R = binding.num_envs, rows.count
+    # Coordinate / DOF index of every (env, row): env 0's row plus env * stride for a replicated layout, else a flat
+    # (num_envs, rows) table; either way no chain of table loads in the kernels.
+    q_idx, q_stride = _index_table(binding.coord_index.reshape(E, R))
+    qd_idx, qd_stride = _index_table(binding.dof_index.reshape(E, R))
+    if not (q_idx.shape[0] == 1 and qd_idx.shape[0] == 1):  # both flat, so that a step kernel indexes either by env
+        q_idx, q_stride = binding.coord_index.reshape(E, R).astype(np.int32), 0
+        qd_idx, qd_stride = binding.dof_index.reshape(E, R).astype(np.int32), 0
+    plan = Plan(
+        rows=rows,
+        binding=binding,
+        options=options,
+        ee_specs=dict(ee_specs or {}),
+        q_idx=q_idx,
+        qd_idx=qd_idx,
+        q_stride=q_stride,
+        qd_stride=qd_stride,
+        row_f=KS.row_float_table(rows, binding.qlimits.astype(np.float32).reshape(R, 2)),
+    )
+    plan.parts = _active_parts(plan)
+    plan.layout = _layout(plan)
+    return plan
+
+
+def _active_parts(plan: Plan) -> tuple[str, ...]:
+    o = plan.options
+    parts = ["drive"]  # per-env drive properties and the model mirror: always
+    if plan.needs_response:
+        parts.append("coupled" if plan.coupled else "response")
+    if o.delay is not None:
+        parts.append("delay")
+    if o.track_effort:
+        parts.append("effort")
+    if plan.ee_specs:
+        parts.append("ee")
+    if o.balance_passive_force:
+        parts.append("gravity")
+    return tuple(parts)
+
+
+def _layout(plan: Plan) -> KS.StepLayout:
+    """The step kernels' compile-time layout (one thread per env, rows unrolled: kernels/pd_step.py)."""
+    rows = plan.rows
+    o = plan.options
+    base = bool((rows.base_axis >= 0).any())
+
+    def ints(a) -> tuple:
+        return tuple(int(x) for x in a)
+
+    vel_rows = (rows.kind != cfg.ROW_POS) | ((rows.flags & cfg.FLAG_VEL_TARGET) != 0)
+    return KS.StepLayout(
+        kind=ints(rows.kind),
+        flags=ints(rows.flags),
+        act_col=ints(rows.act_col),
+        vel_col=ints(rows.vel_col),
+        mimic_src=ints(rows.mimic_src),
+        accel=ints(rows.accel),
+        q_off=ints(plan.q_idx[0]) if plan.strided else None,
+        qd_off=ints(plan.qd_idx[0]) if plan.strided else None,
+        action_dim=int(rows.action_dim),
+        clip=bool(o.clip_targets),
+        explicit=0 if plan.coupled else plan.explicit_mode,
+        delay=o.delay is not None,
+        delay_vel=o.delay is not None and bool(vel_rows.any()),
+        effort=o.track_effort and not plan.coupled,
+        yaw_row=ints(rows.yaw_row) if base else (),
+        base_axis=ints(rows.base_axis) if base else (),
+        bx_col=ints(rows.bx_col) if base else (),
+        by_col=ints(rows.by_col) if base else (),
+    )

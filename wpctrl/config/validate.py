@@ -6,7 +6,6 @@ value. Host only.
 
 from __future__ import annotations
 
-import math  # noqa: F401
 from collections.abc import Mapping, Sequence
 
 import numpy as np

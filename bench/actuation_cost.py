@@ -72,10 +72,10 @@ LABELS = {
 
 def _share_gains(ctrl) -> None:
     """Bind (1, rows) gain arrays, the layout before per-env drive properties (bench-only, engine internals)."""
-    eng = ctrl._engine
+    drive = ctrl._engine.part("drive")
     for name in ("kp", "kd", "force_limit"):
-        a = getattr(eng, name)
-        setattr(eng, name, wp.array(a.numpy()[:1], dtype=wp.float32, device=a.device))
+        a = getattr(drive, name)
+        setattr(drive, name, wp.array(a.numpy()[:1], dtype=wp.float32, device=a.device))
 
 
 def run_one(args, n_envs, model, small_model, sync, device) -> list[dict]:

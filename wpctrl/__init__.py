@@ -6,8 +6,11 @@ Public import path: ``import wpctrl``.
 from typing import TYPE_CHECKING
 
 from .config import (
+    ActuatorNet,
     ConfigError,
     ControllerConfig,
+    DCMotor,
+    JointEffortControllerConfig,
     MimicJointError,
     PassiveControllerConfig,
     PDBaseForwardVelControllerConfig,
@@ -18,12 +21,14 @@ from .config import (
     PDJointPosMimicControllerConfig,
     PDJointPosVelControllerConfig,
     PDJointVelControllerConfig,
+    PositionBasedEffortLimit,
 )
 
 # The controllers (which import newton, ~4 s) load on first use, so that ``python -m wpctrl demo`` can say what it is
 # doing before the heavy imports and kernel compilation start.
 _LAZY = {
     "BaseController",
+    "JointEffortController",
     "CombinedController",
     "PassiveController",
     "PDBaseForwardVelController",
@@ -73,10 +78,14 @@ def __dir__():
 __version__ = "0.1.0"
 
 __all__ = [
+    "ActuatorNet",
     "BaseController",
     "CombinedController",
     "ConfigError",
     "ControllerConfig",
+    "DCMotor",
+    "JointEffortController",
+    "JointEffortControllerConfig",
     "MimicJointError",
     "PDBaseForwardVelController",
     "PDBaseForwardVelControllerConfig",
@@ -96,5 +105,6 @@ __all__ = [
     "PDJointVelControllerConfig",
     "PassiveController",
     "PassiveControllerConfig",
+    "PositionBasedEffortLimit",
     "build_controller",
 ]

@@ -4,12 +4,14 @@ Never touches a device. :mod:`.joint` (joint controllers), :mod:`.ee` (end-effec
 (validation and the flat per-joint tables one kernel launch handles).
 """
 
+from .actuators import ActuatorNet, DCMotor, PositionBasedEffortLimit
 from .base import PDBaseForwardVelControllerConfig, PDBaseVelControllerConfig
 from .ee import EE_CONFIGS, MAX_EE_DOF, EESpec, PDEEPosControllerConfig, PDEEPoseControllerConfig, ee_rows
 from .joint import (
     ConfigError,
     ControllerConfig,
     DriveMode,
+    JointEffortControllerConfig,
     MimicJointError,
     PassiveControllerConfig,
     PDJointPosControllerConfig,
@@ -18,11 +20,14 @@ from .joint import (
     PDJointVelControllerConfig,
 )
 from .rows import (
+    FLAG_BINARY,
     FLAG_DELTA,
+    FLAG_EMA,
     FLAG_INTERPOLATE,
     FLAG_NORMALIZE,
     FLAG_TARGET,
     FLAG_VEL_TARGET,
+    ROW_EFFORT,
     ROW_PASSIVE,
     ROW_POS,
     ROW_VEL,
@@ -32,7 +37,14 @@ from .rows import (
 )
 
 __all__ = [
+    "ActuatorNet",
+    "DCMotor",
     "EE_CONFIGS",
+    "FLAG_BINARY",
+    "FLAG_EMA",
+    "JointEffortControllerConfig",
+    "PositionBasedEffortLimit",
+    "ROW_EFFORT",
     "FLAG_DELTA",
     "FLAG_INTERPOLATE",
     "FLAG_NORMALIZE",

@@ -14,6 +14,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Literal, Union
 
+from .actuators import ActuatorNet, DCMotor, PositionBasedEffortLimit
+
+Actuator = Union[DCMotor, PositionBasedEffortLimit, ActuatorNet]
+
 logger = logging.getLogger("wpctrl")
 
 DriveMode = Literal["force", "acceleration"]
@@ -61,6 +65,18 @@ class PDJointPosControllerConfig(ControllerConfig):
     """Action in [-1, 1] is clipped, then mapped affinely onto [lower, upper]."""
     drive_mode: Union[Sequence[DriveMode], DriveMode] = "force"
     """"force" or "acceleration", for all joints or per joint."""
+    # Beyond ManiSkill (keyword-only: ManiSkill's positional fields keep their order in every subclass).
+    actuator: Actuator | None = field(default=None, kw_only=True)
+    """An actuator model that limits or replaces the PD torque (explicit actuation): :class:`wpctrl.DCMotor`,
+    :class:`wpctrl.PositionBasedEffortLimit` or :class:`wpctrl.ActuatorNet`; None: ManiSkill's clamp to
+    ``force_limit``."""
+    ema: float | None = field(default=None, kw_only=True)
+    """Action smoothing 0 < alpha <= 1 (Isaac Lab's ``EMAJointPositionToLimitsAction``): each commanding joint's
+    target becomes ``alpha * target + (1 - alpha) * previous target``, clamped to the joint's limits; a reset sets the
+    previous target to the measured position. None: off."""
+    binary: bool = field(default=False, kw_only=True)
+    """A binary command (Isaac Lab's ``BinaryJointPositionAction``): one action column whose sign picks the target,
+    ``upper`` (open) for ``a >= 0`` and ``lower`` (close) for ``a < 0``, for every commanding joint."""
 
 
 @dataclass
@@ -86,6 +102,9 @@ class PDJointVelControllerConfig(ControllerConfig):
     """Action in [-1, 1] is clipped, then mapped affinely onto [lower, upper]."""
     drive_mode: Union[Sequence[DriveMode], DriveMode] = "force"
     """"force" or "acceleration", for all joints or per joint."""
+    actuator: Actuator | None = field(default=None, kw_only=True)
+    """An actuator model that limits the PD torque (explicit actuation): :class:`wpctrl.DCMotor` or
+    :class:`wpctrl.PositionBasedEffortLimit`; None: ManiSkill's clamp to ``force_limit``."""
 
 
 @dataclass
@@ -94,6 +113,24 @@ class PDJointPosVelControllerConfig(PDJointPosControllerConfig):
     """Lower velocity-target bound [rad/s or m/s]."""
     vel_upper: Union[float, Sequence[float]] = 1.0
     """Upper velocity-target bound [rad/s or m/s]."""
+
+
+@dataclass
+class JointEffortControllerConfig(ControllerConfig):
+    """Direct effort control (not in ManiSkill): the action, clipped and scaled as the joint configs do, is the joint
+    effort [N·m or N], written to ``Control.joint_f`` before every substep (clamped to ``force_limit``); the joint's
+    built-in drive is off (gains 0, target mode EFFORT) in both actuations."""
+
+    lower: Union[float, Sequence[float]]
+    """Lower effort bound [N·m or N]."""
+    upper: Union[float, Sequence[float]]
+    """Upper effort bound [N·m or N]."""
+    normalize_action: bool = True
+    """Action in [-1, 1] is clipped, then mapped affinely onto [lower, upper]."""
+    force_limit: Union[float, Sequence[float]] = 1e10
+    """Effort limit [N·m or N] applied to the commanded effort."""
+    friction: Union[float, Sequence[float]] = 0.0
+    """Joint friction [N·m or N]."""
 
 
 @dataclass

@@ -8,14 +8,16 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from .actuators import ACT_NET, actuator_rows
 from .base import PDBaseForwardVelControllerConfig, PDBaseVelControllerConfig
 from .joint import (
     ConfigError,
     ControllerConfig,
+    JointEffortControllerConfig,
     MimicJointError,
     PassiveControllerConfig,
     PDJointPosControllerConfig,
@@ -41,6 +43,8 @@ ROW_VEL = 1
 """Velocity-driven joint (PDJointVel): stiffness 0, velocity target from the action."""
 ROW_PASSIVE = 2
 """Passive joint: stiffness 0, damping toward a zero velocity target, no action."""
+ROW_EFFORT = 3
+"""Effort-commanded joint (JointEffortController): the scaled action is the joint effort, drive off."""
 
 # Row flag bits.
 FLAG_NORMALIZE = 1
@@ -49,6 +53,10 @@ FLAG_TARGET = 4
 FLAG_INTERPOLATE = 8
 FLAG_VEL_TARGET = 16
 """The row's velocity drive target comes from the action (PDJointPosVel)."""
+FLAG_EMA = 32
+"""The row's target is smoothed: ``alpha * target + (1 - alpha) * previous``, clamped to the joint's limits."""
+FLAG_BINARY = 64
+"""The row's target is ``hi`` for a non-negative action, ``lo`` for a negative one."""
 
 
 @dataclass
@@ -87,12 +95,24 @@ class Rows:
     base_axis: np.ndarray | None = None  # int32: 0 x, 1 y, -1 none
     bx_col: np.ndarray | None = None  # int32 action column of vx (-1: 0)
     by_col: np.ndarray | None = None  # int32 action column of vy (-1: 0, the forward-only base)
+    # Actuator models and action smoothing (wpctrl.config.actuators): per-row model code and parameters, and the
+    # models that carry more than numbers (position tables, networks) as (first row, rows, what).
+    act_model: np.ndarray | None = None  # int32, ACT_* (0: the plain clamp to force_limit)
+    sat_effort: np.ndarray | None = None  # float32 [N·m or N], DC-motor stall effort (inf: none)
+    vel_limit: np.ndarray | None = None  # float32 [rad/s or m/s], DC-motor no-load speed (inf: none)
+    ema_alpha: np.ndarray | None = None  # float32, the EMA weight of FLAG_EMA rows
+    extras: list = field(default_factory=list)
 
     def __post_init__(self):
         n = len(self.joint_names)
         for k in ("yaw_row", "base_axis", "bx_col", "by_col"):
             if getattr(self, k) is None:
                 setattr(self, k, np.full(n, -1, np.int32))
+        defaults = {"act_model": (0, np.int32), "sat_effort": (np.inf, np.float32), "vel_limit": (np.inf, np.float32),
+                    "ema_alpha": (1.0, np.float32)}  # fmt: skip
+        for k, (v, dt) in defaults.items():
+            if getattr(self, k) is None:
+                setattr(self, k, np.full(n, v, dt))
 
     @property
     def count(self) -> int:
@@ -105,7 +125,9 @@ class Rows:
         row0 = 0
         arrays: dict[str, list[np.ndarray]] = {k: [] for k in _ROW_ARRAYS}
         names: list[str] = []
+        extras = []
         for p in parts:
+            extras += [(r + row0, n, what) for r, n, what in p.extras]
             for k in _ROW_ARRAYS:
                 a = getattr(p, k).copy()
                 if k in ("act_col", "vel_col", "bx_col", "by_col"):
@@ -125,6 +147,7 @@ class Rows:
             action_high=high.astype(np.float32),
             normalized=False,
             action_dim=col0,
+            extras=extras,
             **cat,
         )
 
@@ -150,6 +173,10 @@ _ROW_ARRAYS = {
     "base_axis": np.int32,
     "bx_col": np.int32,
     "by_col": np.int32,
+    "act_model": np.int32,
+    "sat_effort": np.float32,
+    "vel_limit": np.float32,
+    "ema_alpha": np.float32,
 }
 
 
@@ -252,6 +279,17 @@ def _pos_rows(config, qlimits: np.ndarray, *, mimic: bool = False, posvel: bool 
         a_low = np.concatenate([a_low, vl])
         a_high = np.concatenate([a_high, vh])
         d = 2 * n
+    act = actuator_rows(config, n)
+    if getattr(config, "ema", None) is not None:
+        flags |= FLAG_EMA
+    binary = getattr(config, "binary", False)
+    if not isinstance(binary, (bool, np.bool_)):
+        raise ConfigError(f"{_name(config)}.binary: expected a bool, got {binary!r}")
+    if binary:
+        if config.use_delta or posvel:
+            what = "use_delta=True" if config.use_delta else "a position-velocity config"
+            raise ConfigError(f"{_name(config)}.binary: a binary command sets absolute targets, not with {what}")
+        flags |= FLAG_BINARY
     return Rows(
         joint_names=names,
         kind=np.full(n, ROW_POS, np.int32),
@@ -274,6 +312,11 @@ def _pos_rows(config, qlimits: np.ndarray, *, mimic: bool = False, posvel: bool 
         action_high=a_high.astype(np.float32),
         normalized=bool(config.normalize_action),
         action_dim=d,
+        act_model=act["act_model"],
+        sat_effort=act["sat_effort"],
+        vel_limit=act["vel_limit"],
+        ema_alpha=act["ema_alpha"],
+        extras=act["extras"],
     )
 
 
@@ -306,6 +349,52 @@ def _vel_rows(config, bounds: tuple[np.ndarray, np.ndarray] | None = None) -> Ro
         force_limit=_per_joint(config, "force_limit", config.force_limit, n, nonneg=True).astype(np.float32),
         friction=_per_joint(config, "friction", config.friction, n, nonneg=True).astype(np.float32),
         accel=_drive_modes(config, n),
+        action_low=lo.copy(),
+        action_high=hi.copy(),
+        normalized=bool(config.normalize_action),
+        action_dim=n,
+        **_vel_actuator(config, n),
+    )
+
+
+def _vel_actuator(config, n: int) -> dict:
+    act = actuator_rows(config, n)
+    if (act["act_model"] == ACT_NET).any():
+        raise ConfigError(
+            f"{_name(config)}.actuator: an ActuatorNet drives position rows (it reads position errors); use DCMotor "
+            f"or PositionBasedEffortLimit on a velocity controller"
+        )
+    return {k: act[k] for k in ("act_model", "sat_effort", "vel_limit", "extras")}
+
+
+def _effort_rows(config) -> Rows:
+    """Rows of a JointEffortController: the scaled action is the joint effort [N·m or N] (no drive, no target)."""
+    names = _joint_names(config)
+    n = len(names)
+    lo = _per_joint(config, "lower", config.lower, n).astype(np.float32)
+    hi = _per_joint(config, "upper", config.upper, n).astype(np.float32)
+    if not isinstance(config.normalize_action, (bool, np.bool_)):
+        raise ConfigError(f"{_name(config)}.normalize_action: expected a bool, got {config.normalize_action!r}")
+    _check_box(config, lo, hi, names, bool(config.normalize_action), "lower/upper")
+    z = np.zeros(n, np.float32)
+    return Rows(
+        joint_names=names,
+        kind=np.full(n, ROW_EFFORT, np.int32),
+        flags=np.full(n, FLAG_NORMALIZE if config.normalize_action else 0, np.int32),
+        act_col=np.arange(n, dtype=np.int32),
+        vel_col=np.full(n, -1, np.int32),
+        lo=lo,
+        hi=hi,
+        vlo=z.copy(),
+        vhi=z.copy(),
+        mimic_src=np.full(n, -1, np.int32),
+        mimic_mul=np.ones(n, np.float32),
+        mimic_off=z.copy(),
+        kp=z.copy(),
+        kd=z.copy(),
+        force_limit=_per_joint(config, "force_limit", config.force_limit, n, nonneg=True).astype(np.float32),
+        friction=_per_joint(config, "friction", config.friction, n, nonneg=True).astype(np.float32),
+        accel=np.zeros(n, np.bool_),
         action_low=lo.copy(),
         action_high=hi.copy(),
         normalized=bool(config.normalize_action),
@@ -392,6 +481,8 @@ def config_rows(config: ControllerConfig, qlimits: np.ndarray) -> Rows:
         return _base_rows(config, forward=False)
     if isinstance(config, PDJointVelControllerConfig):
         return _vel_rows(config)
+    if isinstance(config, JointEffortControllerConfig):
+        return _effort_rows(config)
     if isinstance(config, PassiveControllerConfig):
         return _passive_rows(config)
     raise ConfigError(

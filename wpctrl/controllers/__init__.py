@@ -8,6 +8,7 @@
 from .base import (
     BaseController,
     CombinedController,
+    JointEffortController,
     PassiveController,
     PDBaseForwardVelController,
     PDBaseVelController,
@@ -22,6 +23,7 @@ from .ee import PDEEPosController, PDEEPoseController
 __all__ = [
     "BaseController",
     "CombinedController",
+    "JointEffortController",
     "PDBaseForwardVelController",
     "PDBaseVelController",
     "PDEEPosController",

@@ -23,6 +23,7 @@ from collections.abc import Sequence
 import numpy as np
 import warp as wp
 
+from ..engine.parts.actuators import ACTUATOR_FIELDS
 from ..engine.parts.drive import DRIVE_FIELDS
 from .inputs import _env_selection, _is_torch
 
@@ -88,6 +89,23 @@ def _host_values(name: str, value, shape_ok, n: int) -> np.ndarray:
     return a
 
 
+def _ranges(fields, ranges, mode: str):
+    """``(lo, hi, enabled)`` lists of the given ``(lo, hi)`` ranges (None: not drawn), validated."""
+    lo, hi, enabled = [0.0] * len(fields), [0.0] * len(fields), [0] * len(fields)
+    for p, (k, rng) in enumerate(zip(fields, ranges)):
+        if rng is None:
+            continue
+        name = f"randomize_drive_properties.{k}"
+        try:
+            a, b = (float(x) for x in rng)
+        except (TypeError, ValueError) as e:
+            raise ValueError(f"{name}: expected a (lo, hi) pair of numbers, got {rng!r}") from e
+        if not (np.isfinite(a) and np.isfinite(b) and 0.0 <= a <= b <= _F32_MAX):
+            raise ValueError(f"{name}: expected finite 0 <= lo <= hi ({mode} range), got ({a!r}, {b!r})")
+        lo[p], hi[p], enabled[p] = a, b, 1
+    return lo, hi, enabled
+
+
 class _Shape:
     def __init__(self, rows: int, n: int):
         self.rows, self.n = rows, n
@@ -123,15 +141,41 @@ class ActuationMixin:
         ``Model.joint_friction``)."""
         return self._view(self._engine.friction)
 
+    @property
+    def saturation_effort(self) -> wp.array | None:
+        """(num_envs, n_joints) DC-motor stall effort [N·m or N] per env (live; inf where no envelope), or None
+        without actuator models."""
+        part = self._engine.part("actuators")
+        return None if part is None else self._view(part.sat_effort)
+
+    @property
+    def velocity_limit(self) -> wp.array | None:
+        """(num_envs, n_joints) DC-motor no-load speed [rad/s or m/s] per env (live), or None without actuator
+        models."""
+        part = self._engine.part("actuators")
+        return None if part is None else self._view(part.vel_limit)
+
     def _selection(self, env_ids):
         eng = self._engine
         return _env_selection(env_ids, eng.num_envs, eng.device)
 
-    def set_drive_properties(self, stiffness=None, damping=None, force_limit=None, friction=None, env_ids=None):
+    def set_drive_properties(
+        self,
+        stiffness=None,
+        damping=None,
+        force_limit=None,
+        friction=None,
+        env_ids=None,
+        *,
+        saturation_effort=None,
+        velocity_limit=None,
+    ):
         """Set drive properties of ``env_ids`` (None: all envs) for this controller's joints.
 
         Each value: shape (n_joints,) (broadcast to every selected env) or (len(env_ids) | num_envs for a bool mask,
-        n_joints), torch / numpy / wp; finite and >= 0 (force_limit may be inf). Written to the per-env arrays, to
+        n_joints), torch / numpy / wp; finite and >= 0 (force_limit may be inf). ``saturation_effort`` and
+        ``velocity_limit`` (> 0) set the DC-motor envelope of controllers built with actuator models. Written to the
+        per-env arrays, to
         Newton's per-DOF model arrays of those envs (gains with implicit actuation; effort limit and friction always)
         and the attached solver is notified. Validation reads the values on the host (a sync for device input): call
         it outside captured graphs; use :meth:`randomize_drive_properties` inside them. With per-id values, list each
@@ -141,6 +185,7 @@ class ActuationMixin:
         ids, mask = self._selection(env_ids)
         n = self._rows.stop - self._rows.start
         sel = eng.num_envs if ids is None else ids.shape[0]  # a bool mask takes (num_envs, n) values
+        self._set_actuator_params(saturation_effort, velocity_limit, ids, mask, sel, n)
         given = {k: v for k, v in zip(DRIVE_FIELDS, (stiffness, damping, force_limit, friction)) if v is not None}
         if not given:
             return
@@ -154,8 +199,39 @@ class ActuationMixin:
         dev_values = wp.array(values, dtype=wp.float32, device=eng.device)
         eng.part("drive").set(eng, dev_values, enabled, ids, mask, self._rows.start, n)
 
+    def _actuators(self, what: str):
+        part = self._engine.part("actuators")
+        if part is None:
+            raise ValueError(f"{what}: this controller was built without actuator models (no DC-motor envelope)")
+        return part
+
+    def _set_actuator_params(self, saturation_effort, velocity_limit, ids, mask, sel: int, n: int) -> None:
+        given = {k: v for k, v in zip(ACTUATOR_FIELDS, (saturation_effort, velocity_limit)) if v is not None}
+        if not given:
+            return
+        part = self._actuators("set_drive_properties")
+        arrays = {k: _host_values(f"set_drive_properties.{k}", v, _Shape(sel, n), n) for k, v in given.items()}
+        if "velocity_limit" in arrays and (arrays["velocity_limit"] <= 0).any():
+            raise ValueError("set_drive_properties.velocity_limit: expected values > 0")
+        batch = max(a.shape[0] if a.ndim == 2 else 1 for a in arrays.values())
+        values = np.zeros((2, batch, n), np.float32)
+        for p, k in enumerate(ACTUATOR_FIELDS):
+            if k in arrays:
+                values[p] = np.broadcast_to(arrays[k].astype(np.float32), (batch, n))
+        part.set(self._engine, values, [int(k in arrays) for k in ACTUATOR_FIELDS], ids, mask, self._rows.start, n)
+
     def randomize_drive_properties(
-        self, env_ids=None, stiffness=None, damping=None, force_limit=None, friction=None, mode="scale", seed=0
+        self,
+        env_ids=None,
+        stiffness=None,
+        damping=None,
+        force_limit=None,
+        friction=None,
+        mode="scale",
+        seed=0,
+        *,
+        saturation_effort=None,
+        velocity_limit=None,
     ):
         """Draw drive properties uniformly on the device for ``env_ids`` (None: all envs) and this controller's joints.
 
@@ -164,28 +240,26 @@ class ActuationMixin:
         property's units. Each joint and env draws independently from Warp's RNG keyed by ``seed`` and a device-side
         counter bumped after every call: a captured graph draws new values on each replay. Mirrored into the model
         and notified to the attached solver like :meth:`set_drive_properties`. ``env_ids`` as in :meth:`reset`
-        (a device bool mask or int array keeps the call capturable).
+        (a device bool mask or int array keeps the call capturable). ``saturation_effort`` / ``velocity_limit``
+        draw the DC-motor envelope of controllers built with actuator models the same way (streams of their own).
         """
         if mode not in _RAND_MODES:
             raise ValueError(f"randomize_drive_properties.mode: expected one of {_RAND_MODES}, got {mode!r}")
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not -(2**31) <= int(seed) < 2**31:
             raise ValueError(f"randomize_drive_properties.seed: expected an int32, got {seed!r}")
-        lo, hi, enabled = [0.0] * 4, [0.0] * 4, [0] * 4
-        for p, (k, rng) in enumerate(zip(DRIVE_FIELDS, (stiffness, damping, force_limit, friction))):
-            if rng is None:
-                continue
-            name = f"randomize_drive_properties.{k}"
-            try:
-                a, b = (float(x) for x in rng)
-            except (TypeError, ValueError) as e:
-                raise ValueError(f"{name}: expected a (lo, hi) pair of numbers, got {rng!r}") from e
-            if not (np.isfinite(a) and np.isfinite(b) and 0.0 <= a <= b <= _F32_MAX):
-                raise ValueError(f"{name}: expected finite 0 <= lo <= hi ({mode} range), got ({a!r}, {b!r})")
-            lo[p], hi[p], enabled[p] = a, b, 1
-        if not any(enabled):
+        lo, hi, enabled = _ranges(DRIVE_FIELDS, (stiffness, damping, force_limit, friction), mode)
+        alo, ahi, aen = _ranges(ACTUATOR_FIELDS, (saturation_effort, velocity_limit), mode)
+        if any(aen) and alo[1] <= 0.0 and aen[1]:
+            raise ValueError(f"randomize_drive_properties.velocity_limit: expected lo > 0, got {velocity_limit!r}")
+        if not any(enabled) and not any(aen):
             return
         ids, mask = self._selection(env_ids)
         n = self._rows.stop - self._rows.start
+        if any(aen):
+            part = self._actuators("randomize_drive_properties")
+            part.randomize(self._engine, alo, ahi, aen, mode == "abs", int(seed), ids, mask, self._rows.start, n)
+        if not any(enabled):
+            return
         eng = self._engine
         eng.part("drive").randomize(eng, lo, hi, enabled, mode == "abs", int(seed), ids, mask, self._rows.start, n)
 

@@ -475,6 +475,21 @@ class PDJointPosVelController(PDJointPosController):
     sets_target_qvel = True
 
 
+class JointEffortController(BaseController):
+    """Direct effort control: the scaled action is the joint effort [N·m or N], written to ``Control.joint_f`` before
+    every substep (clamped to ``force_limit``); the built-in drive is off for these joints."""
+
+    @property
+    def target_qpos(self):
+        """An effort controller has no position target (None)."""
+        return None
+
+    @property
+    def target_effort(self) -> wp.array:
+        """(num_envs, n_joints) commanded effort [N·m or N] of the last accepted action (live view)."""
+        return self._view(self._engine.part("effort_command").target_effort)
+
+
 class PassiveController(BaseController):
     """No action: damping toward zero velocity (stiffness 0) and joint friction."""
 

@@ -17,6 +17,7 @@ from ..config import rows as cfg
 from .base import (
     BaseController,
     CombinedController,
+    JointEffortController,
     PassiveController,
     PDBaseForwardVelController,
     PDBaseVelController,
@@ -32,6 +33,7 @@ cfg.PDJointPosMimicControllerConfig.controller_cls = PDJointPosMimicController
 cfg.PDJointVelControllerConfig.controller_cls = PDJointVelController
 cfg.PDJointPosVelControllerConfig.controller_cls = PDJointPosVelController
 cfg.PassiveControllerConfig.controller_cls = PassiveController
+cfg.JointEffortControllerConfig.controller_cls = JointEffortController
 
 
 cfg_base.PDBaseVelControllerConfig.controller_cls = PDBaseVelController

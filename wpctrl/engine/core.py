@@ -90,7 +90,7 @@ class _Engine:
 
     def part(self, name: str):
         """The active part ``name`` (``"drive"``, ``"response"``, ``"coupled"``, ``"delay"``, ``"effort"``, ``"ee"``,
-        ``"gravity"``), or None."""
+        ``"gravity"``, ``"effort_command"``, ``"actuators"``), or None."""
         return self._by_name.get(name)
 
     @property
@@ -220,7 +220,7 @@ class _Engine:
             return
         for part in self.parts:
             part.before_substep(self, state, control)
-        joint_f = control.joint_f if self.explicit else None
+        joint_f = control.joint_f if self.plan.writes_joint_f else None
         if self._launch_substep is None:
             per_call = {
                 "joint_q_in": state.joint_q,
@@ -292,6 +292,7 @@ class _Engine:
             return
         per_call = {
             "first": int(first),
+            "explicit_on": int(self.explicit),
             "host_substeps": 0 if self.per_substep else self.host_substeps,
             "env_ids_in": env_ids,
             "env_mask_in": env_mask,
@@ -299,7 +300,7 @@ class _Engine:
             "joint_qd_in": state.joint_qd,
             "joint_target_q_out": None if control is None else control.joint_target_q,
             "joint_target_qd_out": None if control is None else control.joint_target_qd,
-            "joint_f_out": None if (control is None or not self.explicit) else control.joint_f,
+            "joint_f_out": None if (control is None or not self.plan.writes_joint_f) else control.joint_f,
         }
         names = [a.label for a in K._reset_kernel.adj.args]
         inputs = [per_call[n] if n in per_call else self.arrays.lookup(n) for n in names]

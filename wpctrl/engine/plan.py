@@ -13,7 +13,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..binding import JointBinding
+from ..config import ConfigError
 from ..config import rows as cfg
+from ..config.actuators import ACT_DC_MOTOR, ACT_NET, ACT_NONE, ACT_POSITION_LIMIT
 from ..config.ee import EESpec
 from ..kernels import pd_step as KS
 from .launch import _index_table
@@ -91,6 +93,19 @@ class Plan:
         return self.has_accel or self.explicit_mode >= 2
 
     @property
+    def has_effort_rows(self) -> bool:
+        return bool((self.rows.kind == cfg.ROW_EFFORT).any())
+
+    @property
+    def has_actuator_models(self) -> bool:
+        return bool((self.rows.act_model != ACT_NONE).any())
+
+    @property
+    def writes_joint_f(self) -> bool:
+        """Whether the substep writes ``Control.joint_f`` (explicit actuation, or effort rows)."""
+        return self.explicit or self.has_effort_rows
+
+    @property
     def strided(self) -> bool:
         return self.q_idx.shape[0] == 1
 
@@ -103,11 +118,18 @@ class Plan:
         o = self.options
         interpolates = bool((self.rows.flags & cfg.FLAG_INTERPOLATE).any())
         inertia_per_substep = self.needs_response and o.inertia_update == "substep"
-        return self.explicit or interpolates or o.delay is not None or o.track_effort or inertia_per_substep
+        return (
+            self.explicit
+            or self.has_effort_rows
+            or interpolates
+            or o.delay is not None
+            or o.track_effort
+            or inertia_per_substep
+        )
 
     def __str__(self) -> str:
         r = self.rows
-        kinds = {cfg.ROW_POS: "pos", cfg.ROW_VEL: "vel", cfg.ROW_PASSIVE: "passive"}
+        kinds = {cfg.ROW_POS: "pos", cfg.ROW_VEL: "vel", cfg.ROW_PASSIVE: "passive", cfg.ROW_EFFORT: "effort"}
         lines = [
             f"Plan: {self.num_envs} envs x {self.num_rows} rows, action_dim {self.action_dim}, "
             f"K = {self.options.num_substeps}, {self.options.actuation}"
@@ -129,8 +151,22 @@ class Plan:
 
 
 def make_plan(rows: cfg.Rows, binding: JointBinding, options: Options, ee_specs: dict | None = None) -> Plan:
-    """The plan of ``rows`` bound by ``binding`` (host only)."""
+    """The plan of ``rows`` bound by ``binding`` (host only).
+
+    Raises:
+        ConfigError: an actuator model with implicit actuation or with the coupled drive.
+    """
     E, R = binding.num_envs, rows.count
+    models = rows.act_model[rows.act_model != ACT_NONE]
+    if models.size and (options.actuation != "explicit" or options.explicit_pd == "coupled"):
+        name = {ACT_DC_MOTOR: "DCMotor", ACT_POSITION_LIMIT: "PositionBasedEffortLimit", ACT_NET: "ActuatorNet"}
+        what = name[int(models[0])]
+        why = (
+            "the solver's implicit drive cannot apply it (it computes its own PD force inside the solve)"
+            if options.actuation != "explicit"
+            else "explicit_pd='coupled' solves the force limits itself"
+        )
+        raise ConfigError(f"actuator: {what} needs actuation='explicit' with explicit_pd='naive' or 'stable'; {why}")
     # Coordinate / DOF index of every (env, row): env 0's row plus env * stride for a replicated layout, else a flat
     # (num_envs, rows) table; either way no chain of table loads in the kernels.
     q_idx, q_stride = _index_table(binding.coord_index.reshape(E, R))
@@ -159,6 +195,10 @@ def _active_parts(plan: Plan) -> tuple[str, ...]:
     parts = ["drive"]  # per-env drive properties and the model mirror: always
     if plan.needs_response:
         parts.append("coupled" if plan.coupled else "response")
+    if plan.has_effort_rows:
+        parts.append("effort_command")
+    if plan.has_actuator_models:
+        parts.append("actuators")
     if o.delay is not None:
         parts.append("delay")
     if o.track_effort:
@@ -199,4 +239,16 @@ def _layout(plan: Plan) -> KS.StepLayout:
         base_axis=ints(rows.base_axis) if base else (),
         bx_col=ints(rows.bx_col) if base else (),
         by_col=ints(rows.by_col) if base else (),
+        act_model=ints(rows.act_model) if plan.has_actuator_models else (),
+        table_len=_table_lengths(rows) if plan.has_actuator_models else (),
     )
+
+
+def _table_lengths(rows: cfg.Rows) -> tuple:
+    """Each row's position-table length (0: no table)."""
+    n = [0] * rows.count
+    for r0, count, what in rows.extras:
+        if isinstance(what, tuple):  # (positions, efforts)
+            for r in range(r0, r0 + count):
+                n[r] = len(what[0])
+    return tuple(n)

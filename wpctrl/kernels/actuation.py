@@ -213,3 +213,56 @@ def _bump_counter_kernel(
 ):
     """One more draw: launched after each kernel that read the counter."""
     counter_out[0] = counter_out[0] + 1
+
+
+@wp.kernel
+def _set_rows_kernel(
+    row0: int,
+    num_rows: int,
+    env_ids_in: wp.array[wp.int32],  # optional
+    env_mask_in: wp.array[wp.bool],  # optional
+    values_in: wp.array2d[float],  # (1 | len(env_ids) | num_envs, num_rows): row 0 broadcasts
+    # Out:
+    param_out: wp.array2d[float],  # (num_envs, rows) a per-env parameter without a model mirror
+):
+    """Copy given values into a per-env parameter (an actuator model's) for the selected envs."""
+    tid = wp.tid()
+    env, rl, i = _select(tid, num_rows, env_ids_in, env_mask_in, param_out.shape[0])
+    if env < 0:
+        return
+    b = 0
+    if values_in.shape[0] > 1:
+        b = i
+        if env_mask_in:
+            b = env
+    param_out[env, row0 + rl] = values_in[b, rl]
+
+
+@wp.kernel
+def _randomize_rows_kernel(
+    row0: int,
+    num_rows: int,
+    seed: int,
+    stream: int,  # a stream per parameter: its draws do not depend on which others are drawn
+    mode: int,
+    lo: float,
+    hi: float,
+    env_ids_in: wp.array[wp.int32],  # optional
+    env_mask_in: wp.array[wp.bool],  # optional
+    nominal_in: wp.array[float],  # (rows,) the config's values
+    rng_counter_in: wp.array[wp.int32],  # (1,)
+    # Out:
+    param_out: wp.array2d[float],  # (num_envs, rows)
+):
+    """value = nominal * U(lo, hi) ("scale") or U(lo, hi) ("abs"), as :func:`_randomize_drive_kernel`."""
+    tid = wp.tid()
+    env, rl, i = _select(tid, num_rows, env_ids_in, env_mask_in, param_out.shape[0])
+    if env < 0:
+        return
+    r = row0 + rl
+    key = wp.randi(wp.rand_init(seed, rng_counter_in[0]))
+    state = wp.rand_init(key + stream * 7919, env * param_out.shape[1] + r)
+    x = lo + (hi - lo) * wp.randf(state)
+    if mode == MODE_SCALE:
+        x = nominal_in[r] * x
+    param_out[env, r] = x

@@ -31,6 +31,9 @@ from ..config import rows as _cfg
 wp.set_module_options({"enable_backward": False})
 
 ROW_POS = wp.constant(_cfg.ROW_POS)
+ROW_EFFORT = wp.constant(_cfg.ROW_EFFORT)
+ROW_VEL = wp.constant(_cfg.ROW_VEL)
+ROW_PASSIVE = wp.constant(_cfg.ROW_PASSIVE)
 
 FLAG_VEL_TARGET = wp.constant(_cfg.FLAG_VEL_TARGET)
 
@@ -87,6 +90,7 @@ def _reset_kernel(
     q_stride: int,
     qd_stride: int,
     first: int,
+    explicit_on: int,
     host_substeps: int,
     delay_min: int,
     delay_max: int,
@@ -101,10 +105,11 @@ def _reset_kernel(
     start_qpos_out: wp.array2d[float],
     target_qpos_out: wp.array2d[float],
     target_qvel_out: wp.array2d[float],
+    target_effort_out: wp.array2d[float],  # optional (effort rows): zeroed
     step_out: wp.array[wp.int32],
     joint_target_q_out: wp.array[float],  # optional (no Control given)
     joint_target_qd_out: wp.array[float],  # optional
-    joint_f_out: wp.array[float],  # optional (explicit actuation only)
+    joint_f_out: wp.array[float],  # optional (explicit actuation or effort rows): zeroed on torque rows
     delay_out: wp.array[wp.int32],  # optional (delay on): (num_envs,) drawn in [delay_min, delay_max] [substeps]
     delay_head_out: wp.array2d[wp.int32],  # optional (delay on)
     delay_q_out: wp.array3d[float],  # optional (delay on): the env's history, filled with the reset pose
@@ -129,7 +134,7 @@ def _reset_kernel(
     q = joint_q_in[qi]
     start_qpos_out[env, r] = q
     target_qpos_out[env, r] = q
-    vel_target = kind != ROW_POS or (row_flags[r] & FLAG_VEL_TARGET) != 0
+    vel_target = kind == ROW_VEL or kind == ROW_PASSIVE or (kind == ROW_POS and (row_flags[r] & FLAG_VEL_TARGET) != 0)
     v = float(0.0)
     if first != 0 and kind == ROW_POS and vel_target:
         v = joint_qd_in[di]  # ManiSkill's first reset of a PDJointPosVel takes the measured velocity
@@ -138,8 +143,11 @@ def _reset_kernel(
         joint_target_q_out[qi] = q
     if joint_target_qd_out and vel_target:
         joint_target_qd_out[di] = v
+    if target_effort_out:
+        target_effort_out[env, r] = 0.0
     if joint_f_out:
-        joint_f_out[di] = 0.0
+        if explicit_on != 0 or kind == ROW_EFFORT:
+            joint_f_out[di] = 0.0
     if delay_q_out:
         if r == 0:  # one draw per env, by its row-0 thread (no other thread reads delay_out here)
             d = delay_min
@@ -149,8 +157,11 @@ def _reset_kernel(
                 d = wp.randi(st, delay_min, delay_max + 1)
             delay_out[env] = d
         delay_head_out[env, r] = 0
+        held = q  # the ring holds targets: the reset pose, or a zero effort on effort rows
+        if kind == ROW_EFFORT:
+            held = 0.0
         for i in range(delay_q_out.shape[0]):
-            delay_q_out[i, env, r] = q
+            delay_q_out[i, env, r] = held
             if delay_qd_out:
                 delay_qd_out[i, env, r] = v
     if computed_effort_out:
@@ -180,7 +191,7 @@ def _targets_kernel(
     per-substep work: the first Control seen, or a swapped one). Writes what the substep kernel would write."""
     env, r = wp.tid()
     kind = row_kind[r]
-    if kind != ROW_POS or (row_flags[r] & FLAG_VEL_TARGET) != 0:
+    if kind == ROW_VEL or kind == ROW_PASSIVE or (kind == ROW_POS and (row_flags[r] & FLAG_VEL_TARGET) != 0):
         joint_target_qd_out[_at(qd_idx, qd_stride, env, r)] = target_qvel_in[env, r]
     if kind == ROW_POS:
         joint_target_q_out[_at(q_idx, q_stride, env, r)] = target_qpos_in[env, r]

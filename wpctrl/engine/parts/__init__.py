@@ -39,6 +39,7 @@ class Part:
 
 def part_classes() -> dict[str, type[Part]]:
     """The part classes by plan name, in the order the engine runs them."""
+    from .actuators import ActuatorModels, EffortCommand
     from .delay import Delay
     from .drive import DriveProperties
     from .ee import EndEffectors
@@ -50,6 +51,8 @@ def part_classes() -> dict[str, type[Part]]:
         "drive": DriveProperties,
         "response": JointSpaceResponse,
         "coupled": CoupledDrive,
+        "effort_command": EffortCommand,
+        "actuators": ActuatorModels,
         "delay": Delay,
         "effort": EffortReadout,
         "ee": EndEffectors,

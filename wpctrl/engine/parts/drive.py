@@ -26,7 +26,9 @@ class DriveProperties(Part):
     def __init__(self, plan, alloc):
         rows = plan.rows
         R = plan.num_rows
-        self.explicit = plan.explicit
+        # Gains reach the model with implicit actuation only (explicit: the built-in drive is off; effort rows are in
+        # target mode EFFORT, where solvers ignore the gains).
+        self.gains_off = plan.explicit
         self.kp = alloc.per_env(R, fill=rows.kp)
         self.kd = alloc.per_env(R, fill=rows.kd)
         self.force_limit = alloc.per_env(R, fill=rows.force_limit)
@@ -48,8 +50,8 @@ class DriveProperties(Part):
             self.kd,
             self.force_limit,
             self.friction,
-            None if self.explicit else model.joint_target_ke,
-            None if self.explicit else model.joint_target_kd,
+            None if self.gains_off else model.joint_target_ke,
+            None if self.gains_off else model.joint_target_kd,
             model.joint_effort_limit,
             model.joint_friction,
         ]
@@ -130,7 +132,9 @@ def apply_drive_properties(plan, model: newton.Model) -> bool:
     eff = m.joint_effort_limit.numpy()
     fric = m.joint_friction.numpy()
     old_mode = mode.copy()
-    vel_target = (rows.kind != cfg.ROW_POS) | ((rows.flags & cfg.FLAG_VEL_TARGET) != 0)
+    vel_target = np.isin(rows.kind, (cfg.ROW_VEL, cfg.ROW_PASSIVE)) | (
+        (rows.kind == cfg.ROW_POS) & ((rows.flags & cfg.FLAG_VEL_TARGET) != 0)
+    )
     if plan.explicit:
         row_mode = np.full(plan.num_rows, int(newton.JointTargetMode.EFFORT), np.int32)
         ke[dof] = 0.0
@@ -143,6 +147,10 @@ def apply_drive_properties(plan, model: newton.Model) -> bool:
         ).astype(np.int32)
         ke[dof] = rows.kp[None, :]
         kd[dof] = rows.kd[None, :]
+    effort = rows.kind == cfg.ROW_EFFORT  # commanded efforts: the built-in drive off in both actuations
+    row_mode[effort] = int(newton.JointTargetMode.EFFORT)
+    ke[dof[:, effort]] = 0.0
+    kd[dof[:, effort]] = 0.0
     mode[dof] = row_mode[None, :]
     eff[dof] = rows.force_limit[None, :]
     fric[dof] = rows.friction[None, :]

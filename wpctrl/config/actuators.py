@@ -1,0 +1,175 @@
+"""Actuator models beyond ManiSkill's PD law, for explicit actuation: what limits (or replaces) the PD torque.
+
+Attach one to a joint config's trailing ``actuator`` field, e.g.
+``PDJointPosControllerConfig(..., actuator=wpctrl.DCMotor(saturation_effort=120.0, velocity_limit=7.5))``. The
+parameters broadcast over the config's joints (a number, or one value per joint). Host only; every value is
+validated here, before anything reaches a device.
+
+- :class:`DCMotor`: the four-quadrant torque-speed envelope of a DC motor (Isaac Lab's ``DCMotor``, Newton's
+  ``ClampingDCMotor``).
+- :class:`PositionBasedEffortLimit`: an effort limit interpolated from a table over the joint position (Isaac Lab's
+  ``RemotizedPDActuator``, Newton's ``ClampingPositionBased``).
+- :class:`ActuatorNet`: a learned actuator (MLP over a history of position errors and velocities, or an LSTM),
+  loaded from TorchScript as Isaac Lab's ``ActuatorNetMLP`` / ``ActuatorNetLSTM``, evaluated in a Warp kernel.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, Literal, Union
+
+Number = Union[float, Sequence[float]]
+
+
+@dataclass(frozen=True)
+class DCMotor:
+    """DC motor torque-speed envelope: ``tau = clip(tau_PD, max(s (-1 - v / v_max), -L), min(s (1 - v / v_max), L))``
+    with ``s`` the stall (saturation) effort, ``v_max`` the no-load speed, ``L`` the config's ``force_limit`` and
+    ``v`` the measured joint velocity clipped to the corner velocities ``±v_max (1 + L / s)`` (where the envelope
+    meets ``±L``), as Isaac Lab and Newton do. Per env: ``ctrl.saturation_effort`` / ``ctrl.velocity_limit``,
+    randomisable with ``randomize_drive_properties``."""
+
+    saturation_effort: Number
+    """Stall effort s [N·m or N] (>= 0)."""
+    velocity_limit: Number
+    """No-load speed v_max [rad/s or m/s] (> 0)."""
+
+
+@dataclass(frozen=True)
+class PositionBasedEffortLimit:
+    """``|tau| <= f(q)``, ``f`` the linear interpolation of ``(positions, efforts)`` at the measured position (end
+    values held outside the table), and ``<= force_limit``. One table for all the config's joints."""
+
+    positions: Sequence[float]
+    """Sample positions [rad or m], non-decreasing."""
+    efforts: Sequence[float]
+    """Effort limits at those positions [N·m or N], >= 0."""
+
+
+@dataclass(frozen=True)
+class ActuatorNet:
+    """A learned actuator: a network maps a joint's position error and velocity to its torque, per env and joint.
+
+    ``network`` is a TorchScript file (what Isaac Lab loads) or a ``torch.nn.Module``: an ``nn.Sequential`` of
+    ``Linear`` layers and elementwise activations (MLP), or a module holding an ``nn.LSTM`` followed by ``Linear``
+    / activation layers (LSTM; called once per substep with the per-env, per-joint hidden and cell state). Torch is
+    needed only to read the weights; the network runs in a Warp kernel (CPU and CUDA, graph-capturable).
+
+    MLP input (Isaac Lab's ``ActuatorNetMLP``): the position errors ``q* - q`` at ``input_idx`` substeps ago times
+    ``pos_scale`` and the velocities at the same substeps times ``vel_scale``, concatenated in ``input_order``; the
+    output times ``torque_scale`` is the computed effort. LSTM input (``ActuatorNetLSTM``): ``[q* - q, qd]`` (scaled
+    the same way). A reset zeroes the reset envs' history (and hidden state). The computed effort is then clipped
+    by the DC-motor envelope of ``saturation_effort`` / ``velocity_limit`` (Isaac Lab's actuator nets are DC
+    motors; inf: no envelope) and by ``force_limit``.
+    """
+
+    network: Any
+    """TorchScript path (str / PathLike) or a torch module."""
+    input_idx: Sequence[int] = (0, 1, 2)
+    """MLP: which past substeps feed the network (0: the current one)."""
+    pos_scale: float = 1.0
+    vel_scale: float = 1.0
+    torque_scale: float = 1.0
+    input_order: Literal["pos_vel", "vel_pos"] = "pos_vel"
+    saturation_effort: Number = math.inf
+    """DC-motor stall effort [N·m or N] of the envelope applied to the network's output (inf: none)."""
+    velocity_limit: Number = math.inf
+    """DC-motor no-load speed [rad/s or m/s] (inf: none)."""
+    kind: Literal["auto", "mlp", "lstm"] = "auto"
+    """``"auto"``: an LSTM if the module holds one, else an MLP."""
+
+
+ACTUATOR_TYPES = (DCMotor, PositionBasedEffortLimit, ActuatorNet)
+
+
+# Row codes of the actuator model (the step kernels specialise on them).
+ACT_NONE = 0
+ACT_DC_MOTOR = 1
+ACT_POSITION_LIMIT = 2
+ACT_NET = 3
+
+
+def actuator_rows(config, n: int) -> dict:
+    """Validate ``config.actuator`` (and ``ema`` / ``binary``) for ``n`` joints; the per-row arrays they add.
+
+    Returns ``{"act_model", "sat_effort", "vel_limit", "ema_alpha", "extras"}``: per-row int32 / float32 arrays, and
+    ``extras`` as ``[(first row, rows, actuator)]`` for models that carry more than per-row numbers (tables, nets).
+    """
+    import numpy as np
+
+    from .joint import ConfigError
+    from .validate import _name, _per_joint
+
+    act = getattr(config, "actuator", None)
+    out = {
+        "act_model": np.zeros(n, np.int32),
+        "sat_effort": np.full(n, np.inf, np.float32),
+        "vel_limit": np.full(n, np.inf, np.float32),
+        "ema_alpha": np.ones(n, np.float32),
+        "extras": [],
+    }
+    ema = getattr(config, "ema", None)
+    if ema is not None:
+        if isinstance(ema, bool) or not isinstance(ema, (int, float)) or not (0.0 < float(ema) <= 1.0):
+            raise ConfigError(f"{_name(config)}.ema: expected a number 0 < alpha <= 1 (or None), got {ema!r}")
+        out["ema_alpha"][:] = float(ema)
+    if act is None:
+        return out
+    if not isinstance(act, ACTUATOR_TYPES):
+        raise ConfigError(
+            f"{_name(config)}.actuator: expected wpctrl.DCMotor, wpctrl.PositionBasedEffortLimit, wpctrl.ActuatorNet "
+            f"or None, got {type(act).__name__}"
+        )
+    where = f"{_name(config)}.actuator"
+
+    def envelope(sat, vlim, allow_inf: bool):
+        s = _per_joint(config, "actuator.saturation_effort", sat, n)
+        v = _per_joint(config, "actuator.velocity_limit", vlim, n)
+        if (s < 0).any():
+            raise ConfigError(f"{where}.saturation_effort: expected values >= 0, got {sat!r}")
+        if (v <= 0).any():
+            raise ConfigError(f"{where}.velocity_limit: expected values > 0, got {vlim!r}")
+        if not allow_inf and (not np.isfinite(s).all() or not np.isfinite(v).all()):
+            raise ConfigError(f"{where}: expected finite saturation_effort and velocity_limit, got {sat!r}, {vlim!r}")
+        if (np.isinf(s) & np.isfinite(v)).any():  # s (1 - v/v_max) is inf * 0 = NaN at v = v_max
+            raise ConfigError(f"{where}.saturation_effort: must be finite where velocity_limit is, got {sat!r}")
+        out["sat_effort"][:] = s.astype(np.float32)
+        out["vel_limit"][:] = v.astype(np.float32)
+
+    if isinstance(act, DCMotor):
+        envelope(act.saturation_effort, act.velocity_limit, allow_inf=False)
+        out["act_model"][:] = ACT_DC_MOTOR
+    elif isinstance(act, PositionBasedEffortLimit):
+        try:
+            pos = np.asarray(act.positions, dtype=np.float64).reshape(-1)
+            eff = np.asarray(act.efforts, dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError) as e:
+            raise ConfigError(f"{where}: expected numeric positions and efforts, got {act!r}") from e
+        if pos.size == 0 or pos.size != eff.size:
+            raise ConfigError(
+                f"{where}: expected positions and efforts of the same non-zero length, got {pos.size} and {eff.size}"
+            )
+        if not (np.isfinite(pos).all() and np.isfinite(eff).all()) or (eff < 0).any():
+            raise ConfigError(f"{where}: expected finite positions and efforts >= 0, got {act!r}")
+        if (np.diff(pos) < 0).any():
+            raise ConfigError(f"{where}.positions: expected non-decreasing positions, got {list(act.positions)}")
+        if pos.size > 64:
+            raise ConfigError(f"{where}: expected at most 64 table entries, got {pos.size}")
+        out["act_model"][:] = ACT_POSITION_LIMIT
+        out["extras"].append((0, n, (pos.astype(np.float32), eff.astype(np.float32))))
+    else:
+        envelope(act.saturation_effort, act.velocity_limit, allow_inf=True)
+        if act.input_order not in ("pos_vel", "vel_pos"):
+            raise ConfigError(f"{where}.input_order: expected 'pos_vel' or 'vel_pos', got {act.input_order!r}")
+        idx = list(act.input_idx)
+        if not idx or any(isinstance(i, bool) or not isinstance(i, int) or i < 0 or i > 63 for i in idx):
+            raise ConfigError(f"{where}.input_idx: expected substep indices in [0, 63], got {act.input_idx!r}")
+        for f in ("pos_scale", "vel_scale", "torque_scale"):
+            v = getattr(act, f)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ConfigError(f"{where}.{f}: expected a finite number, got {v!r}")
+        out["act_model"][:] = ACT_NET
+        out["extras"].append((0, n, act))
+    return out

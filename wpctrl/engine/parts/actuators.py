@@ -1,0 +1,168 @@
+"""Actuator models (explicit actuation) and commanded efforts, as engine parts.
+
+- :class:`EffortCommand`: the ``(num_envs, rows)`` commanded effort of effort rows (JointEffortController), written by
+  ``set_action``, read by the substep kernel (delayed like any target when a delay is on), zeroed by a reset.
+- :class:`ActuatorModels`: per-env DC-motor parameters (``saturation_effort`` / ``velocity_limit``, randomisable like
+  the drive properties), the position-limit tables, and the actuator networks: each network's rows get one launch
+  after the substep kernel (:mod:`wpctrl.kernels.actuator_net`), and a reset zeroes their history / hidden state.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from ...config.actuators import ActuatorNet
+from ...config.networks import read_network
+from ...kernels import actuation as KA
+from ...kernels import actuator_net as KN
+from ..launch import _Launch
+from . import Part
+
+ACTUATOR_FIELDS = ("saturation_effort", "velocity_limit")
+"""The per-env actuator-model parameters, in the order of their RNG streams."""
+
+
+class EffortCommand(Part):
+    name = "effort_command"
+    OPTIONAL_ARGS = ("target_effort",)
+
+    def __init__(self, plan, alloc):
+        self.target_effort = alloc.per_env(plan.num_rows)
+
+    def kernel_args(self) -> dict:
+        return {"target_effort": self.target_effort}
+
+
+class ActuatorModels(Part):
+    name = "actuators"
+    OPTIONAL_ARGS = ("sat_effort", "vel_limit", "limit_table_q", "limit_table_f")
+
+    def __init__(self, plan, alloc):
+        rows = plan.rows
+        R = plan.num_rows
+        self.sat_effort = alloc.per_env(R, fill=rows.sat_effort)
+        self.vel_limit = alloc.per_env(R, fill=rows.vel_limit)
+        self.nominal = alloc.up(np.stack([rows.sat_effort, rows.vel_limit]).reshape(2, R), wp.float32)
+        tables = [(r0, n, what) for r0, n, what in rows.extras if isinstance(what, tuple)]
+        width = max([len(t[2][0]) for t in tables] + [1])
+        tq = np.zeros((max(R, 1), width), np.float32)
+        tf = np.zeros((max(R, 1), width), np.float32)
+        for r0, n, (pos, eff) in tables:
+            tq[r0 : r0 + n, : pos.size] = pos
+            tf[r0 : r0 + n, : eff.size] = eff
+        self.limit_table_q = alloc.up(tq, wp.float32)
+        self.limit_table_f = alloc.up(tf, wp.float32)
+        self.nets = [
+            _NetGroup(plan, alloc, r0, n, spec) for r0, n, spec in rows.extras if isinstance(spec, ActuatorNet)
+        ]
+
+    def kernel_args(self) -> dict:
+        return {
+            "sat_effort": self.sat_effort,
+            "vel_limit": self.vel_limit,
+            "limit_table_q": self.limit_table_q,
+            "limit_table_f": self.limit_table_f,
+        }
+
+    def after_substep(self, engine, state, control) -> None:
+        for net in self.nets:
+            net.launch(engine, state, control)
+
+    def after_reset(self, engine, state, env_ids, env_mask) -> None:
+        for net in self.nets:
+            net.reset(engine, env_ids, env_mask)
+
+    # -- per-env parameters ------------------------------------------------------------------------------------------
+
+    def set(self, engine, values: np.ndarray, enabled, env_ids, env_mask, row0: int, num_rows: int) -> None:
+        """Copy ``values`` (2, 1 | selected | num_envs, num_rows) into the enabled parameters' rows."""
+        dev_values = wp.array(values.astype(np.float32), dtype=wp.float32, device=engine.device)
+        dim = (engine.num_envs if env_ids is None else env_ids.shape[0]) * num_rows
+        for p, arr in enumerate((self.sat_effort, self.vel_limit)):
+            if enabled[p] and dim:
+                wp.launch(
+                    KA._set_rows_kernel,
+                    dim=dim,
+                    inputs=[row0, num_rows, env_ids, env_mask, dev_values[p], arr],
+                    device=engine.device,
+                )
+
+    def randomize(self, engine, lo, hi, enabled, mode_abs: bool, seed: int, env_ids, env_mask, row0, num_rows) -> None:
+        """Draw the enabled parameters on the device (the drive properties' RNG scheme, streams of their own)."""
+        c = engine.core
+        dim = (engine.num_envs if env_ids is None else env_ids.shape[0]) * num_rows
+        if not dim:
+            return
+        for p, arr in enumerate((self.sat_effort, self.vel_limit)):
+            if enabled[p]:
+                wp.launch(
+                    KA._randomize_rows_kernel,
+                    dim=dim,
+                    inputs=[row0, num_rows, int(seed), 4 + p, int(mode_abs), float(lo[p]), float(hi[p]), env_ids,
+                            env_mask, self.nominal[p], c.rng_counter, arr],
+                    device=engine.device,
+                )  # fmt: skip
+        wp.launch(KA._bump_counter_kernel, dim=1, inputs=[c.rng_counter], device=engine.device)
+
+
+class _NetGroup:
+    """One ActuatorNet's rows: its weights, its per-env state and its launch."""
+
+    def __init__(self, plan, alloc, row0: int, n: int, spec: ActuatorNet):
+        self.row0, self.n, self.spec = row0, n, spec
+        net = read_network(spec)
+        E, dev = plan.num_envs, alloc.device
+        taps = tuple(int(i) for i in spec.input_idx) if net.kind == "mlp" else ()
+        history = (max(taps) + 1) if taps else 0
+        self.layout = KN.NetLayout(
+            dense=net.dense, lstm=net.lstm, taps=taps, history=history, pos_first=spec.input_order == "pos_vel", rows=n
+        )
+        self.weights = wp.array(net.weights, dtype=wp.float32, device=dev)
+        self.hist_pos = wp.zeros((max(history, 1), E * n), dtype=wp.float32, device=dev)
+        self.hist_vel = wp.zeros((max(history, 1), E * n), dtype=wp.float32, device=dev)
+        layers, hidden = (len(net.lstm), net.lstm[0][1]) if net.lstm else (1, 1)
+        self.lstm_h = wp.zeros((layers, E * n, hidden), dtype=wp.float32, device=dev)
+        self.lstm_c = wp.zeros((layers, E * n, hidden), dtype=wp.float32, device=dev)
+        self._launch: _Launch | None = None
+
+    def launch(self, engine, state, control) -> None:
+        if self._launch is None:
+            s = self.spec
+            effort = engine.part("effort")
+            per_call = {
+                "row0": self.row0,
+                "weights": self.weights,
+                "pos_scale": float(s.pos_scale),
+                "vel_scale": float(s.vel_scale),
+                "torque_scale": float(s.torque_scale),
+                "joint_q_in": state.joint_q,
+                "joint_qd_in": state.joint_qd,
+                "joint_target_q_in": control.joint_target_q,
+                "hist_pos_out": self.hist_pos,
+                "hist_vel_out": self.hist_vel,
+                "lstm_h_out": self.lstm_h,
+                "lstm_c_out": self.lstm_c,
+                "joint_f_out": control.joint_f,
+                "computed_effort_out": None if effort is None else effort.computed_effort,
+                "applied_effort_out": None if effort is None else effort.applied_effort,
+                "saturation_count_out": None if effort is None else effort.saturation_count,
+            }
+            self._launch = engine._launch(KN.net_kernel(self.layout), (engine.num_envs, self.n), per_call)
+        ln = self._launch
+        ln.bind("joint_q_in", state.joint_q)
+        ln.bind("joint_qd_in", state.joint_qd)
+        ln.bind("joint_target_q_in", control.joint_target_q)
+        ln.bind("joint_f_out", control.joint_f)
+        ln.launch()
+
+    def reset(self, engine, env_ids, env_mask) -> None:
+        dim = engine.num_envs if env_ids is None else env_ids.shape[0]
+        if dim == 0:
+            return
+        wp.launch(
+            KN._reset_state_kernel,
+            dim=(dim, self.n),
+            inputs=[engine.num_envs, self.n, env_ids, env_mask, self.hist_pos, self.hist_vel, self.lstm_h, self.lstm_c],
+            device=engine.device,
+        )

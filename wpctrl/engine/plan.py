@@ -138,14 +138,17 @@ class Plan:
             f"per-substep launch: {'yes' if self.per_substep else 'no (elided)'}",
             f"  parts: {', '.join(self.parts) or '-'}",
         ]
+        ee_rows = {r: c0 for r0, (c0, n, _) in self.ee_specs.items() for r in range(r0, r0 + n)}
         for i, name in enumerate(r.joint_names):
-            extra = []
+            extra = [f"end effector (cols from {ee_rows[i]})"] if i in ee_rows else []
             if r.act_col[i] >= 0:
                 extra.append(f"col {r.act_col[i]}")
             if r.mimic_src[i] >= 0:
                 extra.append(f"mimics row {r.mimic_src[i]}")
             if r.base_axis[i] >= 0:
                 extra.append(f"base {'xy'[r.base_axis[i]]} (yaw row {r.yaw_row[i]})")
+            if r.act_model[i]:
+                extra.append(["", "DC motor", "position-based limit", "actuator net"][int(r.act_model[i])])
             lines.append(f"  row {i:2d} {name:24s} {kinds[int(r.kind[i])]:7s} {', '.join(extra)}")
         return "\n".join(lines)
 
@@ -191,23 +194,10 @@ def make_plan(rows: cfg.Rows, binding: JointBinding, options: Options, ee_specs:
 
 
 def _active_parts(plan: Plan) -> tuple[str, ...]:
-    o = plan.options
-    parts = ["drive"]  # per-env drive properties and the model mirror: always
-    if plan.needs_response:
-        parts.append("coupled" if plan.coupled else "response")
-    if plan.has_effort_rows:
-        parts.append("effort_command")
-    if plan.has_actuator_models:
-        parts.append("actuators")
-    if o.delay is not None:
-        parts.append("delay")
-    if o.track_effort:
-        parts.append("effort")
-    if plan.ee_specs:
-        parts.append("ee")
-    if o.balance_passive_force:
-        parts.append("gravity")
-    return tuple(parts)
+    """The names of the parts the plan needs, in the engine's order (each part decides from the plan)."""
+    from .parts import part_classes
+
+    return tuple(name for name, cls in part_classes().items() if cls.wanted(plan))
 
 
 def _layout(plan: Plan) -> KS.StepLayout:

@@ -18,6 +18,11 @@ class Part:
     OPTIONAL_ARGS: tuple[str, ...] = ()
     """Kernel argument names this part provides; ``None`` in the kernels of a mode without it."""
 
+    @staticmethod
+    def wanted(plan) -> bool:
+        """Whether a mode with this plan needs the part (host only: read the plan's rows and options)."""
+        return False
+
     def kernel_args(self) -> dict:
         return {}
 
@@ -38,7 +43,8 @@ class Part:
 
 
 def part_classes() -> dict[str, type[Part]]:
-    """The part classes by plan name, in the order the engine runs them."""
+    """The part classes by name, in the order the engine runs their hooks. A new option is a new part: its module,
+    and one entry here."""
     from .actuators import ActuatorModels, EffortCommand
     from .delay import Delay
     from .drive import DriveProperties

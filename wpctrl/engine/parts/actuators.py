@@ -27,6 +27,10 @@ class EffortCommand(Part):
     name = "effort_command"
     OPTIONAL_ARGS = ("target_effort",)
 
+    @staticmethod
+    def wanted(plan) -> bool:
+        return plan.has_effort_rows
+
     def __init__(self, plan, alloc):
         self.target_effort = alloc.per_env(plan.num_rows)
 
@@ -37,6 +41,10 @@ class EffortCommand(Part):
 class ActuatorModels(Part):
     name = "actuators"
     OPTIONAL_ARGS = ("sat_effort", "vel_limit", "limit_table_q", "limit_table_f")
+
+    @staticmethod
+    def wanted(plan) -> bool:
+        return plan.has_actuator_models
 
     def __init__(self, plan, alloc):
         rows = plan.rows

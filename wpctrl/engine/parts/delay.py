@@ -18,6 +18,10 @@ class Delay(Part):
     name = "delay"
     OPTIONAL_ARGS = ("delay", "delay_head", "delay_q", "delay_qd")
 
+    @staticmethod
+    def wanted(plan) -> bool:
+        return plan.options.delay is not None
+
     def __init__(self, plan, alloc):
         lo, hi = plan.options.delay
         rows = plan.rows

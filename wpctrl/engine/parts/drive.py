@@ -23,6 +23,10 @@ DRIVE_FIELDS = ("stiffness", "damping", "force_limit", "friction")
 class DriveProperties(Part):
     name = "drive"
 
+    @staticmethod
+    def wanted(plan) -> bool:
+        return True  # every mode: the per-env drive properties and their model mirror
+
     def __init__(self, plan, alloc):
         rows = plan.rows
         R = plan.num_rows

@@ -397,6 +397,10 @@ class EndEffectors(Part):
 
     name = "ee"
 
+    @staticmethod
+    def wanted(plan) -> bool:
+        return bool(plan.ee_specs)
+
     def __init__(self, plan, alloc):
         self.specs = plan.ee_specs  # {first row: (first action column, rows, spec)}
         self.parts: dict[int, EEPart] = {}

@@ -13,6 +13,10 @@ class EffortReadout(Part):
     name = "effort"
     OPTIONAL_ARGS = ("computed_effort", "applied_effort", "saturation_count")
 
+    @staticmethod
+    def wanted(plan) -> bool:
+        return plan.options.track_effort
+
     def __init__(self, plan, alloc):
         R = plan.num_rows
         self.computed_effort = alloc.per_env(R)

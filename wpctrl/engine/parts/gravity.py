@@ -87,6 +87,10 @@ class BalancePassiveForce(Part):
 
     name = "gravity"
 
+    @staticmethod
+    def wanted(plan) -> bool:
+        return plan.options.balance_passive_force
+
     def __init__(self, plan, alloc):
         self.bodies = None
 

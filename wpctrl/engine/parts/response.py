@@ -29,6 +29,10 @@ class JointSpaceResponse(Part):
     name = "response"
     OPTIONAL_ARGS = ("response",)
 
+    @staticmethod
+    def wanted(plan) -> bool:
+        return plan.needs_response and not plan.coupled
+
     def __init__(self, plan, alloc):
         self.plan = plan
         self.response = alloc.per_env(max(plan.num_rows, 1), fill=1.0)
@@ -116,6 +120,10 @@ class JointSpaceResponse(Part):
 class CoupledDrive(JointSpaceResponse):
     name = "coupled"
     OPTIONAL_ARGS = ("response", "coupled_iterations")
+
+    @staticmethod
+    def wanted(plan) -> bool:
+        return plan.coupled
 
     def __init__(self, plan, alloc):
         super().__init__(plan, alloc)

@@ -1,0 +1,220 @@
+"""The cost of each actuator model on one control step, for N parallel Pandas, next to the plain explicit step and
+next to Newton's own clamping component doing the same work.
+
+One control step = ``set_action`` + K x ``before_simulation_step`` (K = 5), ManiSkill's Panda mode
+``pd_joint_target_delta_pos``, explicit actuation (naive PD); the arm's config carries the model:
+
+* ``plain``: no model (ManiSkill's clamp to ``force_limit``);
+* ``dc_motor``: ``wpctrl.DCMotor(87, 2.6)``;
+* ``position_limit``: ``wpctrl.PositionBasedEffortLimit`` with an 8-entry table;
+* ``mlp``: ``wpctrl.ActuatorNet`` of a 6-32-32-1 softsign MLP over 3 history taps (random weights);
+* ``lstm``: ``wpctrl.ActuatorNet`` of a 2-layer, 8-unit LSTM with a linear head (random weights);
+* ``newton_dc``: the plain step plus Newton 1.8's ``ClampingDCMotor`` applied to ``joint_f`` after every substep
+  (its own launch over every DOF): what the same DC-motor envelope costs as Newton's component.
+
+Graph-captured replay (and eager with ``--eager``), round-robin. Run ``python bench/actuator_cost.py --help``;
+results go to ``<out>/actuator_cost_<device>.{json,md}``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import numpy as np  # noqa: E402
+import warp as wp  # noqa: E402
+
+from bench.common import (  # noqa: E402
+    add_run_args,
+    build_panda_model,
+    finish_run,
+    fmt_envs,
+    fmt_ratio,
+    fmt_us,
+    md_table,
+    measure_interleaved,
+    meta_markdown,
+    panda_mode,
+    parse_envs,
+    parse_run_args,
+    real_setup,
+    start_run,
+    synthetic_setup,
+)
+
+VARIANTS = ("plain", "dc_motor", "position_limit", "mlp", "lstm", "newton_dc")
+LABELS = {
+    "plain": "plain explicit step",
+    "dc_motor": "DCMotor",
+    "position_limit": "PositionBasedEffortLimit",
+    "mlp": "ActuatorNet (MLP 6-32-32-1)",
+    "lstm": "ActuatorNet (LSTM 2x8)",
+    "newton_dc": "plain + Newton ClampingDCMotor",
+}
+
+
+def _actuator(name: str):
+    import wpctrl
+
+    if name == "dc_motor":
+        return wpctrl.DCMotor(87.0, 2.6)
+    if name == "position_limit":
+        return wpctrl.PositionBasedEffortLimit(np.linspace(-2.8, 2.8, 8).tolist(), [20, 40, 60, 87, 87, 60, 40, 20])
+    if name in ("mlp", "lstm"):
+        import torch
+
+        torch.manual_seed(0)
+        if name == "mlp":
+            net = torch.nn.Sequential(
+                torch.nn.Linear(6, 32), torch.nn.Softsign(), torch.nn.Linear(32, 32), torch.nn.Softsign(),
+                torch.nn.Linear(32, 1),
+            )  # fmt: skip
+        else:
+
+            class _LSTM(torch.nn.Module):
+                def __init__(self):
+                    super().__init__()
+                    self.lstm = torch.nn.LSTM(2, 8, 2, batch_first=True)
+                    self.linear = torch.nn.Linear(8, 1)
+
+            net = _LSTM()
+        return wpctrl.ActuatorNet(net, torque_scale=10.0, saturation_effort=87.0, velocity_limit=2.6)
+    return None
+
+
+def _mode(name: str, base: str) -> dict:
+    mode = panda_mode(base)
+    act = _actuator(name)
+    if act is not None:
+        mode["arm"] = dataclasses.replace(mode["arm"], actuator=act)
+    return mode
+
+
+def _newton_dc(ctrl, device):
+    """A launch of Newton's ClampingDCMotor over the controller's DOFs of ``joint_f``, in place."""
+    from newton.actuators import ClampingDCMotor
+
+    dof = ctrl._engine.binding.dof_index.reshape(-1).astype(np.uint32)
+    n = dof.size
+    comp = ClampingDCMotor(
+        wp.full(n, 87.0, dtype=wp.float32, device=device),
+        wp.full(n, 2.6, dtype=wp.float32, device=device),
+        wp.full(n, 87.0, dtype=wp.float32, device=device),
+    )
+    idx = wp.array(dof, dtype=wp.uint32, device=device)
+    scratch = wp.zeros(n, dtype=wp.float32, device=device)
+    return comp, idx, scratch
+
+
+def run_one(args, n_envs, model, small_model, sync, device) -> list[dict]:
+    kw = {"actuation": "explicit", "control_freq": 20, "sim_freq": 100}
+    rng = np.random.default_rng(0)
+    fns = {}
+    for name in args.variants:
+        mode = _mode(name, args.mode)
+        su = real_setup(mode, model, **kw) if model is not None else synthetic_setup(mode, small_model, n_envs, **kw)
+        ctrl, state, control = su.ctrl, su.state, su.control
+        action = wp.array(rng.uniform(-1, 1, (n_envs, ctrl.action_dim)).astype(np.float32), device=device)
+        ctrl.reset(state)
+        extra = _newton_dc(ctrl, device) if name == "newton_dc" else None
+
+        def step(ctrl=ctrl, state=state, control=control, action=action, extra=extra):
+            ctrl.set_action(action, state)
+            for _ in range(ctrl.num_substeps):
+                ctrl.before_simulation_step(state, control)
+                if extra is not None:  # Newton's component: read joint_f at the DOFs, clamp, write back
+                    comp, idx, scratch = extra
+                    comp.modify_forces(control.joint_f, scratch, state.joint_q, state.joint_qd, idx, idx)
+
+        step()
+        sync()
+        with wp.ScopedCapture(device=device) as cap:
+            step()
+        fns[name + ":graph"] = lambda g=cap.graph: wp.capture_launch(g)
+        if args.eager:
+            fns[name + ":eager"] = step
+    times = measure_interleaved(
+        fns, sync, repeats=args.repeats, min_time=args.min_time, warmup=args.warmup, clock=args.clock
+    )
+    rows = []
+    base = {k: times.get(f"plain:{k}", {}).get("median_s") for k in ("graph", "eager")}
+    for key, t in times.items():
+        name, how = key.split(":")
+        rows.append(
+            {
+                "envs": n_envs,
+                "layout": "real" if model is not None else "synthetic",
+                "variant": name,
+                "replay": how,
+                "us": t["median_s"] * 1e6,
+                "x_plain": (t["median_s"] / base[how]) if base.get(how) else None,
+                "samples_us": [x * 1e6 for x in t["samples_s"]],
+                "iters": t["iters"],
+                "clock": args.clock,
+            }
+        )
+    return rows
+
+
+def markdown(meta: dict, rows: list[dict], args) -> str:
+    out = ["# Actuator models: cost per control step\n", meta_markdown(meta) + "\n"]
+    out.append(
+        f"Mode `{args.mode}`, explicit actuation (naive PD), K = 5. µs per control step (set_action + 5 substeps); "
+        f"'× plain' = this / the plain explicit step of the same replay kind. Clock: {args.clock}, median of "
+        f"{args.repeats} round-robin samples.\n\n"
+    )
+    body = [
+        [
+            fmt_envs(r["envs"]) + ("*" if r["layout"] == "synthetic" else ""),
+            LABELS[r["variant"]],
+            r["replay"],
+            fmt_us(r["us"] * 1e-6),
+            fmt_ratio(r["x_plain"]),
+        ]
+        for r in rows
+    ]
+    out.append(md_table(["envs", "variant", "replay", "µs", "× plain"], body))
+    if any(r["layout"] == "synthetic" for r in rows):
+        out.append("\n\\* synthetic layout (bench/common.py): a small model's layout tiled to N envs.\n")
+    return "".join(out)
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_run_args(p, envs_help="comma list, k/M suffixes (default: cpu 1,64,1k; cuda up to 1M)", variants=VARIANTS,
+                 torch_threads=False)  # fmt: skip
+    p.add_argument("--mode", default="pd_joint_target_delta_pos")
+    p.add_argument("--eager", action="store_true", help="also time the eager calls")
+    p.add_argument("--max-real-envs", type=int, default=4096)
+    args = parse_run_args(p, argv)
+    device, sync, meta = start_run(p, args, cpu_envs="1,64,1k", cuda_envs="1,1k,4k,64k,1M")
+    rows = []
+    small_model = None
+    t0 = time.perf_counter()
+    for n in parse_envs(args.envs):
+        model = build_panda_model(n, device) if n <= args.max_real_envs else None
+        if model is None and small_model is None:
+            small_model = build_panda_model(2, device)
+        try:
+            got = run_one(args, n, model, small_model, sync, device)
+        except (RuntimeError, MemoryError) as e:
+            print(f"[{fmt_envs(n)}] skipped: {type(e).__name__}: {e}", flush=True)
+            break
+        for r in got:
+            print(
+                f"[{fmt_envs(n)}] {LABELS[r['variant']]:>32} {r['replay']:>5}: {r['us']:10.2f} us  x plain "
+                f"{fmt_ratio(r['x_plain']):>7}",
+                flush=True,
+            )
+        rows += got
+        del model
+    finish_run(args, device, meta, rows, t0, "actuator_cost", lambda: markdown(meta, rows, args))
+
+
+if __name__ == "__main__":
+    main()

@@ -29,7 +29,7 @@ from ..kernels import pd as K
 from ..kernels import pd_step as KS
 from ..kernels.dims import step_block_dim
 from .launch import _Launch, _Targets
-from .parts import part_classes
+from .parts import Part, part_classes
 from .plan import Plan
 from .state import Alloc, Arrays, CoreArrays
 
@@ -66,6 +66,13 @@ class _Engine:
         self._by_name = {p.name: p for p in self.parts}
         optional = {n for cls in classes.values() for n in cls.OPTIONAL_ARGS}
         self.arrays = Arrays(self.core, self.parts, optional)
+        # The hot path's decisions, made once: which parts hook which stage, whether the substep writes joint_f.
+        self._hooks = {
+            h: [p for p in self.parts if getattr(type(p), h) is not getattr(Part, h)]
+            for h in ("before_set_action", "before_substep", "after_substep", "after_reset")
+        }
+        self.writes_joint_f = plan.writes_joint_f
+        self.action_buffer = self.core.action_buffer  # (read by every set_action)
         self.block_dim = step_block_dim(self.device, self.num_envs)
         self.wrappers: dict = {}  # zero-copy wp.array views of torch actions, by (address, strides)
         # Elided substeps: the host's substep count since the last set_action, and the Control whose drive targets
@@ -185,7 +192,7 @@ class _Engine:
     # -- stages ---------------------------------------------------------------------------------------------------
 
     def set_action(self, action: wp.array, state) -> None:
-        for part in self.parts:  # EE rows' targets first (the joint launch leaves them alone), the response update
+        for part in self._hooks["before_set_action"]:  # EE rows' targets (the joint launch leaves them), response
             part.before_set_action(self, action, state)
         if self._launch_set_action is None:
             per_call = {
@@ -218,9 +225,9 @@ class _Engine:
             if not self._is_known_control(control):
                 self.write_targets(control)
             return
-        for part in self.parts:
+        for part in self._hooks["before_substep"]:
             part.before_substep(self, state, control)
-        joint_f = control.joint_f if self.plan.writes_joint_f else None
+        joint_f = control.joint_f if self.writes_joint_f else None
         if self._launch_substep is None:
             per_call = {
                 "joint_q_in": state.joint_q,
@@ -238,7 +245,7 @@ class _Engine:
         ln.bind("joint_target_qd_out", control.joint_target_qd)
         ln.bind("joint_f_out", joint_f)
         ln.launch()
-        for part in self.parts:
+        for part in self._hooks["after_substep"]:
             part.after_substep(self, state, control)
 
     # -- the Control that holds the drive targets (no per-substep work) ----------------------------------------------
@@ -300,13 +307,13 @@ class _Engine:
             "joint_qd_in": state.joint_qd,
             "joint_target_q_out": None if control is None else control.joint_target_q,
             "joint_target_qd_out": None if control is None else control.joint_target_qd,
-            "joint_f_out": None if (control is None or not self.plan.writes_joint_f) else control.joint_f,
+            "joint_f_out": None if (control is None or not self.writes_joint_f) else control.joint_f,
         }
         names = [a.label for a in K._reset_kernel.adj.args]
         inputs = [per_call[n] if n in per_call else self.arrays.lookup(n) for n in names]
         dim = (self.num_envs if env_ids is None else n, self.num_rows)
         wp.launch(K._reset_kernel, dim=dim, inputs=inputs, device=self.device)
-        for part in self.parts:
+        for part in self._hooks["after_reset"]:
             part.after_reset(self, state, env_ids, env_mask)
         if write_all:
             self.write_targets(control)

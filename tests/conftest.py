@@ -1,8 +1,7 @@
-"""Shared test fixtures: Warp on the CPU device, quiet logs, paths to ../shared when present."""
+"""Shared test fixtures: Warp on the CPU device, quiet logs, the test data shipped in tests/data."""
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import pytest
@@ -12,16 +11,13 @@ wp.config.log_level = wp.LOG_WARNING
 wp.init()
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED = Path(os.environ.get("WPCTRL_SHARED", ROOT.parent / "shared"))
-CONFORMANCE = SHARED / "conformance"
-PANDA_URDF = SHARED / "reference" / "panda_v2_dynamics.urdf"
+DATA = ROOT / "tests" / "data"
+CONFORMANCE = DATA / "conformance"
+"""Traces of the real ManiSkill 3.0.1 controllers (Panda joint modes, ``ee/``, ``zoo/``), with their READMEs."""
+PANDA_URDF = DATA / "panda_v2_dynamics.urdf"
+"""ManiSkill's Panda URDF (panda_v2) with its dynamics, for add_urdf-built Pandas."""
 
 HAS_CUDA = wp.is_cuda_available()
-
-
-def need_shared(path: Path) -> None:
-    if not path.exists():
-        pytest.skip(f"{path} is absent (../shared is not checked out beside the project)")
 
 
 @pytest.fixture(autouse=True)

@@ -1,6 +1,6 @@
 """An independent numpy float32 re-derivation of wpctrl's controller semantics, for the property tests.
 
-Written from the configs and ``shared/reference/maniskill-controllers.md`` (sections 1 and 3), ManiSkill-style: one
+Written from the configs and ``tests/data/maniskill-controllers.md`` (sections 1 and 3), ManiSkill-style: one
 small class per config type (``reset`` / ``set_action`` / ``before_simulation_step`` / drive targets / explicit PD
 torque) and a combined wrapper that slices a flat action in dict order. It shares nothing with wpctrl but the
 config dataclasses it reads: no row tables, no kernels, no binding.

@@ -1,4 +1,4 @@
-"""Replay ManiSkill's recorded Panda traces (../shared/conformance) through wpctrl, step by step.
+"""Replay ManiSkill's recorded Panda traces (tests/data/conformance) through wpctrl, step by step.
 
 Each trace ran the real ManiSkill controllers on a real PhysX Panda. We put the recorded measured state into a
 Newton state before every call, and compare what wpctrl computes (processed action, targets, the drive targets
@@ -12,7 +12,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import CONFORMANCE, need_shared
+from conftest import CONFORMANCE
 
 import wpctrl
 from wpctrl import config as C
@@ -30,7 +30,6 @@ _CLS = {
 
 def load_trace(name: str) -> dict:
     path = CONFORMANCE / f"{name}.json"
-    need_shared(path)
     return json.loads(path.read_text())
 
 

@@ -105,19 +105,19 @@ def test_fk_matches_newton_eval_fk_and_the_urdf_offset():
         np.testing.assert_allclose(pose[e, :3], np.array(x.p), atol=2e-6)
         ref = np.array([x.q[3], x.q[0], x.q[1], x.q[2]])
         assert min(np.abs(pose[e, 3:] - ref).max(), np.abs(pose[e, 3:] + ref).max()) < 2e-6
-    if PANDA_URDF.exists():  # the same TCP through urdf_path on add_urdf's collapsed Panda
-        robot = newton.ModelBuilder()
-        robot.add_urdf(str(PANDA_URDF), collapse_fixed_joints=True, floating=False)
-        b = newton.ModelBuilder()
-        b.replicate(robot, 4)
-        urdf = Rig(pose_cfg(urdf_path=str(PANDA_URDF)), 4, model=b.finalize(device="cpu"))
-        np.testing.assert_allclose(urdf.fk(q)[0], pose, atol=2e-6)
-        # Without a readable urdf_path (ManiSkill configs carry the packaged URDF's name), wpctrl's Panda facts
-        # (robots.PANDA_FRAMES) give the merged TCP; root_link_name="panda_link0" is the base merged into the world.
-        fallback = Rig(pose_cfg(urdf_path="panda_v2.urdf", root_link_name="panda_link0"), 4, model=urdf.model)
-        np.testing.assert_allclose(fallback.fk(q)[0], pose, atol=2e-6)
-        with pytest.raises(wpctrl.ConfigError, match="urdf_path: cannot read 'panda_v2.urdf'"):
-            Rig(pose_cfg(ee_link="gripper_tcp", urdf_path="panda_v2.urdf"), 1, model=urdf.model)
+    # the same TCP through urdf_path on add_urdf's collapsed Panda
+    robot = newton.ModelBuilder()
+    robot.add_urdf(str(PANDA_URDF), collapse_fixed_joints=True, floating=False)
+    b = newton.ModelBuilder()
+    b.replicate(robot, 4)
+    urdf = Rig(pose_cfg(urdf_path=str(PANDA_URDF)), 4, model=b.finalize(device="cpu"))
+    np.testing.assert_allclose(urdf.fk(q)[0], pose, atol=2e-6)
+    # Without a readable urdf_path (ManiSkill configs carry the packaged URDF's name), wpctrl's Panda facts
+    # (robots.PANDA_FRAMES) give the merged TCP; root_link_name="panda_link0" is the base merged into the world.
+    fallback = Rig(pose_cfg(urdf_path="panda_v2.urdf", root_link_name="panda_link0"), 4, model=urdf.model)
+    np.testing.assert_allclose(fallback.fk(q)[0], pose, atol=2e-6)
+    with pytest.raises(wpctrl.ConfigError, match="urdf_path: cannot read 'panda_v2.urdf'"):
+        Rig(pose_cfg(ee_link="gripper_tcp", urdf_path="panda_v2.urdf"), 1, model=urdf.model)
         with pytest.raises(wpctrl.ConfigError, match="ee_link: 'gripper_tcp' is not a body or site"):
             Rig(pose_cfg(ee_link="gripper_tcp"), 1, model=urdf.model)
 
@@ -543,8 +543,6 @@ def test_interpolated_drive_targets_and_torques(actuation):
 
 
 def test_floating_base_poses_are_relative_to_the_base():
-    if not PANDA_URDF.exists():
-        pytest.skip("../shared is absent")
     robot = newton.ModelBuilder()
     robot.add_urdf(str(PANDA_URDF), collapse_fixed_joints=True, floating=True)
     b = newton.ModelBuilder()

@@ -1,10 +1,10 @@
-"""Replay ManiSkill's recorded end-effector traces (../shared/conformance/ee) through wpctrl, step by step.
+"""Replay ManiSkill's recorded end-effector traces (tests/data/conformance/ee) through wpctrl, step by step.
 
 Each trace ran the real ManiSkill 3.0.1 PDEEPose/PDEEPos controller (arm) and the mimic gripper on a real PhysX Panda,
 under one of ManiSkill's two IK semantics (``setup.semantics``): "gpu" (one damped least-squares step, pytorch
 kinematics) or "cpu" (Pinocchio CLIK). The replay is generic: the configs, the frame, the solver and the CLIK
 parameters come from the trace, so other recorded cases (frames, solvers, absolute poses, resets, interpolation,
-unreachable targets) replay the same way. The Newton Panda is ``add_urdf`` of ../shared/reference/panda_v2_dynamics.urdf
+unreachable targets) replay the same way. The Newton Panda is ``add_urdf`` of tests/data/panda_v2_dynamics.urdf
 (``panda_hand_tcp`` merged into ``panda_link7``: the controller finds it through ``urdf_path``), 2 envs fed the same
 recorded states. Checks, per step:
 
@@ -26,7 +26,7 @@ import newton
 import numpy as np
 import pytest
 import warp as wp
-from conftest import CONFORMANCE, PANDA_URDF, need_shared
+from conftest import CONFORMANCE, PANDA_URDF
 
 import wpctrl
 from wpctrl import config as C
@@ -63,8 +63,6 @@ def rot_angle(a, b) -> float:
 
 def load(name: str) -> dict:
     path = EE_DIR / f"{name}.json"
-    need_shared(path)
-    need_shared(PANDA_URDF)
     return json.loads(path.read_text())
 
 

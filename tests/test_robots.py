@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import math
-import os
 import xml.etree.ElementTree as ET
-from pathlib import Path
 
 import newton
 import numpy as np
 import pytest
 import warp as wp
+from conftest import PANDA_URDF
 
 from wpctrl.config import (
     PDJointPosControllerConfig,
@@ -31,8 +30,6 @@ from wpctrl.robots import (
     panda_control_modes,
 )
 
-_SHARED = Path(os.environ.get("WPCTRL_SHARED", Path(__file__).resolve().parents[2] / "shared"))
-PANDA_URDF = _SHARED / "reference" / "panda_v2_dynamics.urdf"
 TOL = 1e-6
 
 
@@ -41,8 +38,6 @@ def _last(label: str) -> str:
 
 
 def _urdf_builder(**kwargs) -> newton.ModelBuilder:
-    if not PANDA_URDF.exists():
-        pytest.skip(f"{PANDA_URDF} is absent (../shared is not checked out beside the project)")
     b = newton.ModelBuilder()
     b.add_urdf(str(PANDA_URDF), collapse_fixed_joints=True, floating=False, **kwargs)
     return b
@@ -141,8 +136,6 @@ def test_initial_body_q_is_fk_of_initial_q(models):
 
 def test_exact_inertia_merge_is_the_rigid_composite():
     """inertia_merge="exact" gives link7 + hand as one rigid body about its COM (computed here from the URDF XML)."""
-    if not PANDA_URDF.exists():
-        pytest.skip(f"{PANDA_URDF} is absent")
     root = ET.parse(PANDA_URDF).getroot()
 
     def inertial(link):

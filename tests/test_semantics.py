@@ -1,4 +1,5 @@
-"""Every sentence of section 3 of ../shared/reference/maniskill-controllers.md, numbered as there.
+"""Every sentence of section 3 of tests/data/maniskill-controllers.md (ManiSkill 3.0.1 controller behaviour), numbered
+as there.
 
 Each test asserts ManiSkill's behaviour against closed-form values, or wpctrl's documented deliberate difference
 (marked DIFFERENCE, listed in the README).

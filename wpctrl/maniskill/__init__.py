@@ -27,7 +27,7 @@ import numpy as np
 
 from .assets import active_joint_names, newton_builder, set_joint_positions, set_root_pose
 
-__all__ = ["ManiSkillRobot", "load_robot", "translate_config", "translate_mode", "active_joint_names"]
+__all__ = ["ManiSkillRobot", "active_joint_names", "control_modes", "load_robot", "translate_config", "translate_mode"]
 
 
 def _mani_skill():
@@ -164,6 +164,14 @@ def translate_mode(mode):
     if isinstance(mode, dict):
         return {k: (v if k == "balance_passive_force" else translate_config(v)) for k, v in mode.items()}
     return translate_config(mode)
+
+
+def control_modes(uid_or_agent_class) -> dict:
+    """The agent's control modes as wpctrl configs (what :func:`load_robot` gives as ``control_modes``, without
+    building the robot)."""
+    cls = _agent_class(uid_or_agent_class)
+    agent = _agent_instance(cls, active_joint_names(_asset_path(cls)))
+    return {name: translate_mode(mode) for name, mode in agent._controller_configs.items()}
 
 
 def load_robot(

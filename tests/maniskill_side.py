@@ -1,0 +1,126 @@
+"""The real ManiSkill 3.0.1 side of the differential tests: an ``Empty-v1`` env with one agent on PhysX CPU
+(``render_backend="none"``), its controller driven directly (``agent.set_action`` / ``agent.before_simulation_step``,
+no physics step), and the drive targets read back from PhysX.
+
+Robots whose assets carry visual materials (fetch, G1, so100, koch, TriFinger, the MJCF humanoid) cannot load
+without a rendering device; while such an env is built, ManiSkill's URDF loader builds links without visuals and its
+MJCF loader loads no visual bodies (and never makes a render material), as the conformance traces' README describes.
+Physics, collision shapes, inertials, joints and the controllers are stock.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import warnings
+
+import numpy as np
+
+
+class _Inert:
+    def __init__(self, *args, **kwargs):
+        pass
+
+    def __setattr__(self, name, value):
+        object.__setattr__(self, name, value)
+
+
+@contextlib.contextmanager
+def no_visual_loaders():
+    """ManiSkill's URDF / MJCF loaders without visual shapes or render materials, for the duration."""
+    from mani_skill.utils.building import _mjcf_loader
+    from mani_skill.utils.building.urdf_loader import URDFLoader
+
+    original_build_link = URDFLoader._build_link
+    original_mjcf_init = _mjcf_loader.MJCFLoader.__init__
+    originals = {n: getattr(_mjcf_loader, n) for n in ("RenderMaterial", "RenderTexture2D")}
+
+    def build_link(self, link, *args, **kwargs):
+        visuals = link.visuals
+        link.visuals = []
+        try:
+            return original_build_link(self, link, *args, **kwargs)
+        finally:
+            link.visuals = visuals
+
+    def mjcf_init(self, *args, **kwargs):
+        original_mjcf_init(self, *args, **kwargs)
+        self.visual_groups = []
+
+    URDFLoader._build_link = build_link
+    _mjcf_loader.MJCFLoader.__init__ = mjcf_init
+    for n in originals:
+        setattr(_mjcf_loader, n, _Inert)
+    try:
+        yield
+    finally:
+        URDFLoader._build_link = original_build_link
+        _mjcf_loader.MJCFLoader.__init__ = original_mjcf_init
+        for n, v in originals.items():
+            setattr(_mjcf_loader, n, v)
+
+
+class ManiSkillSide:
+    """One agent of the real ManiSkill, its controller for ``mode``, and read-outs of what it commands."""
+
+    def __init__(self, uid: str, mode: str):
+        import gymnasium as gym
+        import mani_skill.envs  # noqa: F401  (registers Empty-v1)
+
+        with warnings.catch_warnings(), no_visual_loaders():
+            warnings.simplefilter("ignore")
+            self.env = gym.make(
+                "Empty-v1",
+                robot_uids=uid,
+                control_mode=mode,
+                sim_backend="physx_cpu",
+                render_backend="none",
+                num_envs=1,
+                obs_mode="state",
+            )
+            self.env.reset(seed=0)
+        self.agent = self.env.unwrapped.agent
+        self.robot = self.agent.robot
+        self.controller = self.agent.controller
+        self.joint_names = [j.name for j in self.robot.active_joints]
+        self.processed: dict[str, np.ndarray] = {}
+        subs = getattr(self.controller, "controllers", {"__single__": self.controller})
+        for name, ctrl in subs.items():
+            self._record(name, ctrl)
+
+    def _record(self, name, ctrl) -> None:
+        original = ctrl._preprocess_action
+
+        def preprocess(action, _orig=original, _name=name):
+            out = _orig(action)
+            self.processed[_name] = np.asarray(out.detach().cpu().numpy() if hasattr(out, "detach") else out)
+            return out
+
+        ctrl._preprocess_action = preprocess
+
+    @property
+    def qlimits(self) -> np.ndarray:
+        return self.robot.get_qlimits().cpu().numpy()[0]
+
+    def put(self, qpos, qvel) -> None:
+        import torch
+
+        self.robot.set_qpos(torch.as_tensor(np.asarray(qpos, np.float32))[None])
+        self.robot.set_qvel(torch.as_tensor(np.asarray(qvel, np.float32))[None])
+
+    def set_action(self, action) -> None:
+        import torch
+
+        self.processed.clear()
+        self.agent.set_action(torch.as_tensor(np.asarray(action, np.float32))[None])
+
+    def substep(self) -> None:
+        self.agent.before_simulation_step()
+
+    def drive_targets(self) -> tuple[np.ndarray, np.ndarray]:
+        return (
+            self.robot.get_drive_targets().cpu().numpy()[0].astype(np.float64),
+            self.robot.get_drive_velocities().cpu().numpy()[0].astype(np.float64),
+        )
+
+    def close(self) -> None:
+        self.env.close()

@@ -1,24 +1,37 @@
-"""Command line: ``python -m wpctrl demo [options]`` (also the ``wpctrl`` console script; under
+"""Command line: ``python -m wpctrl <command> [options]`` (also the ``wpctrl`` console script; under
 ``torchrun --nproc-per-node=N -m wpctrl demo ...`` one process per rank)."""
 
 from __future__ import annotations
 
 import sys
 
+COMMANDS = {
+    "demo": ("wpctrl.demo", "run a ManiSkill control mode on Newton Pandas and report tracking (CPU or GPU)"),
+    "train": ("wpctrl.train.cli", "train a PPO policy (rsl-rl) through wpctrl on a vectorised Newton task"),
+}
+
+
+def _usage() -> str:
+    lines = ["usage: python -m wpctrl <command> [options]", "", "commands:"]
+    lines += [f"  {name:8s} {help}" for name, (_, help) in COMMANDS.items()]
+    lines += ["", "python -m wpctrl <command> --help lists a command's options."]
+    return "\n".join(lines)
+
 
 def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv or argv[0] in ("-h", "--help"):
-        print("usage: wpctrl demo [options]   (wpctrl demo --help for the options)")
+        print(_usage())
         return 0 if argv else 2
-    if argv[0] != "demo":
-        print(f"wpctrl: error: unknown command {argv[0]!r}; expected 'demo'", file=sys.stderr)
+    if argv[0] not in COMMANDS:
+        print(f"wpctrl: error: unknown command {argv[0]!r}; expected one of {sorted(COMMANDS)}", file=sys.stderr)
         return 2
-    from .demo import main as demo_main  # light: warp (~1-3 s to import) loads after the demo's first line
+    import importlib
 
+    module = importlib.import_module(COMMANDS[argv[0]][0])  # light: warp loads after the command's first line
     try:
-        return demo_main(argv[1:])
-    except SystemExit as e:  # argparse and the demo's checks exit 2 with a one-line message
+        return module.main(argv[1:])
+    except SystemExit as e:  # argparse and the commands' checks exit 2 with a one-line message
         return e.code if isinstance(e.code, int) else 1
 
 

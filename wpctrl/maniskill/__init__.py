@@ -36,9 +36,7 @@ def _mani_skill():
         from mani_skill.agents.base_agent import BaseAgent
         from mani_skill.agents.registration import REGISTERED_AGENTS
     except ImportError as e:  # pragma: no cover - the extra is installed in the test environment
-        raise ImportError(
-            'wpctrl.maniskill needs ManiSkill: pip install "wpctrl[maniskill]" (mani-skill 3.0.1)'
-        ) from e
+        raise ImportError('wpctrl.maniskill needs ManiSkill: pip install "wpctrl[maniskill]" (mani-skill 3.0.1)') from e
     return BaseAgent, REGISTERED_AGENTS
 
 

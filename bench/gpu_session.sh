@@ -1,0 +1,31 @@
+#!/usr/bin/env bash
+# The GPU runs behind the performance page, in stages that each fit one 10-minute device call (run them back to
+# back while the machine stays warm). Results land in $OUT (the device machine sets it; else bench/results/gpu).
+#
+#   STAGE=tests bash bench/gpu_session.sh      # the CUDA tests (parity, graph replay, new features)
+#   STAGE=ab    bash bench/gpu_session.sh      # the control step A/B against BASE_TREE (default .gpu/base)
+#   STAGE=act   bash bench/gpu_session.sh      # actuator models' cost, the reach env's step by part
+#   STAGE=train bash bench/gpu_session.sh      # PPO on 4,096 reach envs
+set -uo pipefail
+cd "$(dirname "$0")/.."
+OUT=${OUT:-bench/results/gpu}
+mkdir -p "$OUT"
+PY=${PYTHON:-python3}
+export PYTHONUNBUFFERED=1
+log="$OUT/${STAGE}.log"
+{ date -u; nvidia-smi --query-gpu=name,driver_version --format=csv,noheader; git log -1 --format=%h 2>/dev/null; } > "$log" 2>&1
+case "$STAGE" in
+  tests)
+    timeout 560 $PY -m pytest -q -p no:cacheprovider tests/test_cuda.py tests/test_cuda_features.py tests/test_ee_cuda.py \
+      "tests/test_actuation.py::test_cuda_captured_randomisation_reaches_mujoco" 2>&1 | tee -a "$log" | tail -30 ;;
+  ab)
+    AB_ENVS=${AB_ENVS:-4k,1M} REPEATS=${REPEATS:-5} timeout 580 bash bench/ab_step.sh "${BASE_TREE:-.gpu/base}" . 2>&1 \
+      | tee -a "$log" | tail -40 ;;
+  act)
+    timeout 330 $PY bench/actuator_cost.py --envs "${ACT_ENVS:-1,4k,64k,1M}" --repeats 5 --out "$OUT" 2>&1 | tee -a "$log" | tail -30
+    timeout 200 $PY bench/train_rate.py --envs 4096 --out "$OUT" 2>&1 | tee -a "$log" | tail -12 ;;
+  train)
+    timeout 580 $PY -m wpctrl train --envs "${TRAIN_ENVS:-4096}" --iterations "${TRAIN_ITERS:-150}" --out "$OUT/train" 2>&1 \
+      | grep -v "^ \|Model\|^)" | tee -a "$log" | tail -40 ;;
+  *) echo "STAGE: expected tests, ab, act or train, got '${STAGE:-}'"; exit 2 ;;
+esac

@@ -22,7 +22,13 @@ case "$STAGE" in
     AB_ENVS=${AB_ENVS:-4k,1M} REPEATS=${REPEATS:-5} timeout 580 bash bench/ab_step.sh "${BASE_TREE:-.gpu/base}" . 2>&1 \
       | tee -a "$log" | tail -40 ;;
   act)
-    timeout 330 $PY bench/actuator_cost.py --envs "${ACT_ENVS:-1,4k,64k,1M}" --repeats 5 --out "$OUT" 2>&1 | tee -a "$log" | tail -30
+    # one process per model, each against the plain step of the same process (ratios in one run)
+    work=$(mktemp -d)
+    for v in dc_motor position_limit newton_dc mlp lstm; do
+      timeout 100 $PY bench/actuator_cost.py --envs "${ACT_ENVS:-1,4k,64k,1M}" --repeats 5 --variants "plain,$v" \
+        --tag "cuda_$v" --out "$work" 2>&1 | grep -E "x plain|skipped" | tee -a "$log"
+    done
+    (cd "$work" && tar -cf "$OUT/actuator_cost.tar" ./*)
     timeout 200 $PY bench/train_rate.py --envs 4096 --out "$OUT" 2>&1 | tee -a "$log" | tail -12 ;;
   train)
     timeout 580 $PY -m wpctrl train --envs "${TRAIN_ENVS:-4096}" --iterations "${TRAIN_ITERS:-150}" --out "$OUT/train" 2>&1 \

@@ -60,9 +60,12 @@ class ReachEnv(VecEnv):
         self.cfg = {"task": "reach", "control_mode": control_mode, "num_envs": E, "episode_steps": episode_steps}
         self._torch = torch
         self.wp_device = wp.get_device(device)
-        if self.wp_device.is_cuda:  # one stream for torch and Warp: the graph is ordered with the policy's kernels
-            torch_dev = torch.device(device)
-            wp.set_stream(wp.stream_from_torch(torch.cuda.current_stream(torch_dev)), self.wp_device)
+        if self.wp_device.is_cuda:
+            # One stream for torch and Warp, so the graph is ordered with the policy's kernels: a torch stream of our
+            # own made current for torch (its legacy default stream cannot be wrapped) and Warp's stream.
+            self.torch_stream = torch.cuda.Stream(device=torch.device(device))
+            torch.cuda.set_stream(self.torch_stream)
+            wp.set_stream(wp.stream_from_torch(self.torch_stream), self.wp_device)
         modes = panda_control_modes()
         if control_mode not in modes:
             raise ValueError(f"control_mode: expected one of {sorted(modes)}, got {control_mode!r}")

@@ -5,7 +5,7 @@
 #   STAGE=tests bash bench/gpu_session.sh      # the CUDA tests (parity, graph replay, new features)
 #   STAGE=ab    bash bench/gpu_session.sh      # the control step A/B against BASE_TREE (default .gpu/base)
 #   STAGE=act   bash bench/gpu_session.sh      # actuator models' cost, the reach env's step by part
-#   STAGE=train bash bench/gpu_session.sh      # PPO on 4,096 reach envs
+#   STAGE=train bash bench/gpu_session.sh      # PPO on 4,096 reach envs to 95 % success (bench/train_gpu.sh)
 set -uo pipefail
 cd "$(dirname "$0")/.."
 OUT=${OUT:-bench/results/gpu}
@@ -31,7 +31,6 @@ case "$STAGE" in
     (cd "$work" && tar -cf "$OUT/actuator_cost.tar" ./*)
     timeout 200 $PY bench/train_rate.py --envs 4096 --out "$OUT" 2>&1 | tee -a "$log" | tail -12 ;;
   train)
-    timeout 580 $PY -m wpctrl train --envs "${TRAIN_ENVS:-4096}" --iterations "${TRAIN_ITERS:-150}" --out "$OUT/train" 2>&1 \
-      | grep -v "^ \|Model\|^)" | tee -a "$log" | tail -40 ;;
+    OUT="$OUT" PYTHON="$PY" timeout 590 bash bench/train_gpu.sh 2>&1 | tee -a "$log" | tail -40 ;;
   *) echo "STAGE: expected tests, ab, act or train, got '${STAGE:-}'"; exit 2 ;;
 esac

@@ -1,13 +1,15 @@
 """``python -m wpctrl train``: PPO (rsl-rl's ``OnPolicyRunner``) on a vectorised Newton task through wpctrl.
 
 Writes into ``--out``: ``train.json`` (per iteration: mean episode reward and success rate of the episodes finished in
-it, collection env-steps/s, wall time; then the final evaluation), ``learning_curve.png``, and ``policy.pt`` (the
-runner's checkpoint).
+it, collection env-steps/s, wall time; the evaluations of the deterministic policy on fresh episodes, periodic with
+``--eval-every`` and final), ``learning_curve.png``, and ``policy.pt`` (the runner's checkpoint).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import json
 import math
 import sys
@@ -71,17 +73,33 @@ def parse(argv):
     p.add_argument("--device", default=None, help="cuda:0 if available, else cpu")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--eval-episodes", type=int, default=None, help="fresh episodes to evaluate (default: one per env)")
+    p.add_argument(
+        "--eval-every", type=int, default=0, help="also evaluate every N iterations (0: only after training)"
+    )
+    p.add_argument(
+        "--target-success",
+        type=float,
+        default=None,
+        help="stop training once an evaluation's success rate reaches this (with --eval-every)",
+    )
     p.add_argument("--out", default="wpctrl-train", help="output folder")
     p.add_argument("--no-graph", action="store_true", help="on CUDA, run the env step eagerly (no CUDA graph)")
     args = p.parse_args(argv)
-    if args.envs is not None and args.envs < 1:
-        p.error(f"--envs: expected a positive number of envs, got {args.envs}")
-    if args.iterations is not None and args.iterations < 1:
-        p.error(f"--iterations: expected a positive number, got {args.iterations}")
+    for name in ("envs", "iterations", "steps_per_env", "eval_episodes"):
+        v = getattr(args, name)
+        if v is not None and v < 1:
+            p.error(f"--{name.replace('_', '-')}: expected a positive number, got {v}")
+    if args.eval_every < 0:
+        p.error(f"--eval-every: expected 0 or a positive number of iterations, got {args.eval_every}")
+    if args.target_success is not None and not 0.0 < args.target_success <= 1.0:
+        p.error(f"--target-success: expected a success rate in (0, 1], got {args.target_success}")
+    if args.target_success is not None and args.eval_every == 0:
+        p.error("--target-success: needs --eval-every N (the evaluations that decide when to stop)")
     return args
 
 
 def main(argv=None) -> int:
+    t_main = time.perf_counter()
     args = parse(list(sys.argv[1:] if argv is None else argv))
     try:
         import torch
@@ -96,6 +114,7 @@ def main(argv=None) -> int:
     cuda = device.startswith("cuda")
     envs = args.envs or (4096 if cuda else 64)
     iterations = args.iterations or (200 if cuda else 20)
+    eval_episodes = args.eval_episodes or envs
     torch.manual_seed(args.seed)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -106,17 +125,17 @@ def main(argv=None) -> int:
         envs, device=device, control_mode=args.control_mode, seed=args.seed, graph=cuda and not args.no_graph
     )
     cfg = train_cfg(args.steps_per_env, args.seed)
-    runner = OnPolicyRunner(env, cfg, log_dir=None, device=device)
+    with contextlib.redirect_stdout(io.StringIO()):  # rsl-rl prints its observation sets and both networks
+        runner = OnPolicyRunner(env, cfg, log_dir=None, device=device)
     setup_s = time.perf_counter() - t0
     print(f"wpctrl train: {envs} envs on {device}, {args.control_mode}, set up in {setup_s:.1f} s", flush=True)
-    history = []
-    env.randomize_episode_phase(args.seed)
+    history, evaluations = [], []
     t_start = time.perf_counter()
-    obs = env.get_observations()
+    obs = _start_episodes(env, args.seed)
     runner.alg.train_mode()
     for it in range(iterations):
         t_it = time.perf_counter()
-        with torch.inference_mode():
+        with torch.inference_mode():  # the loop of OnPolicyRunner.learn, with the env's own episode statistics
             for _ in range(cfg["num_steps_per_env"]):
                 actions = runner.alg.act(obs)
                 obs, rewards, dones, extras = env.step(actions)
@@ -126,6 +145,7 @@ def main(argv=None) -> int:
             collect_s = time.perf_counter() - t_it
             runner.alg.compute_returns(obs)
         losses = runner.alg.update()
+        learn_s = time.perf_counter() - t_it - collect_s
         stats = env.take_stats()
         row = {
             "iteration": it,
@@ -134,8 +154,11 @@ def main(argv=None) -> int:
             "episodes": stats["episodes"],
             "mean_step_reward": stats["mean_step_reward"],
             "collection_env_steps_per_s": envs * cfg["num_steps_per_env"] / collect_s,
+            "collect_s": collect_s,
+            "learn_s": learn_s,
             "iteration_s": time.perf_counter() - t_it,
             "wall_s": time.perf_counter() - t_start,
+            "action_std": float(runner.alg.get_policy().output_std.detach().mean()),
             "losses": {k: float(v) for k, v in losses.items()},
         }
         history.append(row)
@@ -145,33 +168,70 @@ def main(argv=None) -> int:
             f"collect {row['collection_env_steps_per_s']:,.0f} env-steps/s  wall {row['wall_s']:.1f} s",
             flush=True,
         )
+        if args.eval_every and (it + 1) % args.eval_every == 0 and it + 1 < iterations:
+            ev = evaluate(env, runner, eval_episodes)
+            ev.update(iteration=it, wall_s=time.perf_counter() - t_start)
+            evaluations.append(ev)
+            print(f"       evaluation: success {ev['success_rate']:.3f} over {ev['episodes']} episodes", flush=True)
+            if args.target_success is not None and ev["success_rate"] >= args.target_success:
+                break
+            obs = _start_episodes(env, args.seed + it + 1)
+            runner.alg.train_mode()
+    train_s = time.perf_counter() - t_start
     runner.save(str(out / "policy.pt"))
-    evaluation = evaluate(env, runner, args.eval_episodes or envs, cuda)
-    print(f"evaluation: success {evaluation['success_rate']:.3f} over {evaluation['episodes']} episodes", flush=True)
+    last = evaluations[-1] if evaluations and evaluations[-1]["iteration"] == history[-1]["iteration"] else None
+    if last is None:
+        last = evaluate(env, runner, eval_episodes)
+        last.update(iteration=history[-1]["iteration"], wall_s=time.perf_counter() - t_start)
+        evaluations.append(last)
+    print(f"evaluation: success {last['success_rate']:.3f} over {last['episodes']} episodes", flush=True)
+    target = args.target_success
+    reached = [e for e in evaluations if target is not None and e["success_rate"] >= target]
     summary = {
         "task": args.task,
         "control_mode": args.control_mode,
         "envs": envs,
         "device": device,
+        "device_name": torch.cuda.get_device_name(torch.device(device)) if cuda else "cpu",
+        "graph": env.graph is not None,
         "seed": args.seed,
-        "iterations": iterations,
+        "iterations": len(history),
         "steps_per_env": cfg["num_steps_per_env"],
+        "env_steps": len(history) * envs * cfg["num_steps_per_env"],
+        "import_s": t0 - t_main,
         "setup_s": setup_s,
-        "train_wall_s": time.perf_counter() - t_start,
+        "train_wall_s": train_s,
+        "total_s": time.perf_counter() - t_main,
+        "collection_env_steps_per_s_median": _median([h["collection_env_steps_per_s"] for h in history[1:] or history]),
+        "target_success": target,
+        "time_to_target_s": (t_start - t_main + reached[0]["wall_s"]) if reached else None,
         "ppo": cfg,
         "history": history,
-        "evaluation": evaluation,
+        "evaluations": evaluations,
+        "evaluation": last,
     }
     (out / "train.json").write_text(json.dumps(summary, indent=1, allow_nan=False))
-    _plot(history, evaluation, out / "learning_curve.png", envs, device)
+    _plot(history, evaluations, out / "learning_curve.png", envs, device)
     print(f"wrote {out / 'train.json'}, {out / 'learning_curve.png'}, {out / 'policy.pt'}", flush=True)
+    if reached:
+        first = reached[0]
+        print(f"success {first['success_rate']:.3f} >= {target} after {summary['time_to_target_s']:.1f} s", flush=True)
     return 0
 
 
-def evaluate(env, runner, episodes: int, cuda: bool) -> dict:
+def _start_episodes(env, seed: int):
+    """Every env in a new episode at a random step of it (rsl-rl's ``init_at_random_ep_len``); the observations."""
+    obs = env.reset()
+    env.randomize_episode_phase(seed)
+    env.take_stats()
+    return obs
+
+
+def evaluate(env, runner, episodes: int) -> dict:
     """The deterministic policy on fresh episodes (every env restarted): their success rate and mean reward."""
     import torch
 
+    t = time.perf_counter()
     policy = runner.get_inference_policy(device=env.device)
     obs = env.reset()
     env.take_stats()
@@ -184,14 +244,24 @@ def evaluate(env, runner, episodes: int, cuda: bool) -> dict:
             done_eps += s["episodes"]
             rewards += (s["mean_episode_reward"] or 0.0) * s["episodes"]
             successes += (s["success_rate"] or 0.0) * s["episodes"]
-    return {"episodes": done_eps, "success_rate": successes / done_eps, "mean_episode_reward": rewards / done_eps}
+    return {
+        "episodes": done_eps,
+        "success_rate": successes / done_eps,
+        "mean_episode_reward": rewards / done_eps,
+        "eval_s": time.perf_counter() - t,
+    }
+
+
+def _median(xs):
+    xs = sorted(xs)
+    return xs[len(xs) // 2] if xs else None
 
 
 def _fmt(x) -> str:
     return "   –  " if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:6.3f}"
 
 
-def _plot(history, evaluation, path: Path, envs: int, device: str) -> None:
+def _plot(history, evaluations, path: Path, envs: int, device: str) -> None:
     try:
         import matplotlib
 
@@ -200,19 +270,31 @@ def _plot(history, evaluation, path: Path, envs: int, device: str) -> None:
     except ImportError:
         print("wpctrl train: matplotlib is not installed: no learning_curve.png", file=sys.stderr)
         return
+
+    def series(key):
+        return [math.nan if h[key] is None else h[key] for h in history]
+
     its = [h["iteration"] for h in history]
     fig, (a, b) = plt.subplots(1, 2, figsize=(10, 3.8))
-    a.plot(its, [h["mean_episode_reward"] for h in history], "-")
+    a.plot(its, series("mean_episode_reward"), "-")
     a.set_xlabel("PPO iteration")
     a.set_ylabel("mean episode reward")
     a.grid(alpha=0.3)
-    b.plot(its, [h["success_rate"] for h in history], "-", label="training episodes")
-    b.axhline(evaluation["success_rate"], color="k", ls="--", lw=1, label="final evaluation")
+    b.plot(its, series("success_rate"), "-", label="training episodes (stochastic policy)")
+    b.plot(
+        [e["iteration"] for e in evaluations],
+        [e["success_rate"] for e in evaluations],
+        "ko--",
+        ms=4,
+        lw=1,
+        label="evaluation (deterministic, fresh episodes)",
+    )
     b.set_xlabel("PPO iteration")
     b.set_ylabel("success rate (TCP within 2.5 cm)")
     b.set_ylim(-0.02, 1.02)
     b.legend(loc="lower right", fontsize=8)
     b.grid(alpha=0.3)
-    fig.suptitle(f"reach, {envs} envs on {device}")
+    wall = history[-1]["wall_s"]
+    fig.suptitle(f"reach, {envs} envs on {device}: {len(history)} iterations in {wall:.0f} s")
     fig.tight_layout()
     fig.savefig(path, dpi=110)

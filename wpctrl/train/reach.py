@@ -4,9 +4,13 @@ lives on the device and whose whole step is one CUDA graph on a GPU.
 One step of the env: the policy's action (a torch tensor) is copied into a fixed action buffer (zero-copy Warp view),
 then, inside the captured graph, wpctrl's ``set_action``, K x (``before_simulation_step`` + MuJoCo-Warp step), the
 observations, reward and done flags (Warp kernels), and the partial reset of the envs whose episode ended (their
-joint state and a new goal by a Warp kernel, ``ctrl.reset`` with a device mask) run without a host sync. Torch and
-Warp share one CUDA stream, so the graph is ordered with the policy's own kernels. On the CPU the same calls run
-eagerly.
+joint state and a new goal by a Warp kernel, ``ctrl.reset`` with a device mask) run without a host sync. On the CPU
+the same calls run eagerly.
+
+Streams (CUDA): torch and Warp share one stream, so the graph is ordered with the policy's kernels without the host
+waiting. Torch's default stream is CUDA's legacy stream, on which no graph can be captured, so the env makes a torch
+stream of its own current for torch (``torch.cuda.set_stream``, for the whole process) and for Warp
+(``wp.stream_from_torch``).
 """
 
 from __future__ import annotations
@@ -116,7 +120,7 @@ class ReachEnv(VecEnv):
         self.done_t = wp.to_torch(self.done)
         self.time_out_t = wp.to_torch(self.time_out)
         self.action_t = wp.to_torch(self.action)
-        self.episode_length_buf = wp.to_torch(self.episode_step)
+        self._episode_step_t = wp.to_torch(self.episode_step)
         # Every env starts an episode.
         self._reset_envs(self._all)
         self.ctrl.reset(self.state, control=self.control)
@@ -236,6 +240,16 @@ class ReachEnv(VecEnv):
 
     # -- rsl-rl's VecEnv -------------------------------------------------------------------------------------------
 
+    @property
+    def episode_length_buf(self):
+        """(num_envs,) int32 torch view of each env's step in its episode (the device buffer the step kernels use)."""
+        return self._episode_step_t
+
+    @episode_length_buf.setter
+    def episode_length_buf(self, value) -> None:
+        # rsl-rl's ``learn(init_at_random_ep_len=True)`` assigns a new tensor: copy it into the device buffer.
+        self._episode_step_t.copy_(value)
+
     def randomize_episode_phase(self, seed: int = 0) -> None:
         """Start every env at a random step of its episode (rsl-rl's ``init_at_random_ep_len``), so that episode ends
         spread over the iterations instead of arriving in waves."""
@@ -263,6 +277,7 @@ class ReachEnv(VecEnv):
         return obs, self.reward_t.clone(), self.done_t.clone(), {"time_outs": self.time_out_t.clone()}
 
     def reset(self):
+        """Every env starts a new episode (new goals); its first observations."""
         self._reset_all()
         return self.get_observations()
 

@@ -1,15 +1,17 @@
 #!/usr/bin/env bash
-# PPO on 4,096 reach envs on one GPU, end to end, in one run of about 4-6 minutes:
+# PPO on 4,096 reach envs on one GPU, end to end, in one run of about 3-5 minutes (the durations below are estimates
+# from a 4,096-env run on an H100: 120 s of setup with a cold kernel cache, 0.29 s per PPO iteration):
 #
-#   1. warm-up   (cold kernel cache: ~1.5-3 min; warm: ~20 s)  one training iteration, so that every kernel (Warp,
-#                MuJoCo-Warp, wpctrl, the task's) is compiled and cached before the measured run;
-#   2. train     (expected ~1 min; limit 5 min)  `python -m wpctrl train` with a warm cache, evaluating the
-#                deterministic policy on 4,096 fresh episodes every 5 iterations and stopping at 95 % success (at
-#                most TRAIN_ITERS iterations);
-#   3. rate      (~30 s)  bench/train_rate.py: the run's collection rate against the same envs stepped by a
-#                graph-captured MuJoCo-Warp rollout without a policy, and the controller's share of the env step.
+#   1. warm-up   (cold kernel cache: ~2-2.5 min; warm: ~20 s; limit 5 min)  one training iteration, so that every
+#                kernel (Warp, MuJoCo-Warp, wpctrl, the task's) is compiled and cached before the measured run;
+#   2. train     (~30-60 s; limit 5 min)  `python -m wpctrl train` with a warm cache, evaluating the deterministic
+#                policy on 4,096 fresh episodes every 5 iterations and stopping at 95 % success (at most TRAIN_ITERS
+#                iterations; 1,024 envs on the CPU got there in 40 iterations);
+#   3. rate      (~40 s; limit 150 s)  bench/train_rate.py on the same envs: the graph-captured MuJoCo-Warp rollout
+#                without a policy, the controller's calls, the env step, rsl-rl alone, PPO's collection step (each
+#                timed to a device sync, and the host's share of it), and the training run's collection rate.
 #
-# Writes 6 files to $OUT (the device machine sets it; else bench/results/train_gpu): train.json (time_to_target_s is
+# Writes 6 files to $OUT (default bench/results/train_gpu): train.json (time_to_target_s is
 # the wall time from the command's start to the evaluation that reached 95 %), learning_curve.png, policy.pt,
 # train_rate_cuda.json, train_rate_cuda.md, and train_gpu.log (every phase's output and duration).
 #

@@ -59,19 +59,29 @@ def train_cfg(num_steps_per_env: int = 24, seed: int = 0) -> dict:
     }
 
 
+class _Help(argparse.HelpFormatter):
+    """Each option's default in --help (written out where it depends on the device)."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if "default" in text or any(action.default is x for x in (None, False, argparse.SUPPRESS)):
+            return text
+        return f"{text} (default: %(default)s)"
+
+
 def parse(argv):
     p = argparse.ArgumentParser(
         prog="wpctrl train",
         description="Train a PPO policy (rsl-rl) through wpctrl on a vectorised Newton task (MuJoCo-Warp physics).",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=_Help,
     )
     p.add_argument("--task", choices=TASKS, default="reach", help="the task")
     p.add_argument("--control-mode", choices=CONTROL_MODES, default="pd_ee_delta_pos", help="ManiSkill Panda mode")
     p.add_argument("--envs", type=int, default=None, help="parallel envs (default: 4096 on CUDA, 64 on the CPU)")
-    p.add_argument("--iterations", type=int, default=None, help="PPO iterations (default: 200 CUDA, 20 CPU)")
+    p.add_argument("--iterations", type=int, default=None, help="PPO iterations (default: 200 on CUDA, 20 on the CPU)")
     p.add_argument("--steps-per-env", type=int, default=24, help="rollout length per iteration")
-    p.add_argument("--device", default=None, help="cuda:0 if available, else cpu")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--device", default=None, help="torch / Warp device (default: cuda:0 if there is one, else cpu)")
+    p.add_argument("--seed", type=int, default=0, help="seeds torch and the envs' start poses and goals")
     p.add_argument("--eval-episodes", type=int, default=None, help="fresh episodes to evaluate (default: one per env)")
     p.add_argument(
         "--eval-every", type=int, default=0, help="also evaluate every N iterations (0: only after training)"

@@ -146,6 +146,22 @@ def test_rsl_rl_learn_drives_the_env(env):
     assert (steps >= 0).all() and (steps < env.max_episode_length).all()
 
 
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"num_envs": 0}, "num_envs: expected a positive integer, got 0"),
+        ({"num_envs": 4, "episode_steps": 0}, "episode_steps: expected a positive integer, got 0"),
+        ({"num_envs": 4, "control_mode": "pd_ee_pos"}, "control_mode: expected one of"),
+        ({"num_envs": 4, "success_radius": 0.0}, "success_radius: expected a positive distance [m], got 0.0"),
+        ({"num_envs": 4, "start_noise": -0.1}, "start_noise: expected a non-negative angle [rad], got -0.1"),
+    ],
+)
+def test_bad_env_parameters_are_refused_before_anything_is_built(kwargs, message):
+    with pytest.raises(ValueError) as e:
+        ReachEnv(**kwargs)
+    assert message in str(e.value)
+
+
 def test_bad_options_are_refused_with_the_option_named(capsys):
     from wpctrl.__main__ import main
 

@@ -55,6 +55,16 @@ class ReachEnv(VecEnv):
         import wpctrl
         from wpctrl.robots import PANDA_INITIAL_Q, panda, panda_control_modes
 
+        modes = panda_control_modes()
+        if control_mode not in modes:
+            raise ValueError(f"control_mode: expected one of {sorted(modes)}, got {control_mode!r}")
+        for name, value in (("num_envs", num_envs), ("episode_steps", episode_steps)):
+            if int(value) != value or value < 1:
+                raise ValueError(f"{name}: expected a positive integer, got {value!r}")
+        if not success_radius > 0.0:
+            raise ValueError(f"success_radius: expected a positive distance [m], got {success_radius!r}")
+        if not start_noise >= 0.0:
+            raise ValueError(f"start_noise: expected a non-negative angle [rad], got {start_noise!r}")
         self.device = device
         self.num_envs = E = int(num_envs)
         self.max_episode_length = int(episode_steps)
@@ -70,9 +80,6 @@ class ReachEnv(VecEnv):
             self.torch_stream = torch.cuda.Stream(device=torch.device(device))
             torch.cuda.set_stream(self.torch_stream)
             wp.set_stream(wp.stream_from_torch(self.torch_stream), self.wp_device)
-        modes = panda_control_modes()
-        if control_mode not in modes:
-            raise ValueError(f"control_mode: expected one of {sorted(modes)}, got {control_mode!r}")
         builder = newton.ModelBuilder()
         builder.replicate(panda(), E)
         self.model = model = builder.finalize(device=device)

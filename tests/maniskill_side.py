@@ -15,6 +15,26 @@ import warnings
 
 import numpy as np
 
+# every agent whose assets ship in the mani-skill 3.0.1 wheel
+AGENTS = [
+    "panda", "panda_wristcam", "panda_stick", "floating_panda_gripper", "fetch", "allegro_hand_right", "dclaw",
+    "floating_ability_hand_right", "fixed_inspire_hand_right", "floating_inspire_hand_right", "xarm7_ability",
+    "so100", "koch-v1.1", "trifingerpro", "unitree_g1_simplified_legs", "unitree_g1",
+    "unitree_g1_simplified_upper_body", "humanoid", "allegro_hand_left", "allegro_hand_right_touch",
+    "fixed_inspire_hand_left", "floating_inspire_hand_left", "unitree_g1_simplified_upper_body_right_arm",
+    "unitree_g1_simplified_upper_body_with_head_camera",
+]  # fmt: skip
+
+
+# stock modes ManiSkill itself cannot run, and why
+CANNOT_RUN = {
+    ("fetch", "pd_ee_delta_pose_align"): "frame 'ee_align' is not implemented in ManiSkill (UnboundLocalError)",
+    ("panda_stick", "pd_ee_delta_pose_align"): "frame 'ee_align' is not implemented in ManiSkill",
+    ("floating_panda_gripper", "pd_ee_pose"): "pos_lower=None gives NaN action bounds that gymnasium's Box rejects",
+    ("floating_panda_gripper", "pd_ee_pose_quat"): "pos_lower=None gives NaN action bounds that gymnasium rejects",
+    ("fetch", "pd_joint_pos_vel"): "normalising over infinite joint limits: ManiSkill's targets are NaN",
+}
+
 
 class _Inert:
     def __init__(self, *args, **kwargs):
@@ -62,7 +82,8 @@ def no_visual_loaders():
 class ManiSkillSide:
     """One agent of the real ManiSkill, its controller for ``mode``, and read-outs of what it commands."""
 
-    def __init__(self, uid: str, mode: str):
+    def __init__(self, uid, mode: str):
+        """``uid``: a registered agent uid or an agent class."""
         import gymnasium as gym
         import mani_skill.envs  # noqa: F401  (registers Empty-v1)
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import zlib
 
 import newton
 import numpy as np
@@ -23,24 +24,11 @@ import wpctrl
 pytest.importorskip("mani_skill", reason="the maniskill extra (mani-skill) is not installed")  # a dev dependency
 pytestmark = pytest.mark.filterwarnings("ignore")
 
-from maniskill_side import ManiSkillSide  # noqa: E402
+from maniskill_side import AGENTS, CANNOT_RUN, ManiSkillSide  # noqa: E402
 
 from wpctrl.binding import bind_joints  # noqa: E402
 from wpctrl.maniskill import control_modes, load_robot  # noqa: E402
 
-AGENTS = [
-    "panda", "panda_wristcam", "panda_stick", "floating_panda_gripper", "fetch", "allegro_hand_right", "dclaw",
-    "floating_ability_hand_right", "fixed_inspire_hand_right", "floating_inspire_hand_right", "xarm7_ability",
-    "so100", "koch-v1.1", "trifingerpro", "unitree_g1_simplified_legs", "unitree_g1",
-    "unitree_g1_simplified_upper_body", "humanoid",
-]  # fmt: skip
-CANNOT_RUN = {
-    ("fetch", "pd_ee_delta_pose_align"): "frame 'ee_align' is not implemented in ManiSkill (UnboundLocalError)",
-    ("panda_stick", "pd_ee_delta_pose_align"): "frame 'ee_align' is not implemented in ManiSkill",
-    ("floating_panda_gripper", "pd_ee_pose"): "pos_lower=None gives NaN action bounds that gymnasium's Box rejects",
-    ("floating_panda_gripper", "pd_ee_pose_quat"): "pos_lower=None gives NaN action bounds that gymnasium rejects",
-    ("fetch", "pd_joint_pos_vel"): "normalising over infinite joint limits: ManiSkill's targets are NaN",
-}
 CLIK = {"solver_iterations": 100, "tolerance": 1e-4, "clik_dt": 0.1, "clik_damping": 1e-6}
 STEPS = 4
 
@@ -97,6 +85,12 @@ def _sample_q(rng, base, limits):
 
 @pytest.mark.parametrize(("uid", "mode_name"), CASES, ids=[f"{u}-{m}" for u, m in CASES])
 def test_against_maniskill(uid, mode_name):
+    side_by_side(uid, mode_name)
+
+
+def side_by_side(uid, mode_name):
+    """ManiSkill's controller for agent ``uid`` (a uid or an agent class) and mode, and wpctrl's on
+    ``load_robot(uid)``, driven with the same states and actions for ``STEPS`` control steps."""
     ms = ManiSkillSide(uid, mode_name)
     try:
         robot = _robot(uid)
@@ -109,7 +103,7 @@ def test_against_maniskill(uid, mode_name):
         ctrl = wpctrl.build_controller(mode, model, control_freq=env.control_freq, sim_freq=env.sim_freq)
         b = bind_joints(model, ms.joint_names)
         state, control = model.state(), model.control()
-        rng = np.random.default_rng(abs(hash((uid, mode_name))) % 2**32)
+        rng = np.random.default_rng(zlib.crc32(f"{robot.uid}:{mode_name}".encode()))
         kf = robot.keyframes.get(robot.keyframe) if robot.keyframe else None
         base = np.array([kf.qpos[n] for n in ms.joint_names], np.float64) if kf else np.zeros(len(ms.joint_names))
         limits = ms.qlimits
@@ -205,3 +199,51 @@ def test_modes_maniskill_cannot_run_are_refused(uid, mode_name):
     builder.replicate(robot.builder, 1)
     with pytest.raises(wpctrl.ConfigError):
         wpctrl.build_controller(robot.control_modes[mode_name], builder.finalize(device="cpu"))
+
+
+def _my_panda():
+    """A user's own ManiSkill agent class (not registered): the Panda with another keyframe and one mode of its own."""
+    import sapien
+    from mani_skill.agents.base_agent import Keyframe
+    from mani_skill.agents.controllers import PDJointPosControllerConfig, PDJointPosMimicControllerConfig
+    from mani_skill.agents.robots.panda.panda import Panda
+
+    class MyMimic(PDJointPosMimicControllerConfig):  # a config subclass of the user's: its base class's fields
+        pass
+
+    class MyPanda(Panda):
+        uid = "my_panda"
+        keyframes = dict(
+            ready=Keyframe(
+                qpos=np.array([0.3, 0.2, -0.1, -2.0, 0.1, 2.1, 0.5, 0.03, 0.03]),
+                pose=sapien.Pose(p=[0.1, -0.2, 0.05], q=[0.9238795, 0.0, 0.0, 0.3826834]),
+            )
+        )
+
+        @property
+        def _controller_configs(self):
+            arm = PDJointPosControllerConfig(
+                self.arm_joint_names, -0.05, 0.05, 2e3, 150, 80, use_delta=True, use_target=True, interpolate=True
+            )
+            gripper = MyMimic(self.gripper_joint_names, -0.01, 0.04, 1e3, 100, 50)
+            return dict(my_target_delta=dict(arm=arm, gripper=gripper, balance_passive_force=False))
+
+    return MyPanda
+
+
+def test_own_agent_class():
+    """load_robot takes a user's own agent class: its keyframe and mode come through, and the mode runs as
+    ManiSkill runs it."""
+    cls = _my_panda()
+    robot = load_robot(cls)
+    mode = robot.control_modes["my_target_delta"]
+    assert mode["balance_passive_force"] is False
+    arm = mode["arm"]
+    assert isinstance(arm, wpctrl.PDJointPosControllerConfig)
+    assert (arm.lower, arm.upper, arm.stiffness, arm.damping, arm.force_limit) == (-0.05, 0.05, 2e3, 150, 80)
+    assert arm.use_delta and arm.use_target and arm.interpolate
+    assert type(mode["gripper"]) is wpctrl.PDJointPosMimicControllerConfig
+    assert robot.keyframe == "ready" and robot.keyframes["ready"].qpos["panda_joint4"] == -2.0
+    q = robot.builder.joint_q
+    assert q[robot.builder.joint_q_start[robot.builder.joint_label.index("panda/panda_joint4")]] == -2.0
+    side_by_side(cls, "my_target_delta")

@@ -7,12 +7,22 @@ set-up is skipped (its ``__init__`` runs with ManiSkill's ``BaseAgent.__init__``
 such as Fetch's joint lists are set), with a stand-in ``robot`` whose ``active_joints`` are the asset's active joints
 in ManiSkill's order. A user's own ManiSkill agent class works the same way.
 
-What ManiSkill's loader does that the Newton builder does not: the agent's ``urdf_config`` (per-link contact
-materials and patch radii) and ``load_multiple_collisions`` / ``disable_self_collisions`` are not applied (Newton's
-importer keeps its defaults: one convex shape per collision mesh, self-collisions between non-adjacent links);
-visual shapes, cameras and sensors are not loaded; SAPIEN's URDF mimic tags become Newton mimic constraints only
-where Newton's importer makes them. Joint dynamics (limits, armature, damping, friction from the file) and inertials
-are Newton's import of the same file.
+What ManiSkill's loader does, and what the Newton builder gets of it:
+
+- applied: ``fix_root_link`` (a floating root is a free joint), the keyframe's qpos and root pose, the agent's
+  ``urdf_config`` contact materials (PhysX's static friction as Newton's ``shape_material_mu``, restitution),
+  ``disable_self_collisions`` (the importer's ``enable_self_collisions=False``), the SRDF's excluded link pairs
+  (shape collision filter pairs), MJCF geoms with ``condim="1"`` frictionless and geoms outside any body (the floor)
+  left out, as ManiSkill's MJCF loader does; URDF ``<mimic>`` tags become Newton mimic constraints (Newton's
+  importer);
+- not applied, no Newton equivalent: PhysX's ``dynamic_friction`` (Newton has one coefficient),
+  ``patch_radius`` / ``min_patch_radius`` (PhysX's torsional contact patch), the ``urdf_config`` ``density`` (SAPIEN
+  uses it only for links without an inertial), ``load_multiple_collisions`` (SAPIEN splits a collision mesh file
+  into its convex pieces; Newton keeps one shape per mesh), ManiSkill's scene-wide default material (friction 0.3:
+  a scene setting; Newton's shapes keep ``ShapeConfig``'s default), visual shapes, cameras and sensors.
+
+Joint dynamics (limits, armature, damping, friction from the file) and inertials are Newton's import of the same
+file.
 """
 
 from __future__ import annotations
@@ -20,12 +30,14 @@ from __future__ import annotations
 import copy
 import dataclasses
 import os
+import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from .assets import active_joint_names, newton_builder, set_joint_positions, set_root_pose
+from .collision import apply_materials, apply_mjcf_friction, filter_srdf_pairs
 
 __all__ = ["ManiSkillRobot", "active_joint_names", "control_modes", "load_robot", "translate_config", "translate_mode"]
 
@@ -136,12 +148,18 @@ def _agent_instance(cls, joint_names: list[str]):
 
 
 def translate_config(config):
-    """A wpctrl config of the same class name with the same field values as the ManiSkill ``config``."""
+    """A wpctrl config of the same class name with the same field values as the ManiSkill ``config`` (for a
+    user's subclass of a ManiSkill config: the nearest base class wpctrl has)."""
     import wpctrl
 
     name = type(config).__name__
-    target = getattr(wpctrl, name, None)
-    if target is None or not dataclasses.is_dataclass(target):
+    target = None
+    for base in type(config).__mro__:
+        candidate = getattr(wpctrl, base.__name__, None)
+        if candidate is not None and dataclasses.is_dataclass(candidate):
+            target = candidate
+            break
+    if target is None:
         raise TypeError(f"translate_config: ManiSkill's {name} has no wpctrl counterpart")
     ours = {f.name for f in dataclasses.fields(target)}
     values = {}
@@ -149,7 +167,7 @@ def translate_config(config):
         if f.name == "controller_cls":
             continue
         if f.name not in ours:
-            raise TypeError(f"translate_config: {name}.{f.name} has no counterpart in wpctrl.{name}")
+            raise TypeError(f"translate_config: {name}.{f.name} has no counterpart in wpctrl.{target.__name__}")
         v = copy.deepcopy(getattr(config, f.name))
         if isinstance(v, np.ndarray):
             v = v.tolist()
@@ -202,6 +220,13 @@ def load_robot(
     keyframes = {}
     for kname, kf in (getattr(cls, "keyframes", None) or {}).items():
         q = np.asarray(kf.qpos, dtype=np.float64).reshape(-1)
+        if q.size != len(names):  # ManiSkill's own reset to it would fail
+            warnings.warn(
+                f"load_robot: {cls.__name__}'s keyframe {kname!r} has {q.size} qpos values for {len(names)} active "
+                "joints; it is left out",
+                stacklevel=2,
+            )
+            continue
         pose = getattr(kf, "pose", None)
         p = None if pose is None else [*map(float, pose.p), *map(float, pose.q)]
         keyframes[kname] = Keyframe(dict(zip(names, q.tolist())), p)
@@ -211,10 +236,16 @@ def load_robot(
     kf = keyframes.get(chosen) if chosen else None
     fix_root = bool(getattr(cls, "fix_root_link", True))
     pose = root_pose if root_pose is not None else (kf.pose if kf else None)
+    importer_kwargs.setdefault("enable_self_collisions", not bool(getattr(cls, "disable_self_collisions", False)))
     builder = newton_builder(
         asset, fix_root_link=fix_root, root_pose=pose if fix_root else None,
         collapse_fixed_joints=collapse_fixed_joints, **importer_kwargs,
     )  # fmt: skip
+    apply_materials(builder, getattr(cls, "urdf_config", None))
+    if asset.lower().endswith(".xml"):
+        apply_mjcf_friction(builder, asset)
+    else:
+        filter_srdf_pairs(builder, asset)
     if not fix_root and pose is not None:
         set_root_pose(builder, pose)
     if kf is not None:

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import math
 import os
+import re
+import warnings
 import xml.etree.ElementTree as ET
 from collections import deque
 
@@ -87,9 +89,13 @@ def newton_builder(
     xform = _transform(root_pose)
     kw = dict(importer_kwargs)
     if asset_path.lower().endswith(".xml"):
+        # ManiSkill's agent is the articulation alone: geoms outside any body (the floor) are not part of it
+        ignore = [re.escape(n) + "$" for n in _mjcf_world_geoms(asset_path)]
+        kw["ignore_names"] = [*kw.get("ignore_names", ()), *ignore]
         builder.add_mjcf(asset_path, xform=xform, floating=not fix_root_link, hide_visuals=True, **kw)
     else:
-        kw.setdefault("package_dirs", [os.path.dirname(asset_path)])
+        # SAPIEN resolves package://a/b in the URDF's folder or the nearest ancestor holding a/b
+        kw.setdefault("package_dirs", _ancestors(os.path.dirname(os.path.abspath(asset_path))))
         builder.add_urdf(
             asset_path,
             xform=xform,
@@ -99,6 +105,25 @@ def newton_builder(
             **kw,
         )
     return builder
+
+
+def _ancestors(folder: str) -> list[str]:
+    out = [folder]
+    while os.path.dirname(out[-1]) != out[-1]:
+        out.append(os.path.dirname(out[-1]))
+    return out
+
+
+def _mjcf_world_geoms(path: str) -> list[str]:
+    """Names of the geoms directly under ``<worldbody>`` (static scenery, not the robot)."""
+    out = []
+    for world in ET.parse(path).getroot().findall("worldbody"):
+        for g in world.findall("geom"):
+            if g.get("name"):
+                out.append(g.get("name"))
+            else:
+                warnings.warn(f"{path}: an unnamed <geom> outside any body stays in the builder", stacklevel=3)
+    return out
 
 
 def _transform(pose):

@@ -13,6 +13,7 @@ import pytest
 
 from wpctrl import demo
 from wpctrl.__main__ import main as cli_main
+from wpctrl.demo import cli as demo_cli
 from wpctrl.demo import main
 
 TINY = ["--envs", "2", "--seconds", "0.75", "--no-progress"]
@@ -103,7 +104,7 @@ def test_explicit_defaults_and_rates_that_do_not_track_are_refused(tmp_path, cap
 def test_divergence_is_reported_as_null_with_the_cause(tmp_path, capsys, monkeypatch):
     """Force a refused combination through (Featherstone's explicit built-in drive at the Panda's gains): the run
     stops at the first non-finite step, RMS and max are both null, and the message names the options that hold."""
-    monkeypatch.setattr(demo, "unsupported", lambda *a: None)
+    monkeypatch.setattr(demo_cli, "unsupported", lambda *a: None)
     out = tmp_path / "demo"
     rc = main([*TINY, "--solver", "featherstone", "--actuation", "implicit", "--sim-freq", "100", "--out", str(out)])
     assert rc == 1
@@ -120,7 +121,7 @@ def test_divergence_is_reported_as_null_with_the_cause(tmp_path, capsys, monkeyp
 
 
 def test_strict_json_replaces_non_finite_numbers():
-    from wpctrl.demo_report import strict_json
+    from wpctrl.demo.report import strict_json
 
     text = strict_json({"a": math.nan, "b": [1.0, math.inf, -math.inf], "c": {"d": 2}})
     assert json.loads(text, parse_constant=_no_constant) == {"a": None, "b": [1.0, None, None], "c": {"d": 2}}

@@ -4,14 +4,14 @@ The desired motion is the joint-space task's (per-env sinusoids around the rest 
 closes) mapped through the controller's own FK to a desired TCP pose; the policy expresses it in the mode's action
 space (delta from the measured pose, delta on the target pose, or absolute pose; ManiSkill's rotation sign). Tracked:
 the TCP position [m] (measured, desired, and wpctrl's EE target: the composed target pose, or the measured pose plus
-the increment) and the fingers. Same interface as :class:`wpctrl.demo_tasks.JointTask`.
+the increment) and the fingers. Same interface as :class:`wpctrl.demo.joint_task.JointTask`.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .demo_tasks import JointTask
+from .joint_task import JointTask
 
 
 def _qmul(a, b):

@@ -26,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from . import demo_report as report
-from .demo_tasks import JointTask
+from . import report
+from .joint_task import JointTask
 
 # This module imports only numpy at the top: the compile notice is printed before newton (~4 s) and the kernels load.
 SOLVERS = ("mujoco", "xpbd", "featherstone")
@@ -41,7 +41,7 @@ COMPILE_NOTICE = "compiling kernels (first run only: ~1.5 min on a 2-core CPU; l
 def explicit_pd_choices() -> tuple[str, ...]:
     """The controller's own list of explicit PD laws (``build_controller(explicit_pd=...)``): a new law shows up
     in the demo without an edit here."""
-    from .controllers.base import _EXPLICIT_PD
+    from ..controllers.base import _EXPLICIT_PD
 
     return tuple(_EXPLICIT_PD)
 
@@ -188,7 +188,7 @@ def _check_args_loaded(parser, args) -> None:
     """Checks against what newton / warp / wpctrl know (after the compile notice)."""
     import warp as wp
 
-    from .robots import PANDA_CONTROL_MODES
+    from ..robots import PANDA_CONTROL_MODES
 
     if args.control_mode not in PANDA_CONTROL_MODES:
         _fail(parser, f"--control-mode: expected one of {list(PANDA_CONTROL_MODES)}, got {args.control_mode!r}")
@@ -238,8 +238,8 @@ def make_task(mode_name: str, ctrl, model, rest, num_envs: int, rng) -> JointTas
     feeds the per-env histogram), ``tracking_label``, ``names`` (one per tracked column, for the plot),
     ``action(t_next, state) -> (num_envs, action_dim) float32`` and ``tracked(t, state, control) -> (measured,
     desired, drive target)``, each (num_envs, len(names))."""
-    if mode_name.startswith("pd_ee"):  # end-effector modes: TCP actions and tracking (demo_ee.py)
-        from .demo_ee import EETask
+    if mode_name.startswith("pd_ee"):  # end-effector modes: TCP actions and tracking (ee_task.py)
+        from .ee_task import EETask
 
         return EETask(mode_name, ctrl, model, rest, num_envs, rng)
     return JointTask(mode_name, ctrl, model, rest, num_envs, rng)
@@ -268,10 +268,10 @@ def run(args, ctx=None) -> dict:
 
     import wpctrl
 
-    from .robots import PANDA_INITIAL_Q, panda, panda_control_modes
+    from ..robots import PANDA_INITIAL_Q, panda, panda_control_modes
 
     if ctx is None:
-        from .distributed import DistContext
+        from ..distributed import DistContext
 
         ctx = DistContext(device=args.device, seed=args.seed)
     device = wp.get_device(ctx.device)
@@ -484,7 +484,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     _check_args(parser, args)
     _check_extras(args)
-    from . import distributed
+    from .. import distributed
 
     if not distributed.launched() or os.environ.get("RANK") == "0":
         print(COMPILE_NOTICE, flush=True)  # within a second or two of the command: newton's import alone takes ~4 s

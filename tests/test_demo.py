@@ -13,8 +13,8 @@ import pytest
 
 from wpctrl import demo
 from wpctrl.__main__ import main as cli_main
-from wpctrl.demo import cli as demo_cli
 from wpctrl.demo import main
+from wpctrl.demo import options as demo_options
 
 TINY = ["--envs", "2", "--seconds", "0.75", "--no-progress"]
 
@@ -45,9 +45,13 @@ def test_demo_tracks_and_writes_files(tmp_path, capsys):
     assert s["compile_seconds"] <= s["setup_seconds"]
     printed = capsys.readouterr().out
     lines = printed.splitlines()
-    # The compile notice comes first (before the model is built), then the time it took, then the table.
-    assert lines[0] == demo.COMPILE_NOTICE
-    assert lines[1].startswith("kernels ready in ")
+    # What runs comes first; the compile notice only when Warp compiled a module (test_compile_notice_* show it
+    # appears on a cold cache and stays away on a warm one), then the time it took, then the table.
+    assert lines[0] == "wpctrl demo: 4 Pandas, pd_joint_delta_pos, implicit actuation, MuJoCo-Warp at 100 Hz on cpu"
+    ready = next(i for i, line in enumerate(lines) if line.startswith("kernels ready in "))
+    compiled = int(lines[ready].split("(")[1].split(" kernel modules compiled")[0])
+    notices = [line for line in lines if line.startswith("compiling Warp kernels for cpu: ")]
+    assert len(notices) == (1 if compiled else 0) and ready == 1 + len(notices)
     for label in ("env-steps/s", "controller / control step", "solver / control step", "bad actions (NaN/Inf)"):
         assert label in printed
     assert "vs the policy's desired trajectory" in printed
@@ -74,7 +78,7 @@ def test_every_offered_combination_tracks_or_is_refused(solver, actuation, pd, t
         captured = capsys.readouterr()
         err = captured.err.strip().splitlines()
         assert err[-1] == f"wpctrl demo: error: {why}"  # one line, the reason, before anything was built
-        assert "use " in why and not out.exists() and demo.COMPILE_NOTICE not in captured.out
+        assert "use " in why and not out.exists() and captured.out == ""
         return
     assert main(argv) == 0
     s = load_summary(out)
@@ -104,7 +108,7 @@ def test_explicit_defaults_and_rates_that_do_not_track_are_refused(tmp_path, cap
 def test_divergence_is_reported_as_null_with_the_cause(tmp_path, capsys, monkeypatch):
     """Force a refused combination through (Featherstone's explicit built-in drive at the Panda's gains): the run
     stops at the first non-finite step, RMS and max are both null, and the message names the options that hold."""
-    monkeypatch.setattr(demo_cli, "unsupported", lambda *a: None)
+    monkeypatch.setattr(demo_options, "unsupported", lambda *a: None)
     out = tmp_path / "demo"
     rc = main([*TINY, "--solver", "featherstone", "--actuation", "implicit", "--sim-freq", "100", "--out", str(out)])
     assert rc == 1
@@ -135,13 +139,13 @@ def test_missing_extra_is_one_line_before_any_simulation(module, label, tmp_path
     # None in sys.modules makes `import module` raise ImportError: the path a base install (no [demo] extra) takes.
     monkeypatch.setitem(__import__("sys").modules, module, None)
     out = tmp_path / "demo"
-    rc = cli_main(["demo", "--envs", "2", "--seconds", "0.1", "--out", str(out)])  # the console script's entry
+    rc = cli_main(["demo", "--envs", "2", "--seconds", "0.75", "--out", str(out)])  # the console script's entry
     assert rc == 2
     captured = capsys.readouterr()
     err = captured.err.strip().splitlines()
     assert len([line for line in err if "wpctrl demo" in line]) == 1 and "Traceback" not in captured.err
     assert label in err[-1] and 'pip install -e ".[demo]"' in err[-1] and "wpctrl[demo]" in err[-1]
-    assert demo.COMPILE_NOTICE not in captured.out and not out.exists()
+    assert captured.out == "" and not out.exists()
 
 
 def test_missing_progress_bar_is_fine_without_progress(tmp_path, monkeypatch):
@@ -157,6 +161,9 @@ def test_missing_progress_bar_is_fine_without_progress(tmp_path, monkeypatch):
         (["--envs", "0"], "--envs"),
         (["--solver", "physx"], "--solver"),
         (["--sim-freq", "90"], "--sim-freq"),
+        (["--seconds", "0.3"], "--seconds: expected at least 0.55 s"),
+        (["--seconds", "0.5", "--control-freq", "10"], "--seconds: expected at least 0.6 s"),
+        (["--control-freq", "0"], "--control-freq"),
         (["--device", "cuda:0"], "--device"),
         (["--device", "gpu"], "--device"),
         (["--explicit-pd", "stable"], "--explicit-pd stable: applies to --actuation explicit only"),
@@ -167,11 +174,79 @@ def test_demo_bad_arguments_exit_2(argv, message, capsys):
     import warp as wp
 
     if argv[0] == "--device" and argv[1] == "cuda:0" and wp.is_cuda_available():
-        pytest.skip("a GPU is present")
+        pytest.skip("cuda:0 exists on this machine: the no-GPU refusal cannot be shown")
     with pytest.raises(SystemExit) as e:
         main(argv)
     assert e.value.code == 2
-    assert message in capsys.readouterr().err
+    captured = capsys.readouterr()
+    assert message in captured.err
+    assert captured.out == ""  # refused before anything is announced, built or compiled
+
+
+def test_help_lists_every_control_mode_and_solver(capsys):
+    from wpctrl.controllers.base import _EXPLICIT_PD
+    from wpctrl.robots import PANDA_CONTROL_MODES
+
+    assert list(demo.PANDA_MODES) == list(PANDA_CONTROL_MODES)  # the light copy --help reads is the real list
+    assert sorted(demo.explicit_pd_choices()) == sorted(_EXPLICIT_PD)
+    with pytest.raises(SystemExit) as e:
+        main(["--help"])
+    assert e.value.code == 0
+    text = capsys.readouterr().out
+    for name in [*PANDA_CONTROL_MODES, *demo.SOLVERS, *demo.explicit_pd_choices()]:
+        assert name in text
+    for option in ("--envs", "--control-freq", "--seconds", "--seed", "--out", "--graph", "--progress"):
+        line = text[text.index(option) :].split("\n--")[0]
+        assert "(default " in " ".join(line.split()), option  # every option shows its default
+
+
+def test_top_level_help_lists_the_commands(capsys):
+    from wpctrl.__main__ import COMMANDS
+
+    assert cli_main(["--help"]) == 0
+    text = capsys.readouterr().out
+    for name, (_, summary) in COMMANDS.items():
+        assert f"  {name:8s} {summary}" in text
+
+
+_NOTICE_SCRIPT = """
+import sys, warp as wp
+wp.config.log_level = wp.LOG_WARNING
+wp.config.kernel_cache_dir = sys.argv[1]
+from wpctrl.demo.notice import CompileNotice
+
+@wp.kernel
+def affine(x: wp.array(dtype=float)):
+    i = wp.tid()
+    x[i] = 2.0 * x[i] + 1.0
+
+with CompileNotice(lambda msg: print("NOTICE", msg), "a test kernel") as notice:
+    x = wp.ones(3, dtype=float, device="cpu")
+    wp.launch(affine, 3, inputs=[x], device="cpu")
+print(notice.summary(), x.numpy().tolist())
+"""
+
+
+def test_compile_notice_on_a_cold_cache_only(tmp_path):
+    """Two processes share an empty kernel cache: the first compiles (one notice, before the compile), the second
+    loads the module from the cache (no notice)."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "notice_probe.py"
+    script.write_text(_NOTICE_SCRIPT)
+    cache = tmp_path / "cache"
+
+    def probe():
+        r = subprocess.run([sys.executable, str(script), str(cache)], capture_output=True, text=True, timeout=300)
+        assert r.returncode == 0, r.stderr
+        return r.stdout.splitlines()
+
+    cold = probe()
+    assert cold[0].startswith("NOTICE compiling a test kernel (first run only")
+    assert cold[1] == "1 kernel modules compiled, 0 loaded from the cache [3.0, 3.0, 3.0]"
+    warm = probe()
+    assert warm == ["0 kernel modules compiled, 1 loaded from the cache [3.0, 3.0, 3.0]"]
 
 
 def test_default_output_is_git_ignored():

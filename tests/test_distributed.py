@@ -106,5 +106,9 @@ def test_demo_under_torchrun_two_cpu_processes(tmp_path):
     sc = s["scaling"]
     assert sc["efficiency"] > 0 and len(sc["concurrent_s_per_step"]) == 2
     # Rank 0 alone prints the table and writes the files.
-    assert p.stdout.count("env-steps/s per rank") == 1 and p.stdout.count("compiling kernels") == 1
+    assert (
+        p.stdout.count("env-steps/s per rank") == 1
+        and p.stdout.count("wpctrl demo: 2 Pandas") == 1
+        and p.stdout.count("compiling Warp kernels") <= 1
+    )
     assert (out / "tracking.png").stat().st_size > 10_000

@@ -1,19 +1,22 @@
 """The demo (``python -m wpctrl demo``): N Pandas driven through a ManiSkill control mode by wpctrl inside a real Newton
-solver, with a tracking report. :mod:`.cli` (options, checks, the run), :mod:`.joint_task` / :mod:`.ee_task` (the
-scripted policy and tracked quantities of each mode family), :mod:`.report` (reductions over ranks, strict JSON,
-table, plot, timing)."""
+solver, with a tracking report.
 
-from .cli import (  # noqa: F401  (the demo's public face: tests and the CLI read these)
+:mod:`.options` (options and their checks), :mod:`.run` (one run), :mod:`.cli` (the command), :mod:`.joint_task` /
+:mod:`.ee_task` (the scripted policy and tracked quantities of each mode family), :mod:`.notice` (the compile notice),
+:mod:`.report` (reductions over ranks, strict JSON, table, plot, timing)."""
+
+from .cli import main  # noqa: F401
+from .options import (  # noqa: F401  (the demo's options and checks: tests and the CLI read these)
     ACTUATIONS,
-    COMPILE_NOTICE,
     DEFAULT_OUT,
+    PANDA_MODES,
     SOLVERS,
     _check_extras,
     _parser,
+    compile_what,
     default_sim_freq,
     explicit_pd_choices,
-    main,
-    run,
     supported_combinations,
     unsupported,
 )
+from .run import run  # noqa: F401

@@ -48,6 +48,7 @@ class EETask:
     """End-effector modes: the joint task's motion as TCP poses, tracked on the TCP position."""
 
     tracking_label = "measured TCP position vs the policy's desired TCP position"
+    plot_subject = "TCP position and gripper fingers"
     groups = {"ee": (slice(0, 3), "m", "mm", 1e3), "gripper": (slice(3, 5), "m", "mm", 1e3)}
 
     def __init__(self, mode_name: str, ctrl, model, rest: np.ndarray, num_envs: int, rng: np.random.Generator):

@@ -20,6 +20,7 @@ class JointTask:
     """
 
     tracking_label = "measured joint positions vs the policy's desired trajectory"
+    plot_subject = "every joint position"
     #: group -> (columns of tracked(), SI unit (summary.json), unit shown, scale from SI to the unit shown)
     groups = {"arm": (slice(0, 7), "rad", "rad", 1.0), "gripper": (slice(7, 9), "m", "mm", 1e3)}
 

@@ -236,21 +236,30 @@ def plot(path: Path, hist: dict, env_err: np.ndarray, task, summary: dict) -> No
     rows = -(-(n + 2) // cols)
     fig, axes = plt.subplots(rows, cols, figsize=(13, 2.75 * rows), constrained_layout=True)
     t = hist["t"]
+    shown = [None] * n  # per column: (unit shown, scale from SI)
+    for cols, _, unit, scale in task.groups.values():
+        for j in range(n)[cols]:
+            shown[j] = (unit, scale)
     for j, ax in enumerate(axes.flat[:n]):
+        unit, scale = shown[j]
         if len(t):
-            ax.plot(t, hist["desired"][:, j], "k--", lw=1, label="desired (policy)")
-            ax.plot(t, hist["target"][:, j], color="tab:orange", lw=1, label="drive target (wpctrl)")
-            ax.plot(t, hist["measured"][:, j], color="tab:blue", lw=1.5, label="measured")
+            ax.plot(t, scale * hist["desired"][:, j], "k--", lw=1, label="desired (policy)")
+            ax.plot(t, scale * hist["target"][:, j], color="tab:orange", lw=1, label="drive target (wpctrl)")
+            ax.plot(t, scale * hist["measured"][:, j], color="tab:blue", lw=1.5, label="measured")
         ax.set_title(names[j], fontsize=9)
         ax.set_xlabel("t [s]", fontsize=8)
+        ax.set_ylabel(f"[{unit}]", fontsize=8)
         ax.tick_params(labelsize=7)
     axes.flat[0].legend(fontsize=7)
     ax = axes.flat[n]
     finite = env_err[np.isfinite(env_err)]
-    if finite.size:
-        ax.hist(finite, bins=min(30, max(5, finite.size // 2)), color="tab:blue")
     first = next(iter(task.groups))
-    ax.set_title(f"mean |{first} error| per env [{task.groups[first][1]}]", fontsize=9)
+    _, _, unit, scale = task.groups[first]
+    if finite.size:
+        ax.hist(scale * finite, bins=min(30, max(5, finite.size // 2)), color="tab:blue")
+    ax.set_title(f"mean |{first} error| per env", fontsize=9)
+    ax.set_xlabel(f"[{unit}]", fontsize=8)
+    ax.set_ylabel("envs", fontsize=8)
     ax.tick_params(labelsize=7)
     for ax in axes.flat[n + 1 :]:
         ax.axis("off")
@@ -262,7 +271,7 @@ def plot(path: Path, hist: dict, env_err: np.ndarray, task, summary: dict) -> No
     for g, (_, _, u, scale) in task.groups.items():
         lines.append(f"{g} RMS {_num(summary['tracking_rms'][g], '.4f', scale)} {u}")
     axes.flat[n + 1].text(0.0, 1.0, "\n".join(lines), va="top", fontsize=9, family="monospace")
-    fig.suptitle("wpctrl demo: env 0 of rank 0, every joint (Panda)", fontsize=11)
+    fig.suptitle(f"wpctrl demo, {summary['control_mode']}: env 0 of rank 0, {task.plot_subject} (Panda)", fontsize=11)
     fig.savefig(path, dpi=90)
     plt.close(fig)
 

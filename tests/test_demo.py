@@ -254,3 +254,57 @@ def test_default_output_is_git_ignored():
 
     ignored = (ROOT / ".gitignore").read_text().split()
     assert demo.DEFAULT_OUT + "/" in ignored
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# --robot: ManiSkill agents loaded by uid (the maniskill extra is in the test dependencies)
+
+
+def test_robot_modes_table_is_maniskills():
+    from wpctrl.maniskill import load_robot
+
+    for robot, modes in demo.ROBOT_MODES.items():
+        if robot != "panda":
+            assert list(modes) == list(load_robot(robot).control_modes), robot
+
+
+@pytest.mark.parametrize(
+    "robot, groups",
+    [
+        ("fetch", {"arm", "gripper", "body [rad]", "body [m]", "base [m/s]", "base [rad/s]"}),
+        ("allegro_hand_right", {"robot"}),
+        ("unitree_g1_simplified_legs", {"body"}),
+    ],
+)
+def test_maniskill_robot_follows_its_drive_targets(robot, groups, tmp_path, capsys):
+    """Every controlled joint of a ManiSkill robot follows wpctrl's drive targets inside MuJoCo-Warp: a base's
+    velocity rows its velocity targets, the rest their position targets. Broken targets (wrong joints, wrong rows,
+    a base command in the wrong frame) leave errors of the actions' own size (0.1-1 rad, 0.2 m/s)."""
+    out = tmp_path / "demo"
+    argv = ["--robot", robot, "--envs", "2", "--seconds", "1", "--no-progress", "--out", str(out)]
+    assert main(argv) == 0
+    s = load_summary(out)
+    assert s["all_finite"] and s["robot"] == robot and set(s["tracking_rms"]) == groups
+    assert capsys.readouterr().out.startswith(f"wpctrl demo: 2 {robot} robots, pd_joint_delta_pos")
+    limits = {"rad": 0.05, "m": 0.04, "m/s": 0.1, "rad/s": 0.05}
+    if robot == "unitree_g1_simplified_legs":  # floating, gravity on, no balance policy: it falls and its joints
+        limits["rad"] = 0.2  # press on the ground: 0.08-0.12 rad measured
+    for group, rms in s["tracking_rms"].items():
+        assert rms < limits[s["units"][group]], (group, rms)
+    assert (out / "tracking.png").stat().st_size > 10_000
+
+
+def test_robot_refusals_name_the_reason(capsys, monkeypatch):
+    for argv, fragment in [
+        (["--robot", "fetch", "--control-mode", "pd_ee_pose"], "--control-mode: expected one of pd_joint_delta_pos"),
+        (["--robot", "allegro_hand_right", "--solver", "steel"], "--solver mujoco only"),
+    ]:
+        with pytest.raises(SystemExit) as e:
+            main(argv)
+        captured = capsys.readouterr()
+        assert e.value.code == 2 and fragment in captured.err and captured.out == ""
+    monkeypatch.setitem(__import__("sys").modules, "mani_skill", None)  # a base install without the extra
+    with pytest.raises(SystemExit) as e:
+        main(["--robot", "fetch", "--no-progress"])
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and "ManiSkill not installed; --robot fetch needs the [demo,maniskill] extra" in err

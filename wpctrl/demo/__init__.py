@@ -10,6 +10,7 @@ from .options import (  # noqa: F401  (the demo's options and checks: tests and 
     ACTUATIONS,
     DEFAULT_OUT,
     PANDA_MODES,
+    ROBOT_MODES,
     SOLVERS,
     _check_extras,
     _parser,

@@ -7,6 +7,11 @@ throughput, the controller's share of a control step and the tracking error agai
 trajectory. It writes ``summary.json`` (strict JSON: ``null`` for a non-finite number) and ``tracking.png`` into
 ``--out``.
 
+``--robot`` runs a ManiSkill agent instead (``fetch``: base + arm + gripper, ``allegro_hand_right``,
+``unitree_g1_simplified_legs``: floating, standing on a ground plane), loaded by uid with
+:func:`wpctrl.maniskill.load_robot`, in any of its ManiSkill control modes: smooth actions across the mode's action
+space, scored as the measured joints against wpctrl's drive targets.
+
 Under ``torchrun --nproc-per-node=N -m wpctrl demo ...`` every rank runs ``--envs`` Pandas of its own on its own
 device (``--device cuda``: ``cuda:{LOCAL_RANK}``) with its own seed; the statistics are reduced with
 torch.distributed and rank 0 prints and writes them (:mod:`wpctrl.distributed`).
@@ -36,7 +41,8 @@ def main(argv=None) -> int:
 
     if not distributed.launched() or os.environ.get("RANK") == "0":
         print(
-            f"wpctrl demo: {args.envs} Pandas, {args.control_mode}, {args.actuation} actuation, "
+            f"wpctrl demo: {args.envs} {'Pandas' if args.robot == 'panda' else args.robot + ' robots'}, "
+            f"{args.control_mode}, {args.actuation} actuation, "
             f"{SOLVER_LABELS[args.solver]} at {args.sim_freq} Hz on {args.device}",
             flush=True,
         )

@@ -17,16 +17,18 @@ class CompileNotice:
     """``with CompileNotice(say, what):`` calls ``say(notice)`` once, before the first module that Warp has to
     compile (its binary is not in the kernel cache), and counts the modules compiled and loaded from the cache."""
 
-    def __init__(self, say: Callable[[str], None], what: str):
+    def __init__(self, say: Callable[[str], None], what: str, estimate: str = ""):
         self.say = say
         self.what = what
+        self.estimate = estimate
         self.compiled: list[str] = []
         self.cached = 0
         self._original = None
 
     @property
     def message(self) -> str:
-        return f"compiling {self.what} (first run only; later runs load them from Warp's kernel cache) ..."
+        estimate = f", {self.estimate}" if self.estimate else ""
+        return f"compiling {self.what} (first run only{estimate}; later runs load them from Warp's kernel cache) ..."
 
     def __enter__(self) -> CompileNotice:
         import warp as wp

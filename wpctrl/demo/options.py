@@ -26,6 +26,27 @@ PANDA_MODES = (
 )
 """wpctrl.robots.PANDA_CONTROL_MODES' names, spelled out so that --help and argument errors need no heavy import
 (a test keeps the two equal)."""
+ROBOT_MODES = {
+    "panda": PANDA_MODES,
+    "fetch": (
+        "pd_joint_delta_pos",
+        "pd_joint_pos",
+        "pd_ee_delta_pos",
+        "pd_ee_delta_pose",
+        "pd_ee_delta_pose_align",
+        "pd_joint_target_delta_pos",
+        "pd_ee_target_delta_pos",
+        "pd_ee_target_delta_pose",
+        "pd_joint_vel",
+        "pd_joint_pos_vel",
+        "pd_joint_delta_pos_vel",
+        "pd_joint_delta_pos_stiff_body",
+    ),
+    "allegro_hand_right": ("pd_joint_delta_pos", "pd_joint_pos", "pd_joint_target_delta_pos"),
+    "unitree_g1_simplified_legs": ("pd_joint_pos", "pd_joint_delta_pos"),
+}
+"""The robots ``--robot`` offers and their control modes: the built-in Panda, and ManiSkill agents loaded with
+:func:`wpctrl.maniskill.load_robot` (their modes as ManiSkill names them; a test keeps this table equal to theirs)."""
 EXPLICIT_PDS = ("coupled", "stable", "naive")  # build_controller's explicit_pd laws (a test keeps them equal)
 ACTUATIONS = ("implicit", "explicit")
 DEFAULT_OUT = "wpctrl-demo"  # git-ignored in this repository
@@ -42,11 +63,14 @@ SOLVER_LABELS = {
 }
 
 
+COMPILE_ESTIMATE = "about 1.5 min on a 2-core CPU, 1 min on a GPU"
+
+
 def compile_what(args) -> str:
     """What the compile notice says is being compiled."""
     return (
-        f"Warp kernels for {args.device}: wpctrl's {args.control_mode} step and {SOLVER_LABELS[args.solver]} "
-        "(about 1.5 min on a 2-core CPU)"
+        f"Warp kernels for {args.device}: wpctrl's {args.control_mode} step for {args.robot} and "
+        f"{SOLVER_LABELS[args.solver]}"
     )
 
 
@@ -66,19 +90,25 @@ def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="wpctrl demo",
         description=__doc__.split("\n\n")[0],
-        epilog="control modes (--control-mode):\n  " + "\n  ".join(PANDA_MODES),
+        epilog="control modes (--control-mode) by robot (--robot):\n"
+        + "\n".join(f"  {robot}: {', '.join(modes)}" for robot, modes in ROBOT_MODES.items()),
         formatter_class=_HelpFormatter,
     )
-    p.add_argument("--envs", type=int, default=16, help="parallel envs (Pandas); per rank under torchrun (default 16)")
+    p.add_argument(
+        "--robot",
+        default="panda",
+        choices=tuple(ROBOT_MODES),
+        help="panda (built in), or a ManiSkill agent loaded by uid (needs the [maniskill] extra) (default panda)",
+    )
+    p.add_argument("--envs", type=int, default=16, help="parallel envs (robots); per rank under torchrun (default 16)")
     p.add_argument(
         "--device", default="cpu", help="cpu | cuda | cuda:N; under torchrun 'cuda' = cuda:LOCAL_RANK (default cpu)"
     )
     p.add_argument(
         "--control-mode",
         default="pd_joint_delta_pos",
-        choices=PANDA_MODES,
         metavar="MODE",
-        help="a ManiSkill Panda control mode, listed below (default pd_joint_delta_pos)",
+        help="one of the robot's ManiSkill control modes, listed below (default pd_joint_delta_pos)",
     )
     p.add_argument(
         "--actuation",
@@ -204,6 +234,19 @@ def _check_args(parser, args) -> None:
     """Every argument check, before anything is built or compiled (warp is imported for the device check only)."""
     if args.envs < 1:
         _fail(parser, f"--envs: expected >= 1, got {args.envs}")
+    modes = ROBOT_MODES[args.robot]
+    if args.control_mode not in modes:
+        _fail(
+            parser,
+            f"--control-mode: expected one of {', '.join(modes)} for --robot {args.robot}, got {args.control_mode!r}",
+        )
+    if args.robot != "panda" and args.solver != "mujoco":
+        _fail(
+            parser,
+            f"--robot {args.robot} --solver {args.solver}: the demo runs ManiSkill's robots with --solver mujoco only "
+            "(their modes keep ManiSkill's balance_passive_force, which only MuJoCo's per-body gravity compensation "
+            "honours, and floating robots stand on a ground plane through MuJoCo's contacts); use --solver mujoco",
+        )
     if args.control_freq < 1:
         _fail(parser, f"--control-freq: expected a positive number of steps per second, got {args.control_freq}")
     shortest = SCORE_AFTER_S + 1.0 / args.control_freq
@@ -246,6 +289,8 @@ def _check_args(parser, args) -> None:
 def _check_extras(args) -> None:
     """A one-line error naming the extra to install, before anything is built (the base install lacks them)."""
     needed = [("matplotlib", "matplotlib")]
+    if args.robot != "panda":
+        needed.append(("mani_skill", "ManiSkill"))
     if args.progress:
         needed.append(("tqdm", "tqdm"))
     if args.solver == "mujoco":
@@ -259,9 +304,11 @@ def _check_extras(args) -> None:
         if not found:
             missing.append(label)
     if missing:
+        extra = "demo,maniskill" if "ManiSkill" in missing else "demo"
+        for_what = f"--robot {args.robot} needs" if missing == ["ManiSkill"] else "the demo needs"
         print(
-            f"wpctrl demo: error: {', '.join(missing)} not installed; the demo needs the [demo] extra: "
-            f'pip install -e ".[demo]" (in a clone) or pip install "wpctrl[demo]"',
+            f"wpctrl demo: error: {', '.join(missing)} not installed; {for_what} the [{extra}] extra: "
+            f'pip install -e ".[{extra}]" (in a clone) or pip install "wpctrl[{extra}]"',
             file=sys.stderr,
         )
         raise SystemExit(2)

@@ -181,6 +181,7 @@ def format_summary(s: dict) -> str:
     pd = f", {s['explicit_pd']} PD" if s.get("explicit_pd") else ""
     rows = [
         ("envs", envs),
+        ("robot", s.get("robot", "panda")),
         ("control mode", f"{s['control_mode']} ({s['actuation']}{pd}, {s['solver']}, graph={s['graph']})"),
         ("sim time", f"{s['sim_seconds']:.2f} s = {s['control_steps']} control steps x {s['substeps']} substeps"),
         ("control steps/s", _num(s["control_steps_per_s"], ".1f")),
@@ -232,18 +233,19 @@ def plot(path: Path, hist: dict, env_err: np.ndarray, task, summary: dict) -> No
 
     names = task.names
     n = len(names)
-    cols = 3
+    cols = 3 if n <= 10 else 4 if n <= 18 else 6  # a hand or a humanoid gets more, smaller panels
     rows = -(-(n + 2) // cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(13, 2.75 * rows), constrained_layout=True)
+    fig, axes = plt.subplots(rows, cols, figsize=(4.4 * cols, 2.75 * rows), constrained_layout=True, squeeze=False)
     t = hist["t"]
     shown = [None] * n  # per column: (unit shown, scale from SI)
-    for cols, _, unit, scale in task.groups.values():
-        for j in range(n)[cols]:
+    for span, _, unit, scale in task.groups.values():
+        for j in range(n)[span]:
             shown[j] = (unit, scale)
     for j, ax in enumerate(axes.flat[:n]):
         unit, scale = shown[j]
         if len(t):
-            ax.plot(t, scale * hist["desired"][:, j], "k--", lw=1, label="desired (policy)")
+            if getattr(task, "has_desired", True):
+                ax.plot(t, scale * hist["desired"][:, j], "k--", lw=1, label="desired (policy)")
             ax.plot(t, scale * hist["target"][:, j], color="tab:orange", lw=1, label="drive target (wpctrl)")
             ax.plot(t, scale * hist["measured"][:, j], color="tab:blue", lw=1.5, label="measured")
         ax.set_title(names[j], fontsize=9)
@@ -271,7 +273,8 @@ def plot(path: Path, hist: dict, env_err: np.ndarray, task, summary: dict) -> No
     for g, (_, _, u, scale) in task.groups.items():
         lines.append(f"{g} RMS {_num(summary['tracking_rms'][g], '.4f', scale)} {u}")
     axes.flat[n + 1].text(0.0, 1.0, "\n".join(lines), va="top", fontsize=9, family="monospace")
-    fig.suptitle(f"wpctrl demo, {summary['control_mode']}: env 0 of rank 0, {task.plot_subject} (Panda)", fontsize=11)
+    robot = summary.get("robot", "panda")
+    fig.suptitle(f"wpctrl demo, {robot}, {summary['control_mode']}: env 0 of rank 0, {task.plot_subject}", fontsize=11)
     fig.savefig(path, dpi=90)
     plt.close(fig)
 

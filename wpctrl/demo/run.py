@@ -11,19 +11,24 @@ import numpy as np
 from . import report
 from .joint_task import JointTask
 from .notice import CompileNotice
-from .options import MAXIMAL_SOLVERS, SCORE_AFTER_S, compile_what
+from .options import COMPILE_ESTIMATE, MAXIMAL_SOLVERS, SCORE_AFTER_S, compile_what
 
 # ----------------------------------------------------------------------------------------------------------------------
 # What a control mode's demo does: the policy, the tracked quantities and the plotted trace. A mode family plugs in
 # its own task through make_task (e.g. the end-effector modes in their own module).
 
 
-def make_task(mode_name: str, ctrl, model, rest, num_envs: int, rng) -> JointTask:
+def make_task(mode_name: str, ctrl, model, rest, num_envs: int, rng, robot: str = "panda") -> JointTask:
     """The task for ``mode_name``. A family of modes plugs in here with its own module and an object with the same
     interface as :class:`JointTask`: ``groups`` ({name: (columns, SI unit, shown unit, scale)}; the first group also
     feeds the per-env histogram), ``tracking_label``, ``names`` (one per tracked column, for the plot),
     ``action(t_next, state) -> (num_envs, action_dim) float32`` and ``tracked(t, state, control) -> (measured,
-    desired, drive target)``, each (num_envs, len(names))."""
+    desired, drive target)``, each (num_envs, len(names)). A robot other than the Panda gets the generic task
+    (robot_task.py)."""
+    if robot != "panda":
+        from .robot_task import RobotTask
+
+        return RobotTask(mode_name, ctrl, model, num_envs, rng, robot)
     if mode_name.startswith("pd_ee"):  # end-effector modes: TCP actions and tracking (ee_task.py)
         from .ee_task import EETask
 
@@ -31,14 +36,14 @@ def make_task(mode_name: str, ctrl, model, rest, num_envs: int, rng) -> JointTas
     return JointTask(mode_name, ctrl, model, rest, num_envs, rng)
 
 
-def _make_solver(name: str, model):
-    """The demo's Newton solver ``name`` with the settings it was measured with (contacts play no part: each Panda is
-    alone in its world and self-collision is off)."""
+def _make_solver(name: str, model, contacts: bool = False):
+    """The demo's Newton solver ``name`` with the settings it was measured with (contacts only where a floating robot
+    stands on the ground: a Panda is alone in its world, its self-collision off)."""
     import newton
 
     S = newton.solvers
     if name == "mujoco":
-        return S.SolverMuJoCo(model, disable_contacts=True)
+        return S.SolverMuJoCo(model, disable_contacts=not contacts)
     if name == "steel":
         return S.SolverSteel(model, enable_joint_limits=True)  # the fingers' limits (off by default in Steel)
     if name == "kamino":
@@ -55,6 +60,25 @@ def _say(ctx, msg: str) -> None:
         print(msg, flush=True)
 
 
+MIN_BODY_MASS = 1e-3  # [kg]
+MIN_BODY_INERTIA = 1e-6  # [kg m^2]
+
+
+def _bound_mass(builder) -> None:
+    """Give massless bodies a token mass and inertia, as MuJoCo's ``boundmass`` / ``boundinertia`` would: MuJoCo
+    refuses moving bodies without mass, and some ManiSkill assets have them (Fetch's planar base joints hang on two
+    massless links)."""
+    import warp as wp
+
+    for b, m in enumerate(builder.body_mass):
+        if m <= 0.0:
+            inertia = wp.mat33(MIN_BODY_INERTIA, 0.0, 0.0, 0.0, MIN_BODY_INERTIA, 0.0, 0.0, 0.0, MIN_BODY_INERTIA)
+            builder.body_mass[b] = MIN_BODY_MASS
+            builder.body_inv_mass[b] = 1.0 / MIN_BODY_MASS
+            builder.body_inertia[b] = inertia
+            builder.body_inv_inertia[b] = wp.inverse(inertia)
+
+
 class Rig:
     """N Pandas in one Newton model with the controller and the solver: the demo's control step and its two parts."""
 
@@ -67,9 +91,22 @@ class Rig:
         from ..robots import panda, panda_control_modes
 
         builder = newton.ModelBuilder()
-        builder.replicate(panda(), args.envs)
+        self.ground = False
+        if args.robot == "panda":
+            builder.replicate(panda(), args.envs)
+            mode = panda_control_modes()[args.control_mode]
+        else:
+            from ..maniskill import load_robot
+
+            robot = load_robot(args.robot)
+            _bound_mass(robot.builder)
+            builder.replicate(robot.builder, args.envs)
+            mode = robot.control_modes[args.control_mode]
+            free = int(newton.JointType.FREE)
+            if any(t == free for t in robot.builder.joint_type):  # a floating robot stands on the ground
+                builder.add_ground_plane()
+                self.ground = True
         self.model = model = builder.finalize(device=device)
-        mode = panda_control_modes()[args.control_mode]
         extra = {"explicit_pd": args.explicit_pd} if args.actuation == "explicit" else {}
         if args.solver != "mujoco":
             # ManiSkill's balance_passive_force (gravity off the robot) needs MuJoCo's per-body gravity compensation;
@@ -79,7 +116,7 @@ class Rig:
         self.ctrl = wpctrl.build_controller(
             mode, model, args.control_freq, args.sim_freq, actuation=args.actuation, **extra
         )
-        self.solver = _make_solver(args.solver, model)
+        self.solver = _make_solver(args.solver, model, contacts=self.ground)
         self.maximal = args.solver in MAXIMAL_SOLVERS  # joint_q is recovered from the bodies with eval_ik
         self.s0, self.s1 = model.state(), model.state()
         self.control = model.control()
@@ -132,16 +169,16 @@ def run(args, ctx=None) -> dict:
     device = wp.get_device(ctx.device)
     rng = np.random.default_rng(ctx.seed)
     t_start = time.perf_counter()
-    notice = CompileNotice(lambda msg: _say(ctx, msg), compile_what(args))
+    notice = CompileNotice(lambda msg: _say(ctx, msg), compile_what(args), COMPILE_ESTIMATE)
     with notice:  # says so just before Warp compiles a module (a cold kernel cache), not otherwise
         rig = Rig(args, device)
         rest = np.asarray(PANDA_INITIAL_Q, np.float32)
-        task = make_task(args.control_mode, rig.ctrl, rig.model, rest, args.envs, rng)
+        task = make_task(args.control_mode, rig.ctrl, rig.model, rest, args.envs, rng, args.robot)
         rig.control_step()  # warm-up on a zero action: every kernel of the step is compiled (or loaded) here
     wp.synchronize_device(device)
     compile_s = time.perf_counter() - t_start
     _say(ctx, f"kernels ready in {compile_s:.1f} s ({notice.summary()}; model, controller and solver built)")
-    model, ctrl, s0, control, maximal = rig.model, rig.ctrl, rig.s0, rig.control, rig.maximal
+    model, ctrl, s0, control = rig.model, rig.ctrl, rig.s0, rig.control
     action, control_step = rig.action, rig.control_step
     n_steps = max(1, round(args.seconds * args.control_freq))
     coord = ctrl._engine.binding.coord_index
@@ -155,12 +192,13 @@ def run(args, ctx=None) -> dict:
         graph = cap.graph
 
     # Reset every env back to the rest pose (the warm-up and the capture ran steps on a zero action).
-    q_host = s0.joint_q.numpy()
-    q_host[coord] = rest
-    s0.joint_q.assign(q_host)
+    q_rest = model.joint_q.numpy()  # the model's initial pose: the Panda's rest, a ManiSkill robot's keyframe
+    if args.robot == "panda":
+        q_rest[coord] = rest
+    nq, nd = model.joint_coord_count // args.envs, model.joint_dof_count // args.envs  # per world (replicated)
+    s0.joint_q.assign(q_rest)
     s0.joint_qd.zero_()
-    if maximal:
-        newton.eval_fk(model, s0.joint_q, s0.joint_qd, s0)
+    newton.eval_fk(model, s0.joint_q, s0.joint_qd, s0)
     ctrl.reset(s0, control=control)
     setup_s = time.perf_counter() - t_start
 
@@ -229,16 +267,16 @@ def run(args, ctx=None) -> dict:
             mask[0] = False  # keep env 0's trace continuous for the plot
             if mask.any():
                 q_host = s0.joint_q.numpy()
-                noisy = rest[None, :] + np.concatenate(
-                    [rng.normal(0, 0.05, (int(mask.sum()), 7)), np.zeros((int(mask.sum()), 2))], axis=1
-                ).astype(np.float32)
-                q_host[coord[mask]] = noisy
-                s0.joint_q.assign(q_host)
                 qd_host = s0.joint_qd.numpy()
-                qd_host[dof[mask]] = 0.0
+                for w in np.flatnonzero(mask):  # the whole world back to its rest pose (a floating root included)
+                    q_host[w * nq : (w + 1) * nq] = q_rest[w * nq : (w + 1) * nq]
+                    qd_host[w * nd : (w + 1) * nd] = 0.0
+                if args.robot == "panda":  # and the arm a little off it
+                    noise = rng.normal(0, 0.05, (int(mask.sum()), 7)).astype(np.float32)
+                    q_host[coord[mask][:, :7]] += noise
+                s0.joint_q.assign(q_host)
                 s0.joint_qd.assign(qd_host)
-                if maximal:
-                    newton.eval_fk(model, s0.joint_q, s0.joint_qd, s0)
+                newton.eval_fk(model, s0.joint_q, s0.joint_qd, s0)
                 reset_mask.assign(mask)
                 ctrl.reset(s0, env_ids=reset_mask, control=control)
                 resets += int(mask.sum())
@@ -275,6 +313,7 @@ def run(args, ctx=None) -> dict:
     )
     config = {
         "device": str(device),
+        "robot": args.robot,
         "control_mode": args.control_mode,
         "actuation": args.actuation,
         "explicit_pd": args.explicit_pd if args.actuation == "explicit" else None,

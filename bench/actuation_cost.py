@@ -1,12 +1,13 @@
-"""The cost of each actuation option (issue 10) on one control step, for N parallel Pandas.
+"""The cost of each actuation option on one control step, for N parallel Pandas: per-env drive properties, command
+delay, effort readout, target clamping.
 
 One control step = ``set_action`` + K x ``before_simulation_step`` (K = 5), ManiSkill's Panda mode
 ``pd_joint_target_delta_pos``, explicit actuation by default (the law reads the per-env gains), interpolation off.
 Variants, each its own controller on the same model, timed round-robin (graph-captured replay, and eager):
 
 * ``off``: every option off (the default build);
-* ``off, shared gains``: the same, with the gain arrays bound as ``(1, rows)`` as before issue 10 (the kernels'
-  batch rule still accepts them): what per-env drive properties cost;
+* ``off, shared gains``: the same, with the gain arrays bound as ``(1, rows)``, the layout before per-env drive
+  properties (the kernels' batch rule still accepts them): what per-env drive properties cost;
 * ``delay 2`` / ``delay 0-4``: a fixed and a per-env random command delay (ring buffer of 3 / 5 commands);
 * ``track_effort``: computed/applied effort and saturation counts written every substep;
 * ``clip_targets``: position targets clamped to the joint limits in set_action;

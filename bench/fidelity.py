@@ -1,6 +1,6 @@
 """Fidelity against PhysX: replay ManiSkill's recorded Panda traces through wpctrl on MuJoCo-Warp, per actuation.
 
-The traces (``../shared/conformance/*.json``, or ``--traces DIR``) hold PhysX's measured ``qpos``/``qvel`` before and
+The traces (``tests/data/conformance/*.json``, or ``--traces DIR``) hold PhysX's measured ``qpos``/``qvel`` before and
 after every control step of a real ManiSkill Panda (gains 1000/100, force limit 100, 100 Hz, K = 5, gravity off on
 the robot). For each actuation option this measures:
 
@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import time
 from pathlib import Path
@@ -36,9 +35,7 @@ import warp as wp  # noqa: E402
 from bench.common import DEFAULT_OUT, machine_info, md_table, meta_markdown, write_results  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-DEFAULT_TRACES = Path(os.environ.get("WPCTRL_SHARED", ROOT.parent / "shared")) / "conformance"
-if not DEFAULT_TRACES.exists() and (ROOT / "shared" / "conformance").exists():
-    DEFAULT_TRACES = ROOT / "shared" / "conformance"  # a copy of ../shared inside the checkout (device machine)
+DEFAULT_TRACES = ROOT / "tests" / "data" / "conformance"  # the traces that ship with the tests
 ARM = 7
 
 # label: (actuation, explicit_pd, substeps per 10 ms, clamp at the MuJoCo actuator's force range)

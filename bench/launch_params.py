@@ -1,4 +1,4 @@
-"""What a kernel launch costs against its parameter count, and what a dependent index chain costs (issue 12, item 2).
+"""What a kernel launch costs against its parameter count, and what a dependent index chain costs.
 
 Three trivial kernels over ``envs x 9`` threads (a Panda's 9 rows), each writing one float per thread:
 

@@ -15,7 +15,7 @@ graphs in the same processes:
 Weak-scaling efficiency = solo seconds per step / slowest rank's seconds per step (1.0 = perfect). Timing: median of
 ``--repeats`` samples of ``--steps`` control steps between two device syncs.
 
-Run (GPU machine, 2 GPUs; keep the environment's NCCL_NVLS_ENABLE=0)::
+Run (2 GPUs; where NCCL's NVLink multicast misbehaves, export NCCL_NVLS_ENABLE=0 first)::
 
     torchrun --standalone --nproc-per-node=2 bench/multi_gpu.py --out bench/results/multi_gpu
 

@@ -1,4 +1,4 @@
-"""The workload that ``bench/profile_ncu.sh`` profiles: a few eager control steps of N Pandas (issue 12, item 3).
+"""The workload that ``bench/profile_ncu.sh`` profiles: a few eager control steps of N Pandas.
 
 Builds the controller (synthetic layout above ``--max-real-envs``, as ``controller_step.py``), warms up (compiles and
 loads the kernels, writes the first Control), then runs ``--steps`` control steps (``set_action`` + K

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Nsight Compute profile of wpctrl's control-step kernels at 1M envs (issue 12, item 3), on the first CUDA GPU.
+# Nsight Compute profile of wpctrl's control-step kernels at 1M envs, on the first CUDA GPU.
 #
 #   bash bench/profile_ncu.sh          # results in $OUT if set (the device machine sets it), else bench/results
 #

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# Issue 12 on the first CUDA GPU, one device call beside bench/run_gpu.sh: the elided-substep control step, launch
-# cost against parameter count and index chains, and the Nsight Compute profile at 1M envs.
+# The launch-bound side of the control step on the first CUDA GPU, beside bench/run_gpu.sh: the 1-launch control
+# step, launch cost against parameter count and index chains, and the Nsight Compute profile at 1M envs.
 #
 #   STAGES=cuda_tests,implicit,explicit,block_dim bash bench/run_gpu_launch.sh   # one device call
 #   STAGES=launch_params,ncu bash bench/run_gpu_launch.sh                       # another

@@ -21,7 +21,8 @@ Where wpctrl deliberately differs from ManiSkill, this reference follows wpctrl:
 4. An env whose flat action holds any NaN/Inf is left completely untouched and counted.
 5. ``set_state`` copies.
 
-Actuation options (issue 10), also written from their description, not from the kernels:
+Actuation options (drive properties, delay, effort readout, clamping), also written from their description, not
+from the kernels:
 
 6. Drive properties are per env ((N, n) arrays, the config's values at construction); ``set_drive`` overwrites the
    masked envs. Randomised values are drawn by wpctrl on the device and fed in through ``set_drive`` (the reference

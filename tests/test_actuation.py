@@ -1,4 +1,4 @@
-"""RL-grade actuation (issue 10): per-env drive properties and their randomisation, command delay, effort readout,
+"""RL-grade actuation: per-env drive properties and their randomisation, command delay, effort readout,
 target clamping. Closed-form checks on the CPU device, captured graphs, and MuJoCo-Warp rollouts of real Pandas.
 """
 

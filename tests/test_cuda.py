@@ -1,6 +1,6 @@
 """CUDA checks (skipped without a GPU): CPU vs CUDA parity, graph replay == eager bitwise, zero-copy torch input.
 
-Run on the GPU machine; results are recorded in the README's test section.
+Run on a CUDA device; the recorded results are in docs/testing.md.
 """
 
 from __future__ import annotations

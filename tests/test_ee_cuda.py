@@ -1,6 +1,6 @@
 """CUDA parity of the end-effector controllers (skipped without a GPU): the same action/state streams on CPU and
 CUDA give the same processed actions, target poses, IK success flags and joint targets; a CUDA graph replays an
-eager run bitwise. Run on the GPU machine; results are recorded in the README."""
+eager run bitwise. Run on a CUDA device; the recorded results are in docs/testing.md."""
 
 from __future__ import annotations
 

@@ -6,7 +6,7 @@ flag, scalar or per-joint parameters, mimic maps, force/acceleration drive modes
 policy and a seed for an operation stream: random measured states written into the Newton state (also between
 substeps), actions (in range, out of range, NaN/Inf rows; numpy/torch/wp, float32/float64, strided), steps without
 an action, partial resets (ids, masks, torch/wp selections; with or without a Control) and set_state. The actuation
-options of issue 10 are drawn too: a command delay (fixed or per-env ranges; the drawn per-env delays are read back
+actuation options are drawn too: a command delay (fixed or per-env ranges; the drawn per-env delays are read back
 after each reset, checked to lie in range and fed to the reference as inputs), effort tracking, target clamping, and
 per-env drive-property edits in the stream (``set_drive_properties`` on a random child with random envs and shapes;
 ``randomize_drive_properties``, whose device draws are checked for range and untouched envs, then fed to the
@@ -242,7 +242,7 @@ def big_mimic(draw, limits_by_name: dict):
 
 @st.composite
 def actuation_options(draw):
-    """Issue 10's build options: mostly off (the default path stays covered), each on in a good share of examples."""
+    """The actuation build options: mostly off (the default path stays covered), each on in a good share of examples."""
     opts = {}
     d = draw(st.sampled_from([None, None, 0, 2, (0, 3), (1, 2)]))
     if d is not None:

@@ -2,7 +2,7 @@
 as there.
 
 Each test asserts ManiSkill's behaviour against closed-form values, or wpctrl's documented deliberate difference
-(marked DIFFERENCE, listed in the README).
+(marked DIFFERENCE, listed in docs/semantics.md).
 """
 
 from __future__ import annotations

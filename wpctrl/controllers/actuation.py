@@ -306,7 +306,7 @@ class ActuationMixin:
 
     @property
     def saturation_count(self) -> wp.array | None:
-        """(num_envs, n_joints) int32: substeps in which |computed_effort| exceeded the force limit; zeroed by
+        """(num_envs, n_joints) int32: substeps in which ``abs(computed_effort)`` exceeded the force limit; zeroed by
         ``reset`` for the reset envs."""
         a = self._engine.saturation_count
         return None if a is None else self._view(a)

@@ -16,7 +16,8 @@ the robot). For each actuation option this measures:
 Options: ``implicit`` (MuJoCo's built-in PD, Newton's joint-level effort clamp), ``implicit-actclamp`` (the same PD
 with the clamp moved to the actuator's force range: see ``bench/mujoco_clamp.py``), ``explicit`` with
 ``explicit_pd`` = ``naive`` / ``stable`` / ``coupled``, and ``stable x15`` / ``coupled x15`` (15 solver substeps per
-10 ms). ``python bench/fidelity.py --help``; writes ``fidelity_<device>.json`` / ``.md`` under ``--out``.
+10 ms), ``coupled, A per control step`` (``inertia_update="control"``: the coupled drive's A computed once per control
+step). ``python bench/fidelity.py --help``; writes ``fidelity_<device>.json`` / ``.md`` under ``--out``.
 """
 
 from __future__ import annotations
@@ -47,6 +48,7 @@ OPTIONS = {
     "coupled": ("explicit", "coupled", 1, False),
     "stable x15": ("explicit", "stable", 15, False),
     "coupled x15": ("explicit", "coupled", 15, False),
+    "coupled, A per control step": ("explicit", "coupled", 1, False),
 }
 LARGE_MODES = ("pd_joint_pos", "pd_joint_pos_vel")
 
@@ -92,6 +94,11 @@ class Rig:
         from wpctrl.robots import panda
 
         actuation, explicit_pd, mult, actclamp = OPTIONS[option]
+        # stable PD refreshes r every substep here; the coupled drive keeps its default (A every substep) unless the
+        # option asks for A once per control step
+        inertia_update = "substep" if explicit_pd == "stable" else None
+        if option.endswith("A per control step"):
+            inertia_update = "control"
         setup = trace["setup"]
         builder = newton.ModelBuilder()
         builder.replicate(panda(inertia_merge=inertia_merge, visual_shapes=False), num_envs)
@@ -107,7 +114,7 @@ class Rig:
             setup["sim_freq"] * mult,
             actuation,
             explicit_pd=explicit_pd,
-            inertia_update="substep" if explicit_pd == "stable" else "control",
+            inertia_update=inertia_update,
         )
         assert self.ctrl.joint_names == setup["active_joint_names"]
         self.solver = newton.solvers.SolverMuJoCo(self.model, disable_contacts=True)

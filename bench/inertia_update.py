@@ -40,8 +40,26 @@ VARIANTS = (
     ("stable, H per control step [JointSpaceResponse]", "force", "explicit", "stable", "control", "jsr"),
     ("stable, H per control step [fused]", "force", "explicit", "stable", "control", "fused"),
     ("stable, H per substep [fused]", "force", "explicit", "stable", "substep", "fused"),
-    ("coupled, H per substep [fused, in the drive kernel]", "force", "explicit", "coupled", "control", "fused"),
+    ("coupled, H per substep [fused, in the drive kernel]", "force", "explicit", "coupled", "substep", "fused"),
+    ("coupled, A per control step [fused, in the drive kernel]", "force", "explicit", "coupled", "control", "fused"),
 )
+
+
+def mujoco_step(n: int, device):
+    """K = 5 MuJoCo-Warp solver steps of the same Pandas (no controller): the physics a control step pays for."""
+    import newton
+
+    model = build_panda_model(n, device, gravity=False)
+    solver = newton.solvers.SolverMuJoCo(model, disable_contacts=True)
+    s0, s1, control = model.state(), model.state(), model.control()
+
+    def step():
+        a, b = s0, s1
+        for _ in range(5):
+            solver.step(a, b, control, None, 0.01)
+            a, b = b, a
+
+    return step
 
 
 def _use_joint_space_response(ctrl, model) -> None:
@@ -86,7 +104,7 @@ def newton_implicit_actuator(n: int, device):
     return step
 
 
-def run(n: int, device, repeats: int, sync) -> list[dict]:
+def run(n: int, device, repeats: int, sync, only: str = "", with_mujoco: bool = False) -> list[dict]:
     import numpy as np
 
     import wpctrl
@@ -96,6 +114,8 @@ def run(n: int, device, repeats: int, sync) -> list[dict]:
     names = PANDA_ARM_JOINTS + PANDA_GRIPPER_JOINTS
     rows = []
     for label, drive_mode, actuation, explicit_pd, inertia_update, path in VARIANTS:
+        if only and not any(w.strip() and w.strip() in label for w in only.split(",")):
+            continue
         cfg = wpctrl.PDJointPosControllerConfig(
             names, None, None, 1e3, 1e2, 100.0, normalize_action=False, drive_mode=drive_mode
         )
@@ -136,22 +156,28 @@ def run(n: int, device, repeats: int, sync) -> list[dict]:
                     "graph_ns_per_env_step": replay / n * 1e9,
                 }
             )
-    step = newton_implicit_actuator(n, device)
-    step()
-    with wp.ScopedCapture(device=device) as cap:
+    extras = []
+    if not only or "Newton" in only:
+        extras.append(("Newton actuator, set_effort_mode_implicit (+ JointSpaceResponse.refresh per substep)",
+                       newton_implicit_actuator(n, device)))  # fmt: skip
+    if with_mujoco:
+        extras.append(("MuJoCo-Warp, K = 5 solver steps (no controller)", mujoco_step(n, device)))
+    for label, step in extras:
         step()
-    eager = measure(step, sync, repeats=repeats)["median_s"]
-    replay = measure(lambda g=cap.graph: wp.capture_launch(g), sync, repeats=repeats)["median_s"]
-    rows.append(
-        {
-            "envs": n,
-            "variant": "Newton actuator, set_effort_mode_implicit (+ JointSpaceResponse.refresh per substep)",
-            "what": "control step",
-            "eager_s": eager,
-            "graph_s": replay,
-            "graph_ns_per_env_step": replay / n * 1e9,
-        }
-    )
+        with wp.ScopedCapture(device=device) as cap:
+            step()
+        eager = measure(step, sync, repeats=repeats)["median_s"]
+        replay = measure(lambda g=cap.graph: wp.capture_launch(g), sync, repeats=repeats)["median_s"]
+        rows.append(
+            {
+                "envs": n,
+                "variant": label,
+                "what": "control step",
+                "eager_s": eager,
+                "graph_s": replay,
+                "graph_ns_per_env_step": replay / n * 1e9,
+            }
+        )
     return rows
 
 
@@ -160,13 +186,15 @@ def main(argv=None):
     p.add_argument("--device", default="cpu")
     p.add_argument("--envs", default="1,64,1k")
     p.add_argument("--repeats", type=int, default=5)
+    p.add_argument("--variants", default="", help="comma list of label fragments to run (default: all)")
+    p.add_argument("--mujoco", action="store_true", help="also time K MuJoCo-Warp steps of the same envs")
     p.add_argument("--out", default=str(DEFAULT_OUT))
     args = p.parse_args(argv)
     device = wp.get_device(args.device)
     sync = Sync(device)
     rows = []
     for n in parse_envs(args.envs):
-        rows += run(n, device, args.repeats, sync)
+        rows += run(n, device, args.repeats, sync, args.variants, args.mujoco)
         print(f"{fmt_envs(n)} envs done", flush=True)
     meta = machine_info(device)
     table = md_table(
@@ -188,7 +216,8 @@ def main(argv=None):
         + meta_markdown(meta)
         + "\nPanda, all 9 joints, K = 5; 'control step' = set_action + 5 substeps, including the response update "
         "where the variant has one (per control step: in set_action; per substep: before each substep; coupled: "
-        "inside its drive kernel, every substep); 'response update' = the update alone. [JointSpaceResponse]: "
+        "inside its drive kernel, every substep or once per control step); 'response update' = the update alone. "
+        "[JointSpaceResponse]: "
         "Newton's generic path (FK, mass matrix, block inverse, gather); [fused]: wpctrl's one-launch kernel. "
         "Wall clock, median of repeats.\n\n" + table + "\n"
     )

@@ -269,3 +269,47 @@ def test_coupled_rejects_a_floating_base():
     # stable PD falls back to Newton's JointSpaceResponse there
     ctrl = wpctrl.build_controller(cfg, model, actuation="explicit", explicit_pd="stable")
     assert ctrl._engine._fused is None and ctrl._engine._jsr is not None
+
+
+@pytest.mark.parametrize("inertia_update", [None, "substep", "control"])
+def test_coupled_inertia_update_control_reuses_the_first_substeps_block(inertia_update):
+    """inertia_update="control": A is computed at a control step's first substep and reused for the other K - 1 (the
+    PD law still reads each substep's q, qd); the coupled drive's default recomputes it every substep."""
+    model = build_panda(E)
+    arm = wpctrl.PDJointPosControllerConfig(PANDA_ARM_JOINTS, None, None, 1e3, 1e2, 1e9, normalize_action=False)
+    grip = wpctrl.PDJointPosControllerConfig(PANDA_GRIPPER_JOINTS, None, None, 1e3, 1e2, 1e9, normalize_action=False)
+    ctrl = wpctrl.build_controller(
+        {"arm": arm, "gripper": grip}, model, 20, 100, "explicit", explicit_pd="coupled",
+        inertia_update=inertia_update, balance_passive_force=False,
+    )  # fmt: skip
+    assert ctrl.num_substeps == 5
+    rng = np.random.default_rng(7)
+    s, c, q, qd, target = _setup(ctrl, model, rng)
+    b = ctrl._engine.binding
+    cached = inertia_update == "control"
+
+    def torques_match(A):
+        tau = c.joint_f.numpy()[b.dof_index].astype(np.float64)
+        qq = s.joint_q.numpy()[b.coord_index].astype(np.float64)
+        qqd = s.joint_qd.numpy()[b.dof_index].astype(np.float64)
+        for e in range(E):
+            bb, d = _system(A[e], 1e3, 1e2, qq[e], qqd[e], target[e])
+            want = np.linalg.solve(np.eye(9) + np.diag(d) @ A[e], bb)
+            np.testing.assert_allclose(tau[e], want, rtol=1e-5, atol=1e-5 * np.abs(want).max())
+
+    for _control_step in range(2):
+        ctrl.set_action(target, s)
+        ctrl.before_simulation_step(s, c)  # the first substep: A of this configuration in every mode
+        A_first = _block(ctrl, s)
+        torques_match(A_first)
+        for _substep in range(ctrl.num_substeps - 1):
+            q2, qd2 = _random_states(model, rng)  # the solver moved the arm far (a configuration A depends on)
+            s.joint_q.assign(q2)
+            s.joint_qd.assign(qd2)
+            A_now = _block(ctrl, s)
+            assert np.abs(A_now - A_first).max() > 1e-2 * np.abs(A_first).max()  # A really changed
+            ctrl.before_simulation_step(s, c)
+            torques_match(A_first if cached else A_now)
+        q3, qd3 = _random_states(model, rng)  # the next control step starts elsewhere: A is fresh again
+        s.joint_q.assign(q3)
+        s.joint_qd.assign(qd3)

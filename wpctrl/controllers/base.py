@@ -57,7 +57,7 @@ class BaseController(ActuationMixin):
         solver: Any = None,
         nan_policy: str = "hold",
         explicit_pd: str = "naive",
-        inertia_update: str = "control",
+        inertia_update: str | None = None,
         delay=None,
         track_effort: bool = False,
         clip_targets: str = "none",
@@ -76,6 +76,8 @@ class BaseController(ActuationMixin):
         self.nan_policy = nan_policy
         if explicit_pd not in _EXPLICIT_PD:
             raise ValueError(f"explicit_pd: expected one of {_EXPLICIT_PD}, got {explicit_pd!r}")
+        if inertia_update is None:  # each drive's default: the coupled drive per substep, the others per control step
+            inertia_update = "substep" if (actuation == "explicit" and explicit_pd == "coupled") else "control"
         if inertia_update not in _INERTIA_UPDATES:
             raise ValueError(f"inertia_update: expected one of {_INERTIA_UPDATES}, got {inertia_update!r}")
         self.explicit_pd = explicit_pd

@@ -52,7 +52,7 @@ def build_controller(
     solver: Any = None,
     nan_policy: str = "hold",
     explicit_pd: str = "naive",
-    inertia_update: str = "control",
+    inertia_update: str | None = None,
     delay=None,
     track_effort: bool = False,
     clip_targets: str = "none",
@@ -80,8 +80,11 @@ def build_controller(
             ``joint_q`` every substep, and the force limits enforced inside the solve:
             ``tau = clamp(b - diag(dt Kd + dt^2 Kp) A tau)``; one extra launch per substep; see the README section
             "PhysX-faithful drive (coupled)").
-        inertia_update: When r = (H^-1)_ii is recomputed (acceleration drives, stable PD): once per control step
-            in ``set_action`` (``"control"``) or before every substep (``"substep"``).
+        inertia_update: When the inertia is recomputed from ``joint_q``: ``"control"`` (once per control step) or
+            ``"substep"`` (before every substep). Stable PD and acceleration drives refresh r = (H^-1)_ii (default
+            ``"control"``, in ``set_action``); the coupled drive its block A of H^-1 (default ``"substep"``;
+            ``"control"`` computes A at each control step's first substep and reuses it for the other K - 1: about
+            half the drive's cost at K = 5, with A lagging the configuration by up to K - 1 substeps).
         delay: Command latency [substeps]: None (off), an int, or ``(min, max)`` drawn uniformly per env at each
             reset of that env (device RNG). The drive targets (implicit: ``Control.joint_target_q/qd``; explicit:
             the PD law's targets, with the current measured state) are those of d substeps ago; a reset fills the

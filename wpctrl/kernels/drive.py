@@ -43,9 +43,15 @@ _FLAG_VEL_TARGET = _cfg.FLAG_VEL_TARGET
 _cache: dict[tuple, wp.Kernel] = {}
 
 
+def coupled_matrix_type(nr: int):
+    """The (nr, nr) float64 matrix type of A (one element of the coupled kernel's ``a_cache``)."""
+    return wp.types.matrix(shape=(nr, nr), dtype=wp.float64)
+
+
 def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None = None) -> wp.Kernel:
     """The coupled drive kernel for an articulation of nj joints and n DOFs, nr controlled rows (cached); the
-    inertia part unrolled with ``template`` (:meth:`wpctrl.kernels.inertia.ChainLayout.template`)."""
+    inertia part unrolled with ``template`` (:meth:`wpctrl.kernels.inertia.ChainLayout.template`). Its ``a_cache``
+    argument (an array of ``coupled_matrix_type(nr)``) keeps A over a control step."""
     key = (nj, n, nr, template)
     if key in _cache:
         return _cache[key]
@@ -138,6 +144,9 @@ def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None = None) -> w
         # Out:
         joint_f_out: wp.array[float],
         response_out: wp.array2d[float],  # optional: (H^-1)_ii of each row [1/(kg m^2) or 1/kg]
+        a_cache: wp.array[MatR],  # optional, in/out: A per env, kept over a control step (inertia_update="control")
+        step_in: wp.array[wp.int32],  # with a_cache: the substep counter (the substep kernel's, ManiSkill's _step)
+        num_substeps: int,  # with a_cache: K; A is recomputed at the first substep of each control step
         iterations_out: wp.array[wp.int32],  # optional: active-set iterations (rows + 3 + sweeps: not settled)
         computed_effort_out: wp.array2d[float],  # optional [N·m or N]: the PD law at the predicted state, unclamped
         applied_effort_out: wp.array2d[float],  # optional [N·m or N]: the solved torque
@@ -146,11 +155,20 @@ def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None = None) -> w
         """Per env: coupled implicit PD torques [N·m or N] of every controlled row, clamped inside the solve."""
         env = wp.tid()
         nr_rt = row_kind.shape[0]
-        A = chain_rows_factor(
-            num_dofs, env_joint_base[env], env_dof_base[env], chain_type, chain_parent, chain_dof, chain_anc,
-            row_dof, joint_q_start, joint_qd_start, joint_X_p, joint_X_c, joint_axis, joint_child, joint_armature,
-            body_mass, body_com, body_inertia, joint_q_in,
-        )  # fmt: skip
+        fresh = int(1)
+        if a_cache:  # A of the control step's first substep, reused by the others
+            fresh = int((step_in[env] - 1) % num_substeps == 0)
+        A = MatR()
+        if fresh != 0:
+            A = chain_rows_factor(
+                num_dofs, env_joint_base[env], env_dof_base[env], chain_type, chain_parent, chain_dof, chain_anc,
+                row_dof, joint_q_start, joint_qd_start, joint_X_p, joint_X_c, joint_axis, joint_child, joint_armature,
+                body_mass, body_com, body_inertia, joint_q_in,
+            )  # fmt: skip
+            if a_cache:
+                a_cache[env] = A
+        else:
+            A = a_cache[env]
         h = wp.float64(dt)
         b = VecR()  # unclamped PD force at the start-of-step prediction [N·m or N]
         d = VecR()  # dt Kd + dt^2 Kp

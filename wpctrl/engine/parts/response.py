@@ -129,6 +129,11 @@ class CoupledDrive(JointSpaceResponse):
         super().__init__(plan, alloc)
         self.coupled_iterations = wp.zeros(plan.num_envs, dtype=wp.int32, device=alloc.device)
         self._launch: _Launch | None = None
+        # inertia_update="control": A computed at a control step's first substep and reused by the other K - 1
+        self.a_cache = None
+        if plan.options.inertia_update == "control":
+            nr = plan.num_rows
+            self.a_cache = wp.zeros(plan.num_envs, dtype=KD.coupled_matrix_type(nr), device=alloc.device)
 
     def kernel_args(self) -> dict:
         # The substep kernel leaves the effort readout to the coupled drive (it writes the clamped torque itself).
@@ -143,7 +148,8 @@ class CoupledDrive(JointSpaceResponse):
         )
 
     def update(self, engine, state) -> None:
-        """The coupled kernel recomputes H (and r) itself at every substep; at build, r of the initial pose."""
+        """The coupled kernel computes H (and r) itself, at every substep or (``inertia_update="control"``) at each
+        control step's first; at build, r of the initial pose."""
         self._fused.launch_response(state.joint_q, self.response)
 
     def before_set_action(self, engine, action, state) -> None:
@@ -167,6 +173,9 @@ class CoupledDrive(JointSpaceResponse):
                 "joint_f_out": control.joint_f,
                 "response_out": self.response,
                 "iterations_out": self.coupled_iterations,
+                "a_cache": self.a_cache,
+                "step_in": engine.core.step if self.a_cache is not None else None,
+                "num_substeps": engine.num_substeps,
                 "computed_effort_out": None if effort is None else effort.computed_effort,
                 "applied_effort_out": None if effort is None else effort.applied_effort,
                 "saturation_count_out": None if effort is None else effort.saturation_count,

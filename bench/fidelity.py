@@ -16,7 +16,7 @@ the robot). For each actuation option this measures:
 Options: ``implicit`` (MuJoCo's built-in PD, Newton's joint-level effort clamp), ``implicit-actclamp`` (the same PD
 with the clamp moved to the actuator's force range: see ``bench/mujoco_clamp.py``), ``explicit`` with
 ``explicit_pd`` = ``naive`` / ``stable`` / ``coupled``, and ``stable x15`` / ``coupled x15`` (15 solver substeps per
-10 ms), ``coupled, A per control step`` (``inertia_update="control"``: the coupled drive's A computed once per control
+10 ms), ``coupled A per control step`` (``inertia_update="control"``: the coupled drive's A computed once per control
 step). ``python bench/fidelity.py --help``; writes ``fidelity_<device>.json`` / ``.md`` under ``--out``.
 """
 
@@ -48,7 +48,7 @@ OPTIONS = {
     "coupled": ("explicit", "coupled", 1, False),
     "stable x15": ("explicit", "stable", 15, False),
     "coupled x15": ("explicit", "coupled", 15, False),
-    "coupled, A per control step": ("explicit", "coupled", 1, False),
+    "coupled A per control step": ("explicit", "coupled", 1, False),
 }
 LARGE_MODES = ("pd_joint_pos", "pd_joint_pos_vel")
 

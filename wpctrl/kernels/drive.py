@@ -56,44 +56,45 @@ def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None = None) -> w
     if key in _cache:
         return _cache[key]
     chain_rows_factor, MatR, VecR = chain_funcs(nj, n, nr, template)
+    NR = nr  # the row loops have a compile-time bound: unrolled, so A, M and the vectors stay in registers
     row_pos = wp.constant(_ROW_POS)
     flag_vel = wp.constant(_FLAG_VEL_TARGET)
 
     @wp.func
-    def solve_masked(A: MatR, dinv: VecR, rhs: VecR, free: VecR, nr_rt: int):
+    def solve_masked(A: MatR, dinv: VecR, rhs: VecR, free: VecR):
         """Solve ``(diag(dinv) + A)_FF x_F = rhs_F`` with ``x_i = rhs_i`` on the rows where ``free`` is 0."""
         M = MatR()
-        for i in range(nr_rt):
+        for i in range(NR):
             if free[i] > wp.float64(0.0):
-                for j in range(nr_rt):
+                for j in range(NR):
                     if free[j] > wp.float64(0.0):
                         M[i, j] = A[i, j]
                 M[i, i] = M[i, i] + dinv[i]
             else:
                 M[i, i] = wp.float64(1.0)
         # Cholesky in place (SPD: D^-1 + A restricted to F, identity elsewhere).
-        for jc in range(nr_rt):
+        for jc in range(NR):
             s = M[jc, jc]
             for k in range(jc):
                 s -= M[jc, k] * M[jc, k]
             s = wp.max(s, wp.float64(1.0e-300))
             dg = wp.sqrt(s)
             M[jc, jc] = dg
-            for i in range(jc + 1, nr_rt):
+            for i in range(jc + 1, NR):
                 t = M[i, jc]
                 for k in range(jc):
                     t -= M[i, k] * M[jc, k]
                 M[i, jc] = t / dg
         x = VecR()
-        for i in range(nr_rt):
+        for i in range(NR):
             t = rhs[i]
             for k in range(i):
                 t -= M[i, k] * x[k]
             x[i] = t / M[i, i]
-        for ii in range(nr_rt):
-            i = nr_rt - 1 - ii
+        for ii in range(NR):
+            i = NR - 1 - ii
             t = x[i]
-            for k in range(i + 1, nr_rt):
+            for k in range(i + 1, NR):
                 t -= M[k, i] * x[k]
             x[i] = t / M[i, i]
         return x
@@ -154,7 +155,6 @@ def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None = None) -> w
     ):
         """Per env: coupled implicit PD torques [N·m or N] of every controlled row, clamped inside the solve."""
         env = wp.tid()
-        nr_rt = row_kind.shape[0]
         fresh = int(1)
         if a_cache:  # A of the control step's first substep, reused by the others
             fresh = int((step_in[env] - 1) % num_substeps == 0)
@@ -175,7 +175,7 @@ def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None = None) -> w
         dinv = VecR()
         lim = VecR()
         active = VecR()  # 1: in the QP (Kp or Kd > 0), 0: passive (tau = 0)
-        for r in range(nr_rt):
+        for r in range(NR):
             kind = row_kind[r]
             qi = env_q_base[env] + row_q_off[r]
             di = env_qd_base[env] + row_qd_off[r]
@@ -203,17 +203,17 @@ def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None = None) -> w
 
         # Primal-dual active set. state: 0 free, +1 / -1 at the upper / lower bound, 2 passive.
         state = VecR()
-        for r in range(nr_rt):
+        for r in range(NR):
             if active[r] == wp.float64(0.0):
                 state[r] = wp.float64(2.0)
         tau = VecR()
         settled = int(0)
         it = int(0)
-        while it < nr_rt + 2 and settled == 0:
+        while it < NR + 2 and settled == 0:
             it += 1
             free = VecR()
             fixed = VecR()
-            for r in range(nr_rt):
+            for r in range(NR):
                 if state[r] == wp.float64(0.0):
                     free[r] = wp.float64(1.0)
                 elif state[r] == wp.float64(1.0):
@@ -221,17 +221,17 @@ def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None = None) -> w
                 elif state[r] == wp.float64(-1.0):
                     fixed[r] = -lim[r]
             rhs = VecR()
-            for r in range(nr_rt):
+            for r in range(NR):
                 if free[r] > wp.float64(0.0):
                     t = b[r] * dinv[r]
-                    for c in range(nr_rt):
+                    for c in range(NR):
                         t -= A[r, c] * fixed[c]
                     rhs[r] = t
                 else:
                     rhs[r] = fixed[r]
-            tau = solve_masked(A, dinv, rhs, free, nr_rt)
+            tau = solve_masked(A, dinv, rhs, free)
             changed = int(0)
-            for r in range(nr_rt):
+            for r in range(NR):
                 s = state[r]
                 if s == wp.float64(0.0):
                     if tau[r] > lim[r]:
@@ -242,7 +242,7 @@ def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None = None) -> w
                         changed = 1
                 elif s == wp.float64(1.0) or s == wp.float64(-1.0):
                     at = wp.float64(0.0)
-                    for c in range(nr_rt):
+                    for c in range(NR):
                         at += A[r, c] * tau[c]
                     w = b[r] - d[r] * at  # the PD force this row asks for at the predicted state
                     if (s > wp.float64(0.0) and w < lim[r]) or (s < wp.float64(0.0) and w > -lim[r]):
@@ -252,23 +252,23 @@ def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None = None) -> w
                 settled = 1
         if settled == 0:
             # Not settled (cycling between active sets): projected Gauss–Seidel on the clamp equation.
-            for r in range(nr_rt):
+            for r in range(NR):
                 tau[r] = wp.clamp(tau[r], -lim[r], lim[r]) * active[r]
             for _sweep in range(pgs_sweeps):
-                for r in range(nr_rt):
+                for r in range(NR):
                     if active[r] > wp.float64(0.0):
                         at = wp.float64(0.0)
-                        for c in range(nr_rt):
+                        for c in range(NR):
                             at += A[r, c] * tau[c]
                         res = tau[r] - b[r] + d[r] * at  # residual of tau = b - D A tau
                         tau[r] = wp.clamp(tau[r] - res / (wp.float64(1.0) + d[r] * A[r, r]), -lim[r], lim[r])
             it += pgs_sweeps + 1
-        for r in range(nr_rt):
+        for r in range(NR):
             di = env_qd_base[env] + row_qd_off[r]
             joint_f_out[di] = float(tau[r] * active[r])
             if computed_effort_out:
                 at = wp.float64(0.0)
-                for c in range(nr_rt):
+                for c in range(NR):
                     at += A[r, c] * tau[c]
                 w = (b[r] - d[r] * at) * active[r]
                 computed_effort_out[env, r] = float(w)

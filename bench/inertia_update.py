@@ -40,8 +40,8 @@ VARIANTS = (
     ("stable, H per control step [JointSpaceResponse]", "force", "explicit", "stable", "control", "jsr"),
     ("stable, H per control step [fused]", "force", "explicit", "stable", "control", "fused"),
     ("stable, H per substep [fused]", "force", "explicit", "stable", "substep", "fused"),
-    ("coupled, H per substep [inertia kernel + solve kernel]", "force", "explicit", "coupled", "substep", "fused"),
-    ("coupled, A per control step [inertia kernel + solve kernel]", "force", "explicit", "coupled", "control", "fused"),
+    ("coupled, H per substep [fused, in the drive kernel]", "force", "explicit", "coupled", "substep", "fused"),
+    ("coupled, A per control step [fused, in the drive kernel]", "force", "explicit", "coupled", "control", "fused"),
 )
 
 

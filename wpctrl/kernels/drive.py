@@ -1,9 +1,7 @@
 """The coupled implicit PD drive (``explicit_pd="coupled"``): PhysX's articulation drive as a box-constrained solve.
 
-Private module. One thread per env, two launches per substep, run right after the substep kernel (which writes the
-drive targets into the ``Control``; the solve reads them back from there, so it sees exactly what the solver is
-given): the inertia kernel writes A per env (every substep, or at a control step's first only), the solve kernel
-reads it.
+Private module. One thread per env, one launch per substep, run right after the substep kernel (which writes the drive
+targets into the ``Control``; this kernel reads them back from there, so it sees exactly what the solver is given).
 
 Per env, with ``A`` the controlled block of the articulation's inverse joint-space inertia ``H^-1`` (computed in the
 same thread from ``joint_q``: :mod:`wpctrl.kernels.inertia`), the drive torques ``tau`` [N·m or N] of the controlled
@@ -42,14 +40,18 @@ PGS_SWEEPS = 16
 _ROW_POS = _cfg.ROW_POS
 _FLAG_VEL_TARGET = _cfg.FLAG_VEL_TARGET
 
-_cache: dict[tuple, tuple[wp.Kernel, wp.Kernel]] = {}
+_cache: dict[tuple, wp.Kernel] = {}
 
 
-def coupled_kernels(nj: int, n: int, nr: int, template: tuple | None = None) -> tuple[wp.Kernel, wp.Kernel]:
-    """The coupled drive's two kernels for an articulation of nj joints and n DOFs, nr controlled rows (cached): the
-    inertia kernel (A into a ``(num_envs, nr, nr)`` float64 array; unrolled with ``template``,
-    :meth:`wpctrl.kernels.inertia.ChainLayout.template`) and the solve kernel that reads it. Two launches rather
-    than one: each holds fewer registers (one fused kernel spilled 1.5 KB per thread on an H200)."""
+def coupled_matrix_type(nr: int):
+    """The (nr, nr) float64 matrix type of A (one element of the coupled kernel's ``a_cache``)."""
+    return wp.types.matrix(shape=(nr, nr), dtype=wp.float64)
+
+
+def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None = None) -> wp.Kernel:
+    """The coupled drive kernel for an articulation of nj joints and n DOFs, nr controlled rows (cached); the
+    inertia part unrolled with ``template`` (:meth:`wpctrl.kernels.inertia.ChainLayout.template`). Its ``a_cache``
+    argument (an array of ``coupled_matrix_type(nr)``) keeps A over a control step."""
     key = (nj, n, nr, template)
     if key in _cache:
         return _cache[key]
@@ -98,7 +100,7 @@ def coupled_kernels(nj: int, n: int, nr: int, template: tuple | None = None) -> 
         return x
 
     @wp.kernel(enable_backward=False, module="unique")
-    def _coupled_inertia_kernel(
+    def _coupled_drive_kernel(
         # Chain (articulation template):
         chain_type: wp.array[wp.int32],
         chain_parent: wp.array[wp.int32],
@@ -120,28 +122,6 @@ def coupled_kernels(nj: int, n: int, nr: int, template: tuple | None = None) -> 
         body_com: wp.array[wp.vec3],
         body_inertia: wp.array[wp.mat33],
         num_dofs: int,
-        step_in: wp.array[wp.int32],  # the substep counter (the substep kernel's, ManiSkill's _step)
-        per_control_step: int,  # 1: only at a control step's first substep (inertia_update="control")
-        num_substeps: int,
-        joint_q_in: wp.array[float],
-        a_out: wp.array3d[wp.float64],  # (num_envs, rows, rows): A per env [1/(kg m^2) or 1/kg]
-    ):
-        """Per env: A, the controlled block of H^-1 at ``joint_q``, for the solve kernel that follows."""
-        env = wp.tid()
-        if per_control_step != 0:
-            if (step_in[env] - 1) % num_substeps != 0:
-                return
-        A = chain_rows_factor(
-            num_dofs, env_joint_base[env], env_dof_base[env], chain_type, chain_parent, chain_dof, chain_anc,
-            row_dof, joint_q_start, joint_qd_start, joint_X_p, joint_X_c, joint_axis, joint_child, joint_armature,
-            body_mass, body_com, body_inertia, joint_q_in,
-        )  # fmt: skip
-        for i in range(NR):
-            for j in range(NR):
-                a_out[env, i, j] = A[i, j]
-
-    @wp.kernel(enable_backward=False, module="unique")
-    def _coupled_drive_kernel(
         # Rows:
         row_kind: wp.array[wp.int32],
         row_flags: wp.array[wp.int32],
@@ -165,7 +145,9 @@ def coupled_kernels(nj: int, n: int, nr: int, template: tuple | None = None) -> 
         # Out:
         joint_f_out: wp.array[float],
         response_out: wp.array2d[float],  # optional: (H^-1)_ii of each row [1/(kg m^2) or 1/kg]
-        a_in: wp.array3d[wp.float64],  # (num_envs, rows, rows): A per env, from the inertia kernel
+        a_cache: wp.array[MatR],  # optional, in/out: A per env, kept over a control step (inertia_update="control")
+        step_in: wp.array[wp.int32],  # with a_cache: the substep counter (the substep kernel's, ManiSkill's _step)
+        num_substeps: int,  # with a_cache: K; A is recomputed at the first substep of each control step
         iterations_out: wp.array[wp.int32],  # optional: active-set iterations (rows + 3 + sweeps: not settled)
         computed_effort_out: wp.array2d[float],  # optional [N·m or N]: the PD law at the predicted state, unclamped
         applied_effort_out: wp.array2d[float],  # optional [N·m or N]: the solved torque
@@ -173,10 +155,20 @@ def coupled_kernels(nj: int, n: int, nr: int, template: tuple | None = None) -> 
     ):
         """Per env: coupled implicit PD torques [N·m or N] of every controlled row, clamped inside the solve."""
         env = wp.tid()
+        fresh = int(1)
+        if a_cache:  # A of the control step's first substep, reused by the others
+            fresh = int((step_in[env] - 1) % num_substeps == 0)
         A = MatR()
-        for i in range(NR):
-            for j in range(NR):
-                A[i, j] = a_in[env, i, j]
+        if fresh != 0:
+            A = chain_rows_factor(
+                num_dofs, env_joint_base[env], env_dof_base[env], chain_type, chain_parent, chain_dof, chain_anc,
+                row_dof, joint_q_start, joint_qd_start, joint_X_p, joint_X_c, joint_axis, joint_child, joint_armature,
+                body_mass, body_com, body_inertia, joint_q_in,
+            )  # fmt: skip
+            if a_cache:
+                a_cache[env] = A
+        else:
+            A = a_cache[env]
         h = wp.float64(dt)
         b = VecR()  # unclamped PD force at the start-of-step prediction [N·m or N]
         d = VecR()  # dt Kd + dt^2 Kp
@@ -286,5 +278,5 @@ def coupled_kernels(nj: int, n: int, nr: int, template: tuple | None = None) -> 
         if iterations_out:
             iterations_out[env] = it
 
-    _cache[key] = (_coupled_inertia_kernel, _coupled_drive_kernel)
-    return _cache[key]
+    _cache[key] = _coupled_drive_kernel
+    return _coupled_drive_kernel

@@ -129,12 +129,11 @@ class CoupledDrive(JointSpaceResponse):
         super().__init__(plan, alloc)
         self.coupled_iterations = wp.zeros(plan.num_envs, dtype=wp.int32, device=alloc.device)
         self._launch: _Launch | None = None
-        # A per env, written by the inertia kernel: every substep, or (inertia_update="control") at each control
-        # step's first substep and reused by the other K - 1
-        self.per_control_step = int(plan.options.inertia_update == "control")
-        nr = plan.num_rows
-        self.a_cache = wp.zeros((plan.num_envs, nr, nr), dtype=wp.float64, device=alloc.device)
-        self._inertia_launch: _Launch | None = None
+        # inertia_update="control": A computed at a control step's first substep and reused by the other K - 1
+        self.a_cache = None
+        if plan.options.inertia_update == "control":
+            nr = plan.num_rows
+            self.a_cache = wp.zeros(plan.num_envs, dtype=KD.coupled_matrix_type(nr), device=alloc.device)
 
     def kernel_args(self) -> dict:
         # The substep kernel leaves the effort readout to the coupled drive (it writes the clamped torque itself).
@@ -174,34 +173,21 @@ class CoupledDrive(JointSpaceResponse):
                 "joint_f_out": control.joint_f,
                 "response_out": self.response,
                 "iterations_out": self.coupled_iterations,
-                "a_in": self.a_cache,
-                "a_out": self.a_cache,
-                "step_in": engine.core.step,
-                "per_control_step": self.per_control_step,
+                "a_cache": self.a_cache,
+                "step_in": engine.core.step if self.a_cache is not None else None,
                 "num_substeps": engine.num_substeps,
                 "computed_effort_out": None if effort is None else effort.computed_effort,
                 "applied_effort_out": None if effort is None else effort.applied_effort,
                 "saturation_count_out": None if effort is None else effort.saturation_count,
             }
-            launches = []
-            for kernel in KD.coupled_kernels(*fc.kernel_key()):
-                names = [a.label for a in kernel.adj.args]
-                for n in names:
-                    if n not in params:
-                        params[n] = extra[n] if n in extra else engine.arrays.lookup(n)
-                launches.append(
-                    _Launch(
-                        kernel,
-                        engine.num_envs,
-                        {n: params[n] for n in names},
-                        engine.device,
-                        block_dim=PER_ENV_BLOCK_DIM,
-                    )  # fmt: skip
-                )
-            self._inertia_launch, self._launch = launches
-        li = self._inertia_launch
-        li.bind("joint_q_in", state.joint_q)
-        li.launch()
+            kernel = KD.coupled_kernel(*fc.kernel_key())
+            names = [a.label for a in kernel.adj.args]
+            for n in names:
+                if n not in params:
+                    params[n] = extra[n] if n in extra else engine.arrays.lookup(n)
+            self._launch = _Launch(
+                kernel, engine.num_envs, {n: params[n] for n in names}, engine.device, block_dim=PER_ENV_BLOCK_DIM
+            )
         ln = self._launch
         ln.bind("joint_q_in", state.joint_q)
         ln.bind("joint_qd_in", state.joint_qd)

@@ -11,6 +11,7 @@ from .options import (  # noqa: F401  (the demo's options and checks: tests and 
     DEFAULT_OUT,
     PANDA_MODES,
     ROBOT_MODES,
+    ROBOT_MODES_REFUSED,
     SOLVERS,
     _check_extras,
     _parser,

@@ -33,12 +33,10 @@ ROBOT_MODES = {
         "pd_joint_pos",
         "pd_ee_delta_pos",
         "pd_ee_delta_pose",
-        "pd_ee_delta_pose_align",
         "pd_joint_target_delta_pos",
         "pd_ee_target_delta_pos",
         "pd_ee_target_delta_pose",
         "pd_joint_vel",
-        "pd_joint_pos_vel",
         "pd_joint_delta_pos_vel",
         "pd_joint_delta_pos_stiff_body",
     ),
@@ -46,7 +44,15 @@ ROBOT_MODES = {
     "unitree_g1_simplified_legs": ("pd_joint_pos", "pd_joint_delta_pos"),
 }
 """The robots ``--robot`` offers and their control modes: the built-in Panda, and ManiSkill agents loaded with
-:func:`wpctrl.maniskill.load_robot` (their modes as ManiSkill names them; a test keeps this table equal to theirs)."""
+:func:`wpctrl.maniskill.load_robot` (their modes as ManiSkill names them, less those in :data:`ROBOT_MODES_REFUSED`; a
+test keeps the two tables equal to the agents' own)."""
+ROBOT_MODES_REFUSED = {
+    ("fetch", "pd_ee_delta_pose_align"): "its frame 'ee_align' is not implemented in ManiSkill 3.0.1 either",
+    ("fetch", "pd_joint_pos_vel"): (
+        "it normalises actions over the unlimited roll joints, where ManiSkill's own targets are NaN"
+    ),
+}
+"""Modes a ManiSkill agent defines that ManiSkill itself cannot run (wpctrl refuses them too), with the reason."""
 EXPLICIT_PDS = ("coupled", "stable", "naive")  # build_controller's explicit_pd laws (a test keeps them equal)
 ACTUATIONS = ("implicit", "explicit")
 DEFAULT_OUT = "wpctrl-demo"  # git-ignored in this repository
@@ -235,6 +241,9 @@ def _check_args(parser, args) -> None:
     if args.envs < 1:
         _fail(parser, f"--envs: expected >= 1, got {args.envs}")
     modes = ROBOT_MODES[args.robot]
+    refused = ROBOT_MODES_REFUSED.get((args.robot, args.control_mode))
+    if refused:
+        _fail(parser, f"--robot {args.robot} --control-mode {args.control_mode}: refused, {refused}")
     if args.control_mode not in modes:
         _fail(
             parser,

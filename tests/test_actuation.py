@@ -14,8 +14,6 @@ from harness import ARM, FINGERS, Harness, delta_arm
 import wpctrl
 from wpctrl.robots import PANDA_ARM_JOINTS, PANDA_INITIAL_Q
 
-torch = pytest.importorskip("torch")
-
 F32 = np.float32
 N = 4
 
@@ -53,6 +51,7 @@ def _fingers(**kw):
 
 def test_per_env_gains_explicit_torque_closed_form():
     """set_drive_properties on envs 1 and 3 changes exactly their torques: clamp(Kp_e (q* - q) - Kd_e qd, +-lim_e)."""
+    torch = pytest.importorskip("torch", reason="torch is a dev dependency (a torch value is passed here)")
     rng = np.random.default_rng(0)
     h = Harness(arm_abs(), num_envs=N, actuation="explicit")
     q, qd = random_state(h, rng)
@@ -222,6 +221,7 @@ def test_delays_are_warps_rng_of_the_build_seed(seed):
 
 
 def test_randomize_on_a_child_with_ids_and_abs_mode():
+    torch = pytest.importorskip("torch", reason="torch is a dev dependency (torch env ids are passed here)")
     h = Harness({"arm": arm_abs(), "fingers": _fingers()}, num_envs=N)
     before = h.ctrl.force_limit.numpy().copy()
     h.ctrl["fingers"].randomize_drive_properties(env_ids=torch.tensor([2]), force_limit=(5.0, 6.0), mode="abs")

@@ -155,6 +155,30 @@ def delay_draws(seed: int, counter: int, num_envs: int, lo: int, hi: int) -> np.
 
 
 # ----------------------------------------------------------------------------------------------------------------------
+# The coupled drive (README "PhysX-faithful drive"), solved as the box QP it is.
+
+
+def coupled_torques(A: np.ndarray, b: np.ndarray, d: np.ndarray, lim: np.ndarray) -> np.ndarray:
+    """One env's coupled drive torques, float64: ``tau = clamp(b - D A tau, -lim, lim)`` with ``D = diag(d)``, i.e.
+    the box QP ``min 1/2 tau^T (D^-1 + A) tau - (D^-1 b)^T tau  s.t. |tau| <= lim`` over the rows with ``d > 0``
+    (the others apply 0). Solved by scipy's bounded-variable least squares on the Cholesky factor of ``D^-1 + A``
+    (``1/2 |L^T tau - L^-1 D^-1 b|^2`` is the QP's objective up to a constant)."""
+    from scipy.optimize import lsq_linear
+
+    A, b, d, lim = (np.asarray(x, np.float64) for x in (A, b, d, lim))
+    tau = np.zeros_like(b)
+    act = d > 0
+    if not act.any():
+        return tau
+    M = np.diag(1.0 / d[act]) + A[np.ix_(act, act)]
+    L = np.linalg.cholesky(M)
+    y = np.linalg.solve(L, b[act] / d[act])
+    res = lsq_linear(L.T, y, bounds=(-lim[act], lim[act]), method="bvls", tol=1e-14, max_iter=1000)
+    tau[act] = res.x
+    return tau
+
+
+# ----------------------------------------------------------------------------------------------------------------------
 # One class per config type.
 
 

@@ -258,6 +258,26 @@ def test_coupled_matches_the_box_qp_on_random_states(drive_mode):
     assert saturated > 20 and free > 20 and clamped_then_freed > 5, (saturated, free, clamped_then_freed)
 
 
+def test_coupled_effort_readout_is_zeroed_by_reset():
+    """The coupled drive writes the effort readout itself; a reset still zeroes the reset envs' rows of it (computed,
+    applied, saturation count) and leaves the others."""
+    model = build_panda(E)
+    ctrl = _coupled_ctrl(model, 5.0, track_effort=True)
+    s, c, _, _, target = _setup(ctrl, model, np.random.default_rng(6), spread=0.5)
+    ctrl.set_action(target, s)
+    for _ in range(2):
+        ctrl.before_simulation_step(s, c)
+    eng = ctrl._engine
+    before = [a.numpy().copy() for a in (eng.computed_effort, eng.applied_effort, eng.saturation_count)]
+    assert all(np.abs(b).min(axis=1).max() > 0 for b in before[:2]) and before[2].sum() > 0
+    ctrl.reset(s, env_ids=[1])
+    for name, b in zip(("computed", "applied", "saturation"), before):
+        got = getattr(eng, {"computed": "computed_effort", "applied": "applied_effort"}.get(name, "saturation_count"))
+        got = got.numpy()
+        np.testing.assert_array_equal(got[1], 0, err_msg=name)
+        np.testing.assert_array_equal(got[[0, 2]], b[[0, 2]], err_msg=name)
+
+
 def _one_dof_model():
     b = newton.ModelBuilder()
     link = b.add_link(mass=2.0, com=wp.vec3(0.0, 0.1, 0.0), inertia=wp.mat33(0.02, 0, 0, 0, 0.03, 0, 0, 0, 0.04))

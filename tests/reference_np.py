@@ -25,11 +25,12 @@ Actuation options (drive properties, delay, effort readout, clamping), also writ
 from the kernels:
 
 6. Drive properties are per env ((N, n) arrays, the config's values at construction); ``set_drive`` overwrites the
-   masked envs. Randomised values are drawn by wpctrl on the device and fed in through ``set_drive`` (the reference
-   checks their range, not their draws).
+   masked envs. Randomised values are Warp's RNG draws (:class:`WarpRand`, a numpy port of Warp's PCG hash: seed, the
+   device draw counter, env and row), as ``randomize_drive_properties`` documents them: :func:`drive_draws`.
 7. ``delay``: each substep's drive command (position target after interpolation, velocity target) enters a history;
    the drive (written targets and the explicit law) uses the command of ``d[env]`` substeps ago; a reset fills the
-   env's history with its reset pose and velocity target. The per-env d is an input (drawn by wpctrl at reset).
+   env's history with its reset pose and velocity target. The per-env d is drawn at reset from the build's seed and
+   the draw counter (:func:`delay_draws`).
 8. ``track_effort``: the PD law (the explicit one, or the naive law for implicit actuation) before and after the
    clamp, and a count of substeps with |law| > limit; reset zeroes them for the reset envs.
 9. ``clip_targets``: position targets set by an action are clamped to the joint limits (commanded joints first, then
@@ -89,6 +90,93 @@ class RefRobot:
 
     def cols(self, names: Sequence[str]) -> list[int]:
         return [self.joint_names.index(s) for s in names]
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# Warp's random numbers (warp/native/rand.h: the PCG hash of Jarzynski and Olano), in numpy.
+
+_M32 = 0xFFFFFFFF
+
+
+def _pcg(x: int) -> int:
+    b = (x * 747796405 + 2891336453) & _M32
+    c = (((b >> ((b >> 28) + 4)) ^ b) * 277803737) & _M32
+    return (c >> 22) ^ c
+
+
+class WarpRand:
+    """One Warp RNG state: ``wp.rand_init(seed, offset)``, then ``randi`` / ``randf`` draws from it."""
+
+    def __init__(self, seed: int, offset: int):
+        self.state = (int(seed) + _pcg(int(offset) & _M32)) & _M32
+        self.state = _pcg(self.state)
+
+    def _next(self) -> int:
+        self.state = _pcg(self.state)
+        return self.state
+
+    def randi(self, lo: int | None = None, hi: int | None = None) -> int:
+        """``wp.randi(state)`` (an int32) or ``wp.randi(state, lo, hi)`` in [lo, hi)."""
+        u = self._next()
+        if lo is None:
+            return u - (1 << 32) if u >= (1 << 31) else u
+        return u % (hi - lo) + lo
+
+    def randf(self) -> np.float32:
+        return F32((self._next() >> 8) * (1.0 / 16777216.0))
+
+
+def drive_draws(seed: int, counter: int, num_envs: int, total_rows: int, row0: int, n: int) -> np.ndarray:
+    """(num_envs, n, 4) uniform [0, 1) draws of ``randomize_drive_properties``: per (env, row of the mode), one
+    state keyed by the seed and the draw counter, four draws (stiffness, damping, force limit, friction)."""
+    key = WarpRand(seed, counter).randi()
+    out = np.zeros((num_envs, n, 4), F32)
+    for e in range(num_envs):
+        for j in range(n):
+            r = WarpRand(key & _M32, e * total_rows + row0 + j)
+            out[e, j] = [r.randf() for _ in range(4)]
+    return out
+
+
+def drawn_value(u: np.ndarray, lo: float, hi: float, nominal=None) -> np.ndarray:
+    """``lo + (hi - lo) u`` in float32, times the nominal value for a "scale" draw."""
+    x = F32(lo) + (F32(hi) - F32(lo)) * np.asarray(u, F32)
+    return x if nominal is None else np.asarray(nominal, F32) * x
+
+
+def delay_draws(seed: int, counter: int, num_envs: int, lo: int, hi: int) -> np.ndarray:
+    """(num_envs,) per-env delays a reset draws in [lo, hi] [substeps] (lo when the range is a single value)."""
+    if hi <= lo:
+        return np.full(num_envs, lo, np.int64)
+    out = np.zeros(num_envs, np.int64)
+    for e in range(num_envs):
+        key = WarpRand(seed, counter).randi()
+        out[e] = WarpRand(key & _M32, e).randi(lo, hi + 1)
+    return out
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# The coupled drive (README "PhysX-faithful drive"), solved as the box QP it is.
+
+
+def coupled_torques(A: np.ndarray, b: np.ndarray, d: np.ndarray, lim: np.ndarray) -> np.ndarray:
+    """One env's coupled drive torques, float64: ``tau = clamp(b - D A tau, -lim, lim)`` with ``D = diag(d)``, i.e.
+    the box QP ``min 1/2 tau^T (D^-1 + A) tau - (D^-1 b)^T tau  s.t. |tau| <= lim`` over the rows with ``d > 0``
+    (the others apply 0). Solved by scipy's bounded-variable least squares on the Cholesky factor of ``D^-1 + A``
+    (``1/2 |L^T tau - L^-1 D^-1 b|^2`` is the QP's objective up to a constant)."""
+    from scipy.optimize import lsq_linear
+
+    A, b, d, lim = (np.asarray(x, np.float64) for x in (A, b, d, lim))
+    tau = np.zeros_like(b)
+    act = d > 0
+    if not act.any():
+        return tau
+    M = np.diag(1.0 / d[act]) + A[np.ix_(act, act)]
+    L = np.linalg.cholesky(M)
+    y = np.linalg.solve(L, b[act] / d[act])
+    res = lsq_linear(L.T, y, bounds=(-lim[act], lim[act]), method="bvls", tol=1e-14, max_iter=1000)
+    tau[act] = res.x
+    return tau
 
 
 # ----------------------------------------------------------------------------------------------------------------------

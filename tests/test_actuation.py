@@ -14,8 +14,6 @@ from harness import ARM, FINGERS, Harness, delta_arm
 import wpctrl
 from wpctrl.robots import PANDA_ARM_JOINTS, PANDA_INITIAL_Q
 
-torch = pytest.importorskip("torch")
-
 F32 = np.float32
 N = 4
 
@@ -53,6 +51,7 @@ def _fingers(**kw):
 
 def test_per_env_gains_explicit_torque_closed_form():
     """set_drive_properties on envs 1 and 3 changes exactly their torques: clamp(Kp_e (q* - q) - Kd_e qd, +-lim_e)."""
+    torch = pytest.importorskip("torch", reason="torch is a dev dependency (a torch value is passed here)")
     rng = np.random.default_rng(0)
     h = Harness(arm_abs(), num_envs=N, actuation="explicit")
     q, qd = random_state(h, rng)
@@ -93,9 +92,12 @@ def test_per_env_gains_implicit_write_the_model_for_those_envs_only():
     np.testing.assert_array_equal(ke[~changed], before["joint_target_ke"][~changed])
     np.testing.assert_array_equal(fr[~changed], before["joint_friction"][~changed])
     np.testing.assert_array_equal(m.joint_target_kd.numpy(), before["joint_target_kd"])
-    # the drive targets do not depend on the gains
-    h.act(np.zeros((N, 8), F32))
-    assert np.isfinite(h.substeps(1)[0]).all()
+    # the drive targets do not depend on the gains: arm targets are the raw action, the fingers' the scaled column
+    a = np.random.default_rng(4).uniform(-1.2, 1.2, (N, 8)).astype(F32)
+    h.act(a)
+    lo, hi = F32(-0.01), F32(0.04)
+    finger = F32(0.5) * (hi + lo) + F32(0.5) * (hi - lo) * np.clip(a[:, 7], F32(-1), F32(1))
+    np.testing.assert_array_equal(h.substeps(1)[0], np.column_stack([a[:, :7], finger, finger]))
 
 
 def test_acceleration_drive_uses_per_env_gains_over_r():
@@ -166,7 +168,60 @@ def test_randomisation_in_a_captured_graph_draws_new_values_each_replay():
     assert len(np.unique(u)) == u.size  # every joint and env draws independently
 
 
+def test_randomisation_is_warps_rng_keyed_by_seed_and_draw_counter():
+    """Each (env, row) draws from Warp's RNG keyed by the call's seed and the device draw counter (one per call):
+    the values are the numpy port's (reference_np.drive_draws), another seed gives other values, the same seed on a
+    fresh controller the same ones, and the next call (counter + 1) new ones."""
+    from reference_np import drawn_value, drive_draws
+
+    def fresh():
+        return Harness({"arm": arm_abs(), "fingers": _fingers()}, num_envs=N)
+
+    got = {}
+    for seed in (7, 8):
+        h = fresh()
+        c = h.ctrl["fingers"]
+        nom = {f: getattr(c, f).numpy()[0].copy() for f in ("stiffness", "force_limit")}
+        c.randomize_drive_properties(stiffness=(0.5, 2.0), force_limit=(1.0, 3.0), mode="abs", seed=seed)
+        u = drive_draws(seed, 0, N, 9, 7, 2)
+        np.testing.assert_allclose(c.stiffness.numpy(), drawn_value(u[..., 0], 0.5, 2.0), rtol=1e-6)
+        np.testing.assert_allclose(c.force_limit.numpy(), drawn_value(u[..., 2], 1.0, 3.0), rtol=1e-6)
+        np.testing.assert_array_equal(h.ctrl["arm"].stiffness.numpy(), 400.0)  # other rows untouched
+        got[seed] = c.stiffness.numpy().copy()
+        c.randomize_drive_properties(stiffness=(0.5, 2.0), mode="scale", seed=seed)  # counter 1
+        np.testing.assert_allclose(
+            c.stiffness.numpy(), drawn_value(drive_draws(seed, 1, N, 9, 7, 2)[..., 0], 0.5, 2.0, nom["stiffness"]),
+            rtol=1e-6,
+        )  # fmt: skip
+        np.testing.assert_array_equal(h.model.joint_target_ke.numpy()[h.dof[:, 7:]], c.stiffness.numpy())
+    assert not np.isin(got[7], got[8]).any()  # another seed, other values
+    h = fresh()
+    h.ctrl["fingers"].randomize_drive_properties(stiffness=(0.5, 2.0), force_limit=(1.0, 3.0), mode="abs", seed=7)
+    np.testing.assert_array_equal(h.ctrl["fingers"].stiffness.numpy(), got[7])  # the same seed, the same values
+
+
+@pytest.mark.parametrize("seed", [0, 5])
+def test_delays_are_warps_rng_of_the_build_seed(seed):
+    """Each reset that draws delays (a range of more than one value) uses the build's seed and the draw counter
+    (the build's own reset is draw 0): the values of the numpy port (reference_np.delay_draws)."""
+    from reference_np import delay_draws
+
+    h = Harness({"arm": delta_arm(use_target=True)}, num_envs=16, delay=(1, 4), seed=seed)
+    np.testing.assert_array_equal(h.ctrl.delay.numpy(), delay_draws(seed, 0, 16, 1, 4))
+    h.ctrl.reset(h.state)
+    np.testing.assert_array_equal(h.ctrl.delay.numpy(), delay_draws(seed, 1, 16, 1, 4))
+    h.ctrl.randomize_drive_properties(damping=(1.0, 2.0), seed=seed)  # draw 2
+    mask = np.arange(16) % 3 == 0
+    before = h.ctrl.delay.numpy().copy()
+    h.ctrl.reset(h.state, env_ids=mask)
+    want = np.where(mask, delay_draws(seed, 3, 16, 1, 4), before)
+    np.testing.assert_array_equal(h.ctrl.delay.numpy(), want)
+    other = Harness({"arm": delta_arm(use_target=True)}, num_envs=16, delay=(1, 4), seed=seed + 1)
+    assert not np.array_equal(other.ctrl.delay.numpy(), delay_draws(seed, 0, 16, 1, 4))
+
+
 def test_randomize_on_a_child_with_ids_and_abs_mode():
+    torch = pytest.importorskip("torch", reason="torch is a dev dependency (torch env ids are passed here)")
     h = Harness({"arm": arm_abs(), "fingers": _fingers()}, num_envs=N)
     before = h.ctrl.force_limit.numpy().copy()
     h.ctrl["fingers"].randomize_drive_properties(env_ids=torch.tensor([2]), force_limit=(5.0, 6.0), mode="abs")

@@ -18,7 +18,7 @@ from conftest import ROOT, build_panda
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-torch = pytest.importorskip("torch")
+torch = pytest.importorskip("torch", reason="the benchmarks' baseline is written in torch (a dev dependency)")
 
 import wpctrl  # noqa: E402
 from bench.common import panda_mode, synthetic_setup  # noqa: E402

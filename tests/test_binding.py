@@ -1,4 +1,5 @@
-"""Binding joint names to Newton's arrays: replicated worlds (fast path) and worlds that differ (per-world path)."""
+"""Binding joint names to Newton's arrays: replicated worlds (fast path) and worlds that differ (per-world path),
+against a search of the model's joint labels written here."""
 
 from __future__ import annotations
 
@@ -6,19 +7,21 @@ import newton
 import numpy as np
 import warp as wp
 
-from wpctrl.binding import _replicated_table, _resolve, bind_joints
+from wpctrl.binding import _replicated_table, bind_joints
 from wpctrl.robots import PANDA_ARM_JOINTS, panda
 
 
-def _slow_table(model, names):
-    labels = list(model.joint_label)
-    jworld, jtype, qd = model.joint_world.numpy(), model.joint_type.numpy(), model.joint_qd_start.numpy()
-    return np.stack(
-        [
-            _resolve(names, labels, np.nonzero(jworld == w)[0].tolist(), w, jtype, qd)[0]
-            for w in range(model.world_count)
-        ]
-    )
+def _label_table(model, names):
+    """(worlds, len(names)) index of each named joint in each world, found here by label (its last '/' part)."""
+    world = model.joint_world.numpy()
+    out = np.full((model.world_count, len(names)), -1, np.int64)
+    for j, label in enumerate(model.joint_label):
+        short = label.rsplit("/", 1)[-1]
+        if short in names and world[j] >= 0:
+            assert out[world[j], names.index(short)] == -1  # one joint of that name per world
+            out[world[j], names.index(short)] = j
+    assert (out >= 0).all()
+    return out
 
 
 def test_replicated_fast_path_matches_the_per_world_search():
@@ -31,7 +34,11 @@ def test_replicated_fast_path_matches_the_per_world_search():
         model, names, labels, model.joint_world.numpy(), model.joint_type.numpy(), model.joint_qd_start.numpy(), 5
     )
     assert fast is not None
-    np.testing.assert_array_equal(fast, _slow_table(model, names))
+    np.testing.assert_array_equal(fast, _label_table(model, names))
+    binding = bind_joints(model, names)
+    np.testing.assert_array_equal(binding.joint_index, fast)
+    np.testing.assert_array_equal(binding.coord_index, model.joint_q_start.numpy()[fast])
+    np.testing.assert_array_equal(binding.dof_index, model.joint_qd_start.numpy()[fast])
 
 
 def test_worlds_that_differ_bind_world_by_world():
@@ -47,7 +54,10 @@ def test_worlds_that_differ_bind_world_by_world():
     model = b.finalize(device="cpu")
     binding = bind_joints(model, PANDA_ARM_JOINTS)
     assert binding.num_envs == 3
-    np.testing.assert_array_equal(binding.joint_index, _slow_table(model, PANDA_ARM_JOINTS))
+    joints = _label_table(model, PANDA_ARM_JOINTS)
+    np.testing.assert_array_equal(binding.joint_index, joints)
+    np.testing.assert_array_equal(binding.coord_index, model.joint_q_start.numpy()[joints])
+    np.testing.assert_array_equal(binding.dof_index, model.joint_qd_start.numpy()[joints])
     # world 1's coordinates are shifted by the free joint's 7 coordinates and 6 DOFs
     assert binding.q_base[1] - binding.q_base[0] == 9 + 7
     assert binding.qd_base[1] - binding.qd_base[0] == 9 + 6

@@ -118,9 +118,19 @@ def test_cuda_torch_zero_copy():
 
 
 def test_demo_on_cuda(tmp_path):
+    """The demo on the GPU tracks as on the CPU (tests/test_demo.py's bounds): every value finite, no env diverged,
+    the arm within a few centi-radians of the policy's sinusoid."""
+    import json
+
     from wpctrl.demo import main
 
-    assert main(["--device", "cuda:0", "--envs", "64", "--seconds", "1", "--out", str(tmp_path), "--no-progress"]) == 0
+    args = ["--device", "cuda:0", "--envs", "64", "--seconds", "1.5", "--seed", "1", "--out", str(tmp_path)]
+    assert main([*args, "--no-progress"]) == 0
+    s = json.loads((tmp_path / "summary.json").read_text())
+    assert s["all_finite"] and s["envs"] == 64 and s["control_steps"] == 30
+    assert s["nonfinite_envs"] == 0 and s["bad_actions"] == 0 and s["diverged_at_s"] is None
+    assert s["tracking_rms"]["arm"] < 0.06 and s["tracking_rms"]["gripper"] < 0.015
+    assert s["tracking_rms"]["arm"] <= s["tracking_max"]["arm"] < 0.3
 
 
 def test_cuda_fused_inertia_and_coupled_drive_match_cpu():

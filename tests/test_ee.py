@@ -118,8 +118,8 @@ def test_fk_matches_newton_eval_fk_and_the_urdf_offset():
     np.testing.assert_allclose(fallback.fk(q)[0], pose, atol=2e-6)
     with pytest.raises(wpctrl.ConfigError, match="urdf_path: cannot read 'panda_v2.urdf'"):
         Rig(pose_cfg(ee_link="gripper_tcp", urdf_path="panda_v2.urdf"), 1, model=urdf.model)
-        with pytest.raises(wpctrl.ConfigError, match="ee_link: 'gripper_tcp' is not a body or site"):
-            Rig(pose_cfg(ee_link="gripper_tcp"), 1, model=urdf.model)
+    with pytest.raises(wpctrl.ConfigError, match="ee_link: 'gripper_tcp' is not a body or site"):
+        Rig(pose_cfg(ee_link="gripper_tcp"), 1, model=urdf.model)
 
 
 def test_jacobian_matches_finite_differences():
@@ -216,6 +216,35 @@ def test_per_env_independence_and_nan_hold(iterations):
     for x, y in zip(held[1], held[0]):  # env 5 kept its targets (arm, target pose, gripper)
         np.testing.assert_array_equal(x[5], y[5])
     assert rig.ctrl.bad_action_count.numpy().tolist() == [int(e == 5) for e in range(n)]
+
+
+@pytest.mark.parametrize("mode_name", ["pd_ee_delta_pos", "pd_ee_target_delta_pose"])
+def test_a_nan_in_any_column_holds_the_whole_env(mode_name):
+    """The hold rule is per env over the whole flat action: a NaN/Inf in the gripper's column holds the EE rows (and
+    the EE's processed action and target pose) as well, and one in an EE column holds the gripper; the other envs
+    move; each held env is counted once."""
+    rng = np.random.default_rng(9)
+    n = 4
+    rig = Rig(copy.deepcopy(panda_control_modes()[mode_name]), n)
+    rig.put(random_q(rng, n))
+    rig.ctrl.reset(rig.state)
+    D = rig.ctrl.action_dim
+    rig.ctrl.set_action(rng.uniform(-1, 1, (n, D)).astype(np.float32), rig.state)
+    names = ("target_qpos", "processed_action", "target_pose")
+    before = {k: getattr(rig.arm, k).numpy().copy() for k in names}
+    gripper_before = rig.ctrl["gripper"].target_qpos.numpy().copy()
+    a = rng.uniform(-1, 1, (n, D)).astype(np.float32)
+    a[1, D - 1] = np.nan  # the gripper's column
+    a[2, 0] = np.inf  # the EE's first column
+    rig.ctrl.set_action(a, rig.state)
+    held = [1, 2]
+    for k in names:
+        got = getattr(rig.arm, k).numpy()
+        np.testing.assert_array_equal(got[held], before[k][held], err_msg=k)
+        if k != "target_pose" or rig.arm.config.use_target:  # (without use_target no target pose is composed)
+            assert (got[[0, 3]] != before[k][[0, 3]]).any(axis=1).all(), k  # the others took their new actions
+    np.testing.assert_array_equal(rig.ctrl["gripper"].target_qpos.numpy()[held], gripper_before[held])
+    assert rig.ctrl.bad_action_count.numpy().tolist() == [0, 1, 1, 0]
 
 
 def test_partial_reset():

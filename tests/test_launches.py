@@ -94,17 +94,71 @@ def test_launches_per_control_step(monkeypatch, mode, actuation, options, expect
     assert len(counter.take()) == expected
 
 
-def _check_drive(h, control, where):
-    """The Control holds what the substep kernel writes without interpolation: q* = target_qpos on position rows,
-    qd* = target_qvel on rows with a velocity drive."""
-    rows = h.ctrl._engine.rows
-    pos = rows.kind == wpctrl.config.ROW_POS
-    vel = ~pos | ((rows.flags & wpctrl.config.FLAG_VEL_TARGET) != 0)
-    tq, tqd = h.ctrl._engine.target_qpos.numpy(), h.ctrl._engine.target_qvel.numpy()
+class Expected:
+    """The drive position targets of ``_mode()`` re-derived in numpy (ManiSkill's rules, float32): the arm's virtual
+    target accumulates ``0.1 clip(a)``; both fingers take the gripper's column scaled onto [-0.01, 0.04]; an env with
+    a NaN/Inf action keeps its targets; a reset sets the reset envs' targets to the measured positions; set_state sets
+    the arm's."""
+
+    def __init__(self, q):
+        self.t = np.asarray(q, f32).copy()
+
+    def act(self, a):
+        a = np.asarray(a, f32)
+        good = np.isfinite(a).all(axis=1)
+        c = np.clip(a, f32(-1), f32(1))
+        lo, hi = f32(-0.01), f32(0.04)
+        g = f32(0.5) * (hi + lo) + f32(0.5) * (hi - lo) * c[:, 7]
+        t = self.t.copy()
+        t[:, :7] = t[:, :7] + f32(0.1) * c[:, :7]
+        t[:, 7] = t[:, 8] = g
+        self.t[good] = t[good]
+
+    def reset(self, q, envs):
+        self.t[envs] = np.asarray(q, f32)[envs]
+
+
+@pytest.mark.parametrize(
+    "mode, actuation, options",
+    [
+        (delta_arm(), "implicit", {}),
+        (_mode(), "implicit", {}),
+        (_mode(interpolate=True), "explicit", {"track_effort": True, "clip_targets": "joint_limits"}),
+        (_mode(), "implicit", {"delay": 2}),
+    ],
+)
+def test_reset_is_one_launch(monkeypatch, mode, actuation, options):
+    """reset is the reset kernel alone, whatever the env selection and with or without the (known) Control; the
+    documented extras: a Control not known yet in a mode without per-substep work also gets every env's targets
+    (one more launch), a delay range draws (the draw counter's bump), an EE controller resets its pose."""
+    n = 4
+    h = Harness(copy.deepcopy(mode), num_envs=n, actuation=actuation, **options)
+    h.ctrl.reset(h.state, control=h.control)
+    _control_step(h, np.zeros((n, h.ctrl.action_dim), np.float32))
+    counter = LaunchCounter(monkeypatch)
+    mask = wp.array(np.arange(n) % 2 == 0, dtype=wp.bool)
+    for env_ids in (None, 1, [0, 3], np.arange(n) < 2, mask, wp.array(np.array([2], np.int32), dtype=wp.int32)):
+        for control in (None, h.control):
+            h.ctrl.reset(h.state, env_ids=env_ids, control=control)
+            assert counter.take() == ["_reset_kernel"], (env_ids, control)
+    elided = not h.ctrl._engine.per_substep
+    h.ctrl.reset(h.state, env_ids=[1], control=h.model.control())
+    assert counter.take() == ["_reset_kernel"] + (["_targets_kernel"] if elided else [])
+    ranged = Harness(copy.deepcopy(mode), num_envs=n, actuation=actuation, delay=(0, 2))
+    counter.take()
+    ranged.ctrl.reset(ranged.state, env_ids=[1])
+    assert counter.take() == ["_reset_kernel", "_bump_counter_kernel"]
+    ee = Harness(copy.deepcopy(panda_control_modes()["pd_ee_delta_pos"]), num_envs=n)
+    counter.take()
+    ee.ctrl.reset(ee.state, env_ids=[1])
+    assert len(counter.take()) == 2
+
+
+def _check_drive(h, control, want, where):
+    """The Control's position drive targets are ``want`` (n, 9); the velocity targets stay 0 (position rows)."""
     got_q = control.joint_target_q.numpy()[h.coord]
-    got_qd = control.joint_target_qd.numpy()[h.dof]
-    np.testing.assert_array_equal(got_q[:, pos], tq[:, pos], err_msg=f"{where}: joint_target_q")
-    np.testing.assert_array_equal(got_qd[:, vel], tqd[:, vel], err_msg=f"{where}: joint_target_qd")
+    np.testing.assert_allclose(got_q, want, atol=1e-6, rtol=0, err_msg=f"{where}: joint_target_q")
+    np.testing.assert_array_equal(control.joint_target_qd.numpy()[h.dof], 0.0, err_msg=f"{where}: joint_target_qd")
 
 
 def test_swapped_controls_get_the_targets():
@@ -113,17 +167,22 @@ def test_swapped_controls_get_the_targets():
     rng = np.random.default_rng(0)
     h.put(rng.uniform(-1, 1, (n, 9)))
     h.ctrl.reset(h.state)
+    want = Expected(h.q())
     a, b = h.model.control(), h.model.control()
     schedule = [[a] * 5, [b] * 5, [a, b, a, b, a], [b, b, a, a, a]]
     for i, controls in enumerate(schedule):
-        h.ctrl.set_action(rng.uniform(-1, 1, (n, 8)).astype(np.float32), h.state)
+        act = rng.uniform(-1.2, 1.2, (n, 8)).astype(np.float32)
+        if i == 2:
+            act[1, 7] = np.nan  # env 1 holds its targets this step
+        h.ctrl.set_action(act, h.state)
+        want.act(act)
         for k, c in enumerate(controls):
             h.ctrl.before_simulation_step(h.state, c)
-            _check_drive(h, c, f"step {i} substep {k}")  # the Control the solver steps with holds the targets
+            _check_drive(h, c, want.t, f"step {i} substep {k}")  # the Control the solver steps with holds them
     # A Control whose arrays were replaced in place counts as another Control.
     a.joint_target_q = wp.zeros_like(a.joint_target_q)
     h.ctrl.before_simulation_step(h.state, a)
-    _check_drive(h, a, "replaced arrays")
+    _check_drive(h, a, want.t, "replaced arrays")
 
 
 def test_reset_set_state_and_invalidate_keep_the_known_control_current():
@@ -131,27 +190,38 @@ def test_reset_set_state_and_invalidate_keep_the_known_control_current():
     h = Harness({"arm": delta_arm(use_target=True), "gripper": gripper()}, num_envs=n)
     rng = np.random.default_rng(1)
     h.ctrl.reset(h.state)
-    _control_step(h, rng.uniform(-1, 1, (n, 8)).astype(np.float32))
+    want = Expected(h.q())
+    act = rng.uniform(-1, 1, (n, 8)).astype(np.float32)
+    _control_step(h, act)
+    want.act(act)
+    _check_drive(h, h.control, want.t, "control step")
     # A reset without a Control still updates the known one (the solver's next substep sees the reset pose) ...
     h.put(rng.uniform(-1, 1, (n, 9)))
     h.ctrl.reset(h.state, env_ids=[2])
-    _check_drive(h, h.control, "reset without control")
-    np.testing.assert_array_equal(h.drive_q()[2], h.q()[2])
+    want.reset(h.q(), [2])
+    _check_drive(h, h.control, want.t, "reset without control")
     # ... a reset with a new Control writes every env into it, not only the reset ones.
     other = h.model.control()
     h.ctrl.reset(h.state, env_ids=[1], control=other)
-    _check_drive(h, other, "reset with a new control")
+    want.reset(h.q(), [1])
+    _check_drive(h, other, want.t, "reset with a new control")
     # set_state edits the targets on the host: the next substep writes them.
-    h.ctrl.set_state({"arm": {"target_qpos": rng.uniform(-1, 1, (n, 7)).astype(np.float32)}})
+    arm = rng.uniform(-1, 1, (n, 7)).astype(np.float32)
+    h.ctrl.set_state({"arm": {"target_qpos": arm}})
+    want.t[:, :7] = arm
     h.ctrl.before_simulation_step(h.state, other)
-    _check_drive(h, other, "set_state")
+    _check_drive(h, other, want.t, "set_state")
     # Someone else overwrote the targets: invalidate_control makes the next substep rewrite them.
     other.joint_target_q.zero_()
     h.ctrl.before_simulation_step(h.state, other)
     assert not other.joint_target_q.numpy().any()  # not detected (documented) ...
     h.ctrl.invalidate_control()
     h.ctrl.before_simulation_step(h.state, other)
-    _check_drive(h, other, "invalidate_control")  # ... until invalidated
+    _check_drive(h, other, want.t, "invalidate_control")  # ... until invalidated
+    act = rng.uniform(-1, 1, (n, 8)).astype(np.float32)
+    _control_step(h, act, other)
+    want.act(act)
+    _check_drive(h, other, want.t, "the next control step")
 
 
 def test_step_counter_follows_maniskill_step_without_substep_launches():

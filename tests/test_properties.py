@@ -40,7 +40,7 @@ import wpctrl
 from wpctrl import config as C
 from wpctrl.robots import PANDA_JOINTS
 
-torch = pytest.importorskip("torch")
+torch = pytest.importorskip("torch", reason="torch is a dev dependency (torch inputs are drawn here)")
 
 TOL = 1e-6
 MAX_EXAMPLES = int(os.environ.get("WPCTRL_PROPERTY_EXAMPLES", "250"))  # raise it for a deeper search

@@ -47,8 +47,22 @@ def test_02_batched_space_and_unbatched_single_env():
     assert h.ctrl.action_space.shape == (3, 8)
     h1 = Harness({"arm": delta_arm(), "gripper": gripper()}, num_envs=1)
     assert h1.ctrl.action_space.shape == (8,)
-    # DIFFERENCE: with one env a (D,) action is accepted (as ManiSkill's env does before calling the controller).
-    h1.ctrl.set_action(np.zeros(8, np.float32), h1.state)
+    # DIFFERENCE: with one env a (D,) action is accepted (as ManiSkill's env does before calling the controller),
+    # and means what the (1, D) action means, for every input kind.
+    a = np.array([0.5, -1.5, 0.25, 1.0, -0.2, 0.0, 0.9, 0.3], np.float32)
+    q = np.linspace(-0.5, 0.5, 9).astype(np.float32)
+    h1.put(q)
+    h1.ctrl.reset(h1.state)
+    c = np.clip(a, -1, 1)
+    lo, hi = f32(-0.01), f32(0.04)
+    finger = f32(0.5) * (hi + lo) + f32(0.5) * (hi - lo) * c[7]
+    want = np.concatenate([q[:7] + f32(0.1) * c[:7], [finger, finger]])[None, :]
+    torch = pytest.importorskip("torch", reason="torch is a dev dependency")
+    for x in (a, wp.array(a, dtype=wp.float32), torch.from_numpy(a.copy()), a.astype(np.float64)):
+        h1.ctrl.set_action(x, h1.state)
+        np.testing.assert_allclose(h1.ctrl.target_qpos.numpy(), want, atol=1e-7)
+        np.testing.assert_array_equal(h1.ctrl.processed_action.numpy()[0, :7], f32(0.1) * c[:7])
+        assert h1.ctrl.bad_action_count.numpy().tolist() == [0]
     with pytest.raises(ValueError, match=r"expected shape \(3, 8\)"):
         h.ctrl.set_action(np.zeros(8, np.float32), h.state)
 
@@ -395,7 +409,13 @@ def test_30_mimic_formula_and_delta_target_offsets():
 def test_31_empty_mimic_defaults_and_errors(caplog):
     f1, f2 = FINGERS
     cfg = wpctrl.PDJointPosMimicControllerConfig(FINGERS, -1, 1, 1.0, 1.0, normalize_action=False)
-    h = Harness(cfg)
+    with caplog.at_level("WARNING", logger="wpctrl"):
+        h = Harness(cfg)
+    # DIFFERENCE (README): the config is not mutated, and the warning says which joint follows which
+    assert [r.getMessage() for r in caplog.records if r.name == "wpctrl"] == [
+        f"PDJointPosMimicControllerConfig.mimic is empty: {f1!r} follows {f2!r} (the second joint is commanded, as "
+        "in ManiSkill)"
+    ]
     h.ctrl.reset(h.state)
     h.act([0.02])  # the second joint is commanded, the first follows
     np.testing.assert_allclose(h.ctrl.target_qpos.numpy()[0], [0.02, 0.02])
@@ -499,12 +519,155 @@ def test_37_float64_accepted_and_nan_held():
     hr = Harness(delta_arm(), num_envs=2, nan_policy="raise")
     with pytest.raises(ValueError, match="non-finite"):
         hr.ctrl.set_action(bad, hr.state)
+    # Any column: env c gets NaN, +Inf or -Inf in column c of the flat arm + gripper action; the last env none.
+    n = 9
+    hm = Harness({"arm": delta_arm(use_target=True), "gripper": gripper()}, num_envs=n)
+    hm.ctrl.reset(hm.state)
+    hm.act(np.zeros((n, 8), np.float32))
+    before = hm.ctrl.target_qpos.numpy().copy()
+    a = np.full((n, 8), 0.5, np.float32)
+    for c in range(8):
+        a[c, c] = (np.nan, np.inf, -np.inf)[c % 3]
+    hm.act(a)
+    t = hm.ctrl.target_qpos.numpy()
+    np.testing.assert_array_equal(t[:8], before[:8])
+    assert (t[8] != before[8]).all()
+    np.testing.assert_array_equal(hm.ctrl.bad_action_count.numpy(), [1] * 8 + [0])
 
 
 def test_38_from_qpos_not_provided():
-    # ManiSkill's CombinedController.from_qpos (1-D only) has no counterpart: wpctrl works on batched arrays only.
-    h = Harness({"arm": delta_arm(), "gripper": gripper()})
-    assert not hasattr(h.ctrl, "from_qpos")
+    # ManiSkill's CombinedController.from_qpos / to_action_dict (1-D only) have no counterpart: wpctrl works on
+    # batched arrays only, and action_mapping slices a flat batch the way to_action_dict splits one action.
+    ms = pytest.importorskip("mani_skill.agents.controllers.base_controller", reason="mani-skill is a dev dependency")
+    assert callable(ms.CombinedController.from_qpos) and callable(ms.CombinedController.to_action_dict)
+    n = 3
+    h = Harness({"arm": delta_arm(), "gripper": gripper()}, num_envs=n)
+    assert not hasattr(h.ctrl, "from_qpos") and not hasattr(h.ctrl, "to_action_dict")
+    a = np.random.default_rng(38).uniform(-1.5, 1.5, (n, 8)).astype(np.float32)
+    h.ctrl.reset(h.state)
+    h.act(a)
+    lo, hi = f32(-0.01), f32(0.04)
+    want = {"arm": f32(0.1) * np.clip(a[:, :7], -1, 1)}
+    want["gripper"] = f32(0.5) * (hi + lo) + f32(0.5) * (hi - lo) * np.clip(a[:, 7:], -1, 1)
+    assert h.ctrl.action_mapping == {"arm": (0, 7), "gripper": (7, 8)}
+    for uid, (s, e) in h.ctrl.action_mapping.items():
+        np.testing.assert_array_equal(h.ctrl[uid].processed_action.numpy(), want[uid])
+        np.testing.assert_array_equal(h.ctrl.processed_action.numpy()[:, s:e], want[uid])
+
+
+def test_reset_with_a_control_zeroes_the_explicit_torques_of_the_reset_envs():
+    """Explicit actuation: a reset given the Control zeroes joint_f on the reset envs' controlled DOFs (and writes
+    their drive targets); other envs and DOFs the controller does not drive keep theirs."""
+    n = 3
+    h = Harness({"arm": delta_arm(use_target=True)}, num_envs=n, actuation="explicit")
+    rng = np.random.default_rng(8)
+    h.put(rng.uniform(-1, 1, (n, 7)), rng.uniform(-1, 1, (n, 7)))
+    h.ctrl.reset(h.state)
+    h.step(rng.uniform(-1, 1, (n, 7)))
+    f = h.control.joint_f.numpy()
+    fingers = h.model.joint_qd_start.numpy()[[7, 8]]  # world 0's finger DOFs: not driven by this controller
+    f[fingers] = 123.0
+    h.control.joint_f.assign(f)
+    before = h.control.joint_f.numpy().copy()
+    assert (np.abs(before[h.dof]) > 1e-3).all()
+    q_new = rng.uniform(-1, 1, (n, 7)).astype(np.float32)
+    h.put(q_new)
+    h.ctrl.reset(h.state, env_ids=[1], control=h.control)
+    after = h.control.joint_f.numpy()
+    np.testing.assert_array_equal(after[h.dof[1]], 0.0)
+    keep = np.ones_like(after, bool)
+    keep[h.dof[1]] = False
+    np.testing.assert_array_equal(after[keep], before[keep])
+    np.testing.assert_array_equal(h.drive_q()[1], q_new[1])
+
+
+# --- README promises -----------------------------------------------------------------------------------------------
+
+
+JOINT_CONFIGS = [
+    "PDJointPosControllerConfig",
+    "PDJointPosMimicControllerConfig",
+    "PDJointVelControllerConfig",
+    "PDJointPosVelControllerConfig",
+    "PassiveControllerConfig",
+]
+
+
+@pytest.mark.parametrize("name", JOINT_CONFIGS)
+def test_joint_configs_have_maniskills_fields_order_and_defaults(name):
+    """The positional fields of wpctrl's joint configs are ManiSkill 3.0.1's, in its order, with its defaults (its
+    own dataclasses, imported); wpctrl's additions are keyword-only and come with defaults."""
+    import dataclasses
+
+    controllers = pytest.importorskip("mani_skill.agents.controllers", reason="mani-skill is a dev dependency")
+    theirs = dataclasses.fields(getattr(controllers, name))
+    ours = dataclasses.fields(getattr(wpctrl, name))
+    positional = [f for f in ours if not f.kw_only]
+    assert [f.name for f in positional] == [f.name for f in theirs]
+
+    def default(f):
+        if f.default is not dataclasses.MISSING:
+            return f.default
+        if f.default_factory is not dataclasses.MISSING:
+            return f.default_factory()
+        return "required"
+
+    assert [default(f) for f in positional] == [default(f) for f in theirs]
+    for f in ours:
+        if f.kw_only:
+            assert default(f) != "required", f.name
+
+
+def test_set_state_copies_its_input_and_get_state_is_live():
+    """DIFFERENCE (README 8): set_state copies (changing the dict's arrays afterwards changes nothing), whatever the
+    array kind; get_state returns the live arrays."""
+    torch = pytest.importorskip("torch", reason="torch is a dev dependency")
+    n = 2
+    h = Harness({"arm": delta_arm(use_target=True), "gripper": gripper()}, num_envs=n)
+    h.ctrl.reset(h.state)
+    rng = np.random.default_rng(9)
+    for kind in ("numpy", "torch", "warp"):
+        v = rng.uniform(-1, 1, (n, 7)).astype(np.float32)
+        if kind == "numpy":
+            src = v.copy()
+        elif kind == "torch":
+            src = torch.from_numpy(v.copy())
+        else:
+            src = wp.array(v, dtype=wp.float32)
+        h.ctrl.set_state({"arm": {"target_qpos": src}})
+        if kind == "warp":
+            src.fill_(7.0)
+        else:
+            src[:] = 7.0
+        np.testing.assert_array_equal(h.ctrl["arm"].target_qpos.numpy(), v, err_msg=kind)
+    live = h.ctrl.get_state()["arm"]["target_qpos"]
+    h.act(np.ones((n, 8), np.float32))
+    np.testing.assert_allclose(live.numpy(), v + f32(0.1), atol=1e-7)  # the same array, updated by the step
+
+
+def test_a_controller_built_after_the_mujoco_solver_warns_what_to_do():
+    """Changing joint_target_mode after SolverMuJoCo was built (it creates its actuators at construction) warns with
+    the fix; building before the solver, or changing no mode, does not warn."""
+    import warnings
+
+    import newton
+    from conftest import build_panda
+
+    vel = wpctrl.PDJointVelControllerConfig(ARM, -1.0, 1.0, 10.0)
+    model = build_panda(1)
+    solver = newton.solvers.SolverMuJoCo(model, disable_contacts=True)
+    with pytest.warns(UserWarning) as record:
+        wpctrl.build_controller(vel, model, solver=solver)
+    assert [str(w.message) for w in record] == [
+        "wpctrl changed Model.joint_target_mode after the MuJoCo solver was built; MuJoCo creates its actuators at "
+        "construction, so build the controller before the solver"
+    ]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        wpctrl.build_controller(vel, model, solver=solver)  # the modes are VELOCITY already: nothing changes
+        model = build_panda(1)
+        ctrl = wpctrl.build_controller(vel, model)
+        ctrl.attach_solver(newton.solvers.SolverMuJoCo(model, disable_contacts=True))
 
 
 # --- Beyond section 3: many envs, inputs, state round trips ----------------------------------------------------------
@@ -560,13 +723,13 @@ def test_get_set_state_round_trip():
     h.act(np.ones((n, 8)))
     h.ctrl.set_state(saved)
     np.testing.assert_array_equal(h.ctrl.get_state()["arm"]["target_qpos"].numpy(), saved["arm"]["target_qpos"])
-    torch = pytest.importorskip("torch")
+    torch = pytest.importorskip("torch", reason="torch is a dev dependency")
     h.ctrl.set_state({"arm": {"target_qpos": torch.zeros(n, 7)}})
     assert not h.ctrl["arm"].target_qpos.numpy().any()
 
 
 def test_torch_numpy_warp_inputs_identical_and_zero_copy():
-    torch = pytest.importorskip("torch")
+    torch = pytest.importorskip("torch", reason="torch is a dev dependency")
     n = 8
     a = np.random.default_rng(6).uniform(-1.2, 1.2, (n, 8)).astype(np.float32)
     results = []

@@ -3,7 +3,9 @@
 MuJoCo-Warp (reduced coordinates, integrates joint_q) and XPBD (maximal coordinates: joint_q is recovered with
 ``newton.eval_ik`` after each step), each with wpctrl's implicit actuation (the solver's built-in drive) and explicit
 actuation (wpctrl's clamped PD torques in ``Control.joint_f``), gravity on. Gains are chosen stable for the explicit
-law at 100 Hz. The tracking error must shrink 10x within one second of simulated time.
+law at 100 Hz, the arm's force limit low enough to be reached. At every substep the solver is given the targets and
+(explicit) the clamped PD law on that substep's measured state; the tracking error must shrink 10x within one second
+of simulated time.
 """
 
 from __future__ import annotations
@@ -55,7 +57,7 @@ def small_arm(num_envs: int) -> newton.Model:
 
 def mode():
     return {
-        "arm": wpctrl.PDJointPosControllerConfig(ARM, None, None, 20.0, 2.0, 50.0, normalize_action=False),
+        "arm": wpctrl.PDJointPosControllerConfig(ARM, None, None, 20.0, 2.0, 10.0, normalize_action=False),
         "gripper": wpctrl.PDJointPosMimicControllerConfig(
             FINGERS, 0.0, 0.04, 20.0, 2.0, 50.0, mimic={"finger_right": {"joint": "finger_left"}}
         ),
@@ -86,10 +88,23 @@ def test_tracking_with_a_real_solver(solver_name, actuation):
 
     e0 = error()
     dt = 1.0 / 100
+    dof = ctrl._engine.binding.dof_index
+    limit = np.array([10.0, 10.0, 50.0, 50.0], np.float32)
+    saturated = 0
     for _ in range(20):  # one second
         ctrl.set_action(action, s0)
         for _ in range(ctrl.num_substeps):
             ctrl.before_simulation_step(s0, control)
+            # What the solver is given at every substep: the targets, and (explicit) the clamped PD law on this
+            # substep's measured state, |f| <= the force limit (10 N·m on the arm, 50 N on the fingers).
+            np.testing.assert_allclose(control.joint_target_q.numpy()[coord], want, atol=1e-7)
+            if actuation == "explicit":
+                q, qd = s0.joint_q.numpy()[coord], s0.joint_qd.numpy()[dof]
+                law = np.float32(20.0) * (want - q) + np.float32(2.0) * (np.float32(0.0) - qd)
+                f = control.joint_f.numpy()[dof]
+                np.testing.assert_allclose(f, np.clip(law, -limit, limit), rtol=1e-5, atol=1e-5)
+                assert (np.abs(f) <= limit).all()
+                saturated += int((np.abs(law) > limit).sum())
             solver.step(s0, s1, control, None, dt)
             s0, s1 = s1, s0
             if solver_name == "xpbd":
@@ -98,5 +113,4 @@ def test_tracking_with_a_real_solver(solver_name, actuation):
     assert np.isfinite(s0.joint_q.numpy()).all()
     assert (e1 < e0 / 10).all(), f"tracking error {e0} -> {e1}"
     if actuation == "explicit":
-        f = control.joint_f.numpy()[ctrl._engine.binding.dof_index]
-        assert (np.abs(f) <= 50.0 + 1e-4).all()
+        assert saturated > 0  # the bound was reached on the way (a check of the clamp, not of a quiet state)

@@ -309,6 +309,11 @@ class _Engine:
             "joint_target_qd_out": None if control is None else control.joint_target_qd,
             "joint_f_out": None if (control is None or not self.writes_joint_f) else control.joint_f,
         }
+        effort = self._by_name.get("effort")
+        if effort is not None:  # (the coupled drive sets the substep kernel's effort outputs aside, not the reset's)
+            per_call["computed_effort_out"] = effort.computed_effort
+            per_call["applied_effort_out"] = effort.applied_effort
+            per_call["saturation_count_out"] = effort.saturation_count
         names = [a.label for a in K._reset_kernel.adj.args]
         inputs = [per_call[n] if n in per_call else self.arrays.lookup(n) for n in names]
         dim = (self.num_envs if env_ids is None else n, self.num_rows)

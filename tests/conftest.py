@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -18,6 +19,16 @@ PANDA_URDF = DATA / "panda_v2_dynamics.urdf"
 """ManiSkill's Panda URDF (panda_v2) with its dynamics, for add_urdf-built Pandas."""
 
 HAS_CUDA = wp.is_cuda_available()
+
+try:  # WPCTRL_HYPOTHESIS_PROFILE=no-shrink: report a property test's first failure as found (shrinking a stream of
+    # operations over a freshly compiled control mode can take minutes)
+    from hypothesis import Phase, settings
+
+    settings.register_profile("no-shrink", phases=[Phase.explicit, Phase.reuse, Phase.generate])
+    if os.environ.get("WPCTRL_HYPOTHESIS_PROFILE"):
+        settings.load_profile(os.environ["WPCTRL_HYPOTHESIS_PROFILE"])
+except ImportError:  # hypothesis is a dev dependency
+    pass
 
 
 @pytest.fixture(autouse=True)

@@ -21,8 +21,7 @@ Where wpctrl deliberately differs from ManiSkill, this reference follows wpctrl:
 4. An env whose flat action holds any NaN/Inf is left completely untouched and counted.
 5. ``set_state`` copies.
 
-Actuation options (drive properties, delay, effort readout, clamping), also written from their description, not
-from the kernels:
+Actuation options (issue 10), also written from their description, not from the kernels:
 
 6. Drive properties are per env ((N, n) arrays, the config's values at construction); ``set_drive`` overwrites the
    masked envs. Randomised values are Warp's RNG draws (:class:`WarpRand`, a numpy port of Warp's PCG hash: seed, the
@@ -162,20 +161,36 @@ def delay_draws(seed: int, counter: int, num_envs: int, lo: int, hi: int) -> np.
 def coupled_torques(A: np.ndarray, b: np.ndarray, d: np.ndarray, lim: np.ndarray) -> np.ndarray:
     """One env's coupled drive torques, float64: ``tau = clamp(b - D A tau, -lim, lim)`` with ``D = diag(d)``, i.e.
     the box QP ``min 1/2 tau^T (D^-1 + A) tau - (D^-1 b)^T tau  s.t. |tau| <= lim`` over the rows with ``d > 0``
-    (the others apply 0). Solved by scipy's bounded-variable least squares on the Cholesky factor of ``D^-1 + A``
-    (``1/2 |L^T tau - L^-1 D^-1 b|^2`` is the QP's objective up to a constant)."""
+    (the others apply 0). The active set comes from scipy's bounded-variable least squares on the Cholesky factor of
+    ``D^-1 + A`` (``1/2 |L^T tau - L^-1 D^-1 b|^2`` is the QP's objective up to a constant); the free rows are then
+    solved exactly on it, and the result is checked to satisfy the clamp equation."""
     from scipy.optimize import lsq_linear
 
     A, b, d, lim = (np.asarray(x, np.float64) for x in (A, b, d, lim))
     tau = np.zeros_like(b)
-    act = d > 0
+    act = (d > 0) & (lim > 0)  # a zero limit pins its row at 0 (out of the QP, like a passive one)
     if not act.any():
         return tau
-    M = np.diag(1.0 / d[act]) + A[np.ix_(act, act)]
-    L = np.linalg.cholesky(M)
-    y = np.linalg.solve(L, b[act] / d[act])
-    res = lsq_linear(L.T, y, bounds=(-lim[act], lim[act]), method="bvls", tol=1e-14, max_iter=1000)
-    tau[act] = res.x
+    idx = np.nonzero(act)[0]
+    M = np.diag(1.0 / d[idx]) + A[np.ix_(idx, idx)]
+    c = b[idx] / d[idx]
+    lo, hi = -lim[idx], lim[idx]
+    x = np.linalg.solve(M, c)  # no active limit: the linear system
+    if not ((x >= lo) & (x <= hi)).all():
+        L = np.linalg.cholesky(M)
+        x = lsq_linear(L.T, np.linalg.solve(L, c), bounds=(lo, hi), method="bvls", tol=1e-14, max_iter=1000).x
+        for _ in range(len(idx) + 2):  # polish on the active set found: exact free rows, clamped ones at the bound
+            clamped = (x <= lo * (1 - 1e-9)) | (x >= hi * (1 - 1e-9))
+            x = np.where(clamped, np.clip(x, lo, hi), x)
+            f = ~clamped
+            if f.any():
+                rhs = c[f] - M[np.ix_(f, ~f)] @ x[~f]
+                x[f] = np.linalg.solve(M[np.ix_(f, f)], rhs)
+            if ((x >= lo * (1 + 1e-9)) & (x <= hi * (1 + 1e-9))).all():
+                break
+    tau[idx] = x
+    w = b - d * (A @ tau)
+    assert np.allclose(tau[idx], np.clip(w[idx], -lim[idx], lim[idx]), rtol=1e-7, atol=1e-9 * (1 + np.abs(b).max()))
     return tau
 
 
@@ -211,6 +226,7 @@ class RefController:
         self.computed_effort = np.zeros((num_envs, n), F32)
         self.applied_effort = np.zeros((num_envs, n), F32)
         self.saturation_count = np.zeros((num_envs, n), np.int64)
+        self.sat_margin = np.zeros((num_envs, n), np.int64)  # coupled drive: substeps within 1e-5 of the limit
         mode = getattr(config, "drive_mode", "force")  # ManiSkill's passive drive is always "force"
         modes = [mode] * n if isinstance(mode, str) else list(mode)
         self.accel = np.array([m == "acceleration" for m in modes], bool)
@@ -249,6 +265,7 @@ class RefController:
         self.computed_effort[mask] = 0
         self.applied_effort[mask] = 0
         self.saturation_count[mask] = 0
+        self.sat_margin[mask] = 0
         self.step[mask] = 0
         self.start_qpos[mask] = q[mask]
         self.target_qpos[mask] = q[mask]
@@ -282,6 +299,8 @@ class RefController:
         ``response``: (N, n) joint-space response r = (H^-1)_ii (an input, as the physics is); acceleration drives
         scale both gains by 1/r; the "stable" law is ``(Kp (e - dt qd) + Kd (qd* - qd)) / (1 + r dt (Kd + dt Kp))``.
         ``command``: None, or a function mapping this substep's command to the (delayed) one to drive with.
+        "coupled": the torques of all children are solved together (:meth:`RefCombined.coupled_step`); this keeps
+        the command it wrote in ``self.command``.
         """
         self.step += 1
         everyone = np.ones(self.N, bool)
@@ -292,7 +311,8 @@ class RefController:
             _write(writes, "target_q", everyone, self.cols, tq)
         if self.has_vel_target:
             _write(writes, "target_qd", everyone, self.cols, tqd)
-        if explicit_pd is None and not track_effort:
+        self.command = (tq, tqd)
+        if explicit_pd == "coupled" or (explicit_pd is None and not track_effort):
             return
         qm, qdm = q[:, self.cols], qd[:, self.cols]
         r = np.asarray(response, F32)
@@ -498,6 +518,10 @@ class RefPassive(RefController):
 
 
 def ref_controller_cls(config):
+    from reference_ee import EE_CONFIGS, RefEE
+
+    if isinstance(config, EE_CONFIGS):
+        return RefEE
     for cls, ref in (
         (PDJointPosMimicControllerConfig, RefPDJointPosMimic),
         (PDJointPosVelControllerConfig, RefPDJointPosVel),
@@ -545,7 +569,10 @@ class RefCombined:
         delay: tuple[int, int] | None = None,
         track_effort: bool = False,
         clip_targets: str = "none",
+        kinematics=None,
     ):
+        """``kinematics(q, joint_names, ee_link) -> (N, 6, n)``: the geometric Jacobian of an EE chain at the measured
+        positions (an input for end-effector children, as the response is for acceleration drives)."""
         configs = dict(config) if isinstance(config, Mapping) else {"": config}
         configs.pop("balance_passive_force", None)
         self.robot = robot
@@ -553,12 +580,14 @@ class RefCombined:
         self.K = num_substeps
         self.explicit = actuation == "explicit"
         self.explicit_pd = explicit_pd if self.explicit else None
+        self.coupled = self.explicit_pd == "coupled"
         self.dt = F32(sim_dt)
         self.children: dict[str, RefController] = {}
         self.action_mapping: dict[str, tuple[int, int]] = {}
         col = 0
         for uid, c in configs.items():
             ch = ref_controller_cls(c)(c, robot, num_envs, num_substeps, q0)
+            ch.kinematics = kinematics
             ch.clip = clip_targets == "joint_limits"
             self.children[uid] = ch
             self.action_mapping[uid] = (col, col + ch.action_dim)
@@ -645,7 +674,8 @@ class RefCombined:
         return writes
 
     def set_action(self, action, q) -> dict:
-        """Returns the drive writes (none, unless a mode without per-substep work knows a Control)."""
+        """Returns the drive writes (none, unless a mode without per-substep work knows a Control). End-effector
+        children read the Jacobian at ``q`` from ``kinematics``."""
         a = np.asarray(action).astype(F32).reshape(self.N, self.action_dim)
         good = np.isfinite(a).all(axis=1)
         self.bad_action_count[~good] += 1
@@ -659,8 +689,9 @@ class RefCombined:
                     ch.drive_writes(good, writes)
         return writes
 
-    def before_simulation_step(self, q, qd, response: Mapping | None = None) -> dict:
-        """``response``: {uid: (N, n) r} for children with acceleration drives or under stable explicit PD."""
+    def before_simulation_step(self, q, qd, response: Mapping | None = None, inverse=None) -> dict:
+        """``response``: {uid: (N, n) r} for children with acceleration drives or under stable explicit PD.
+        ``inverse``: (N, J, J) H^-1 over the robot's joints at ``q`` (float64), for the coupled drive."""
         q, qd = np.asarray(q, F32), np.asarray(qd, F32)
         writes = empty_writes(self.N, len(self.robot.joint_names))
         unchanged = not self.per_substep and self.knows_control  # the known Control already holds the targets
@@ -671,8 +702,62 @@ class RefCombined:
             if self.delay_range is not None:
                 command = self._delayer(uid, ch)
             ch.before_simulation_step(q, qd, r, self.explicit_pd, self.dt, writes, command, self.track_effort)
+        if self.coupled:
+            self.coupled_step(q, qd, inverse, writes)
         self.knows_control = True
         return empty_writes(self.N, len(self.robot.joint_names)) if unchanged else writes
+
+    def coupled_step(self, q, qd, inverse, writes) -> None:
+        """The coupled drive (README, "PhysX-faithful drive"), float64, over every row of the mode at once:
+        ``b = Kp (q* - q - dt qd) + Kd (qd* - qd)`` (Kp = 0 without a position target, qd* = 0 without a velocity
+        target), ``d = dt Kd + dt^2 Kp``, acceleration rows scale Kp, Kd by 1 / A_ii, and ``tau`` solves the box QP
+        (:func:`coupled_torques`) with A the rows' block of H^-1. Effort readout: the law at the predicted state
+        ``b - d (A tau)`` and tau; a row counts as saturated when that law exceeds its limit (``sat_margin``: the
+        substeps where it was within 1e-5 of the limit, either way)."""
+        kids = list(self.children.values())
+        cols = np.concatenate([ch.cols for ch in kids])
+        h = float(self.dt)
+        qm = np.asarray(q, np.float64)[:, cols]
+        qdm = np.asarray(qd, np.float64)[:, cols]
+        kp, kd, lim, accel, e, tqd = [], [], [], [], [], []
+        for ch in kids:
+            tq, cqd = ch.command
+            has_q = tq is not None
+            kp.append(np.asarray(ch.kp if has_q else np.zeros((self.N, ch.n)), np.float64))
+            kd.append(np.asarray(ch.kd, np.float64))
+            lim.append(np.asarray(ch.force_limit, np.float64))
+            accel.append(np.broadcast_to(ch.accel, (self.N, ch.n)))
+            e.append(np.asarray(tq, np.float64) if has_q else np.zeros((self.N, ch.n)))
+            tqd.append(np.asarray(cqd, np.float64) if ch.has_vel_target else np.zeros((self.N, ch.n)))
+        kp, kd, lim, accel, tq, tqd = (np.concatenate(x, axis=1) for x in (kp, kd, lim, accel, e, tqd))
+        e = np.where(kp > 0, tq - qm, 0.0)
+        tau = np.zeros_like(qm)
+        w = np.zeros_like(qm)
+        scale = np.zeros_like(qm)  # |b| + D |A| |tau|: what the law's rounding is relative to
+        for env in range(self.N):
+            A = np.asarray(inverse[env], np.float64)[np.ix_(cols, cols)]
+            diag = np.diag(A)
+            kpe = np.where(accel[env], kp[env] / diag, kp[env])
+            kde = np.where(accel[env], kd[env] / diag, kd[env])
+            b = kpe * (e[env] - h * qdm[env]) + kde * (tqd[env] - qdm[env])
+            d = h * kde + h * h * kpe
+            tau[env] = coupled_torques(A, b, d, lim[env])
+            w[env] = np.where(d > 0, b - d * (A @ tau[env]), 0.0)
+            scale[env] = np.abs(b) + d * (np.abs(A) @ np.abs(tau[env]))
+        everyone = np.ones(self.N, bool)
+        _write(writes, "f", everyone, cols, tau.astype(F32))
+        self.coupled_scale = (cols, scale)
+        if self.track_effort:
+            c0 = 0
+            for ch in kids:
+                sl = slice(c0, c0 + ch.n)
+                ch.computed_effort = w[:, sl].astype(F32)
+                ch.effort_scale = scale[:, sl]
+                ch.applied_effort = tau[:, sl].astype(F32)
+                near = np.abs(np.abs(w[:, sl]) - lim[:, sl]) <= 1e-5 * np.maximum(lim[:, sl], 1.0)
+                ch.saturation_count += (np.abs(w[:, sl]) > lim[:, sl]) & ~near
+                ch.sat_margin += near
+                c0 += ch.n
 
     def initial_control_targets(self, q0) -> dict:
         """Drive targets of a ``Model.control()`` made after construction: the initial pose on position joints, 0 on

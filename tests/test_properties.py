@@ -1,91 +1,47 @@
-"""Property tests: wpctrl against the independent numpy reference (``reference_np.py``), step by step.
+"""Property tests: wpctrl against the independent numpy reference (``reference_np.py``, ``reference_ee.py``), operation
+by operation (``property_harness.py`` says what is compared after each one and how the reference's inputs are checked).
 
-Hypothesis draws a control mode (1-3 children on disjoint subsets of the Panda's 9 joints, every config type and mode
-flag, scalar or per-joint parameters, mimic maps, force/acceleration drive modes), a substep count, an actuation
-(implicit; explicit with the naive or the stable PD law), when the joint response r = (H^-1)_ii is refreshed, a NaN
-policy and a seed for an operation stream: random measured states written into the Newton state (also between
-substeps), actions (in range, out of range, NaN/Inf rows; numpy/torch/wp, float32/float64, strided), steps without
-an action, partial resets (ids, masks, torch/wp selections; with or without a Control) and set_state. The actuation
-actuation options are drawn too: a command delay (fixed or per-env ranges; the drawn per-env delays are read back
-after each reset, checked to lie in range and fed to the reference as inputs), effort tracking, target clamping, and
-per-env drive-property edits in the stream (``set_drive_properties`` on a random child with random envs and shapes;
-``randomize_drive_properties``, whose device draws are checked for range and untouched envs, then fed to the
-reference).
+Hypothesis draws the build and then every operation of the stream itself (``st.data()``), so a failure shrinks to a
+short stream of simple operations:
 
-After every operation the controller's buffers, the model's drive properties and the whole of Newton's control arrays
-(entries the controller must not write included) are compared with the reference within 1e-6 (torques and model
-gains: relative 1e-6). The joint response r is read back from wpctrl after every call and fed to the reference as an
-input, like the measured state: its value is checked against the mass matrix in test_acceleration.py, its use
-(acceleration gains, the stable law) here.
+- ``test_matches_reference``: a random control mode (1-3 children on disjoint subsets of the Panda's 9 joints, every
+  joint config type and flag, scalar or per-joint parameters, mimic maps, force/acceleration drive modes), the model
+  layout (replicated worlds with 1, 3 or 5 envs, or 3 worlds that differ: per-env index tables), a substep count, the
+  actuation (implicit; explicit with the naive, stable or coupled PD law), when r = (H^-1)_ii is refreshed, a NaN
+  policy, and the actuation options (command delay, effort readout, target clamping, the RNG seed).
+- ``test_panda_modes_match_reference``: ManiSkill's Panda modes, the end-effector ones included, on the same layouts,
+  actuations and options (few modes: a mode compiles its kernels once, the cost of the random-mode test).
+- ``test_mimic_matches_reference``: mimic maps with several control joints.
 
-Warp runs on the CPU device; models are built once per env count and shared (each controller rewrites the drive
-arrays of its own joints only, and the comparisons never read other joints' model values).
+Operations: measured states written into the Newton state (also between substeps), actions (in range, out of range,
+NaN/Inf entries; numpy / torch / wp, float32 / float64, strided, 1-D with one env), steps with and without an action
+and past K substeps, resets (ids, masks, torch / wp selections; with or without the Control), ``set_drive_properties``
+and ``randomize_drive_properties`` on a child and an env selection, and ``set_state``.
+
+Cost: the random-mode test compiles the two step kernels of each mode it draws (about 0.2 s each on the CPU; Warp's
+kernel cache keeps them for later runs); ``WPCTRL_PROPERTY_EXAMPLES`` sets the examples of the random-mode test (the
+others take a fifth), default 250.
 """
 
 from __future__ import annotations
 
+import copy
 import os
-import warnings
 
-import newton
 import numpy as np
 import pytest
-import warp as wp
-from conftest import build_panda
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from reference_np import WRITE_KEYS, RefCombined, RefRobot
+from property_harness import Harness, model_for, run_stream
 
 import wpctrl
 from wpctrl import config as C
-from wpctrl.robots import PANDA_JOINTS
+from wpctrl.robots import PANDA_JOINTS, panda_control_modes
 
 torch = pytest.importorskip("torch", reason="torch is a dev dependency (torch inputs are drawn here)")
 
-TOL = 1e-6
 MAX_EXAMPLES = int(os.environ.get("WPCTRL_PROPERTY_EXAMPLES", "250"))  # raise it for a deeper search
-
-# wpctrl bugs this file found (regression tests at the end); the stream test steps around any that is set True.
-KNOWN_BUGS = {
-    # A child with no action columns (passive) of a dict: processed_action slices a wp.array [:, k:k] and raises.
-    "empty_child_processed_action": False,
-}
-ENV_COUNTS = (3, 5)
-
-# ----------------------------------------------------------------------------------------------------------------------
-# Models and an index layout computed here (independently of wpctrl's binding).
-
-_MODELS: dict[int, tuple[newton.Model, Layout]] = {}
-
-
-class Layout:
-    """(N, J) coordinate and DOF indices of the Panda's joints in every world, and the robot's joint limits."""
-
-    def __init__(self, model: newton.Model):
-        labels = list(model.joint_label)
-        world = model.joint_world.numpy()
-        q_start = model.joint_q_start.numpy()
-        qd_start = model.joint_qd_start.numpy()
-        N = int(model.world_count)
-        self.coord = np.zeros((N, len(PANDA_JOINTS)), np.int64)
-        self.dof = np.zeros((N, len(PANDA_JOINTS)), np.int64)
-        for j, label in enumerate(labels):
-            short = label.rsplit("/", 1)[-1]
-            if short in PANDA_JOINTS:
-                c = PANDA_JOINTS.index(short)
-                self.coord[world[j], c] = q_start[j]
-                self.dof[world[j], c] = qd_start[j]
-        d0 = self.dof[0]
-        self.limits = np.stack([model.joint_limit_lower.numpy()[d0], model.joint_limit_upper.numpy()[d0]], axis=1)
-        self.q0 = model.joint_q.numpy()[self.coord].astype(np.float32)
-
-
-def model_for(num_envs: int):
-    if num_envs not in _MODELS:
-        m = build_panda(num_envs)
-        _MODELS[num_envs] = (m, Layout(m))
-    return _MODELS[num_envs]
-
+LAYOUTS = [("replicated", 1), ("replicated", 3), ("replicated", 5), ("flat", 3)]
 
 # ----------------------------------------------------------------------------------------------------------------------
 # Config strategies.
@@ -242,7 +198,7 @@ def big_mimic(draw, limits_by_name: dict):
 
 @st.composite
 def actuation_options(draw):
-    """The actuation build options: mostly off (the default path stays covered), each on in a good share of examples."""
+    """Issue 10's build options: mostly off (the default path stays covered), each on in a good share of examples."""
     opts = {}
     d = draw(st.sampled_from([None, None, 0, 2, (0, 3), (1, 2)]))
     if d is not None:
@@ -251,447 +207,74 @@ def actuation_options(draw):
         opts["track_effort"] = True
     if draw(st.booleans()):
         opts["clip_targets"] = "joint_limits"
+    if draw(st.booleans()):
+        opts["seed"] = draw(st.integers(-(2**31), 2**31 - 1))  # keys the per-env delay draws
     return opts
-
-
-DRIVE = ("stiffness", "damping", "force_limit", "friction")
-
-# ----------------------------------------------------------------------------------------------------------------------
-# The harness.
-
-
-class Harness:
-    def __init__(
-        self, mode, num_envs, num_substeps, actuation, nan_policy, rng, explicit_pd, inertia_update, opts=None
-    ):
-        opts = dict(opts or {})
-        self.opts = opts
-        self.model, self.layout = model_for(num_envs)
-        self.N = num_envs
-        self.K = num_substeps
-        self.rng = rng
-        self.single = not isinstance(mode, dict)
-        self.explicit = actuation == "explicit"
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            self.ctrl = wpctrl.build_controller(
-                mode,
-                self.model,
-                control_freq=20,
-                sim_freq=20 * num_substeps,
-                actuation=actuation,
-                nan_policy=nan_policy,
-                explicit_pd=explicit_pd,
-                inertia_update=inertia_update,
-                **opts,
-            )
-        robot = RefRobot(PANDA_JOINTS, self.layout.limits)
-        delay = opts.get("delay")
-        delay = (delay, delay) if isinstance(delay, int) else delay
-        self.ref = RefCombined(
-            mode,
-            robot,
-            num_envs,
-            num_substeps,
-            self.layout.q0,
-            actuation,
-            explicit_pd,
-            1.0 / (20 * num_substeps),
-            inertia_update=inertia_update,
-            delay=delay,
-            track_effort=opts.get("track_effort", False),
-            clip_targets=opts.get("clip_targets", "none"),
-        )
-        self.nominal = {
-            uid: {f: getattr(self.child(uid), f).numpy()[0].copy() for f in DRIVE} for uid in self.ref.children
-        }
-        self.read_delay()
-        self.nan_policy = nan_policy
-        self.state = self.model.state()
-        self.control = self.model.control()
-        # The expected control arrays: everything the controller must not write keeps its value.
-        self.expect = {
-            "target_q": self.control.joint_target_q.numpy().copy(),
-            "target_qd": self.control.joint_target_qd.numpy().copy(),
-            "f": self.control.joint_f.numpy().copy(),
-        }
-        self.apply(self.ref.initial_control_targets(self.layout.q0), check_only=True)
-        self.q = self.layout.q0.copy()
-        self.qd = np.zeros_like(self.q)
-
-    # -- Newton arrays ----------------------------------------------------------------------------------------------
-
-    def put_state(self):
-        self.q = self.rng.uniform(-3.0, 3.0, self.q.shape).astype(np.float32)
-        self.qd = self.rng.uniform(-5.0, 5.0, self.q.shape).astype(np.float32)
-        q = self.state.joint_q.numpy()
-        qd = self.state.joint_qd.numpy()
-        q[self.layout.coord] = self.q
-        qd[self.layout.dof] = self.qd
-        self.state.joint_q.assign(q)
-        self.state.joint_qd.assign(qd)
-
-    def _index(self, key):
-        return self.layout.coord if key == "target_q" else self.layout.dof
-
-    def apply(self, writes: dict, check_only: bool = False):
-        """Fold the reference's writes into the expected control arrays (check_only: just compare those entries)."""
-        for key in WRITE_KEYS:
-            written, values = writes[key]
-            if key == "f" and not self.explicit:
-                assert not written.any()
-            idx = self._index(key)[written]
-            if check_only:
-                got = self._control_array(key)[idx]
-                np.testing.assert_allclose(got, values[written], atol=TOL, rtol=0, err_msg=f"initial control {key}")
-            else:
-                self.expect[key][idx] = values[written]
-
-    def _control_array(self, key):
-        return {
-            "target_q": self.control.joint_target_q,
-            "target_qd": self.control.joint_target_qd,
-            "f": self.control.joint_f,
-        }[key].numpy()
-
-    def child(self, uid):
-        return self.ctrl if self.single else self.ctrl[uid]
-
-    def read_delay(self):
-        """The per-env delays wpctrl drew at the last reset: in range, then an input of the reference."""
-        if self.ref.delay_range is None:
-            assert self.ctrl.delay is None
-            return
-        d = self.ctrl.delay.numpy()
-        lo, hi = self.ref.delay_range
-        assert ((d >= lo) & (d <= hi)).all(), (d, lo, hi)
-        self.ref.delay = d.astype(np.int64).copy()
-
-    def response(self) -> dict:
-        """{uid: (N, n) r} as wpctrl last computed it (an input of the physics, like the measured state)."""
-        out = {}
-        for uid in self.ref.children:
-            r = self.child(uid).response
-            if r is not None:
-                out[uid] = r.numpy().copy()
-        return out
-
-    def check_drive_properties(self, where: str):
-        m = self.model
-        arrays = {
-            "ke": m.joint_target_ke,
-            "kd": m.joint_target_kd,
-            "effort": m.joint_effort_limit,
-            "friction": m.joint_friction,
-        }
-        response = self.response()
-        for uid, rc in self.ref.children.items():
-            props = rc.drive_properties(self.explicit, response.get(uid))
-            dof = self.layout.dof[:, rc.cols]
-            for key, arr in arrays.items():
-                np.testing.assert_allclose(arr.numpy()[dof], props[key], rtol=1e-6, atol=0, err_msg=f"{where}: {key}")
-            modes = np.vectorize(lambda s: int(newton.JointTargetMode[s]))(props["mode"])
-            np.testing.assert_array_equal(m.joint_target_mode.numpy()[dof], modes, err_msg=f"{where}: mode")
-
-    # -- comparisons ------------------------------------------------------------------------------------------------
-
-    def check(self, where: str):
-        ctrl, ref = self.ctrl, self.ref
-        for key in WRITE_KEYS:
-            got = self._control_array(key)
-            exp = self.expect[key]
-            # Torques are products of gains up to 1e4: allow the float32 rounding of a fused multiply-add.
-            rtol = 1e-6 if key == "f" else 0.0
-            np.testing.assert_allclose(got, exp, atol=TOL, rtol=rtol, err_msg=f"{where}: control.{key}")
-        np.testing.assert_array_equal(ctrl.step_counter.numpy(), ref.step_counter, err_msg=f"{where}: step")
-        np.testing.assert_array_equal(ctrl.bad_action_count.numpy(), ref.bad_action_count, err_msg=f"{where}: bad")
-        for uid, rc in ref.children.items():
-            c = ctrl if self.single else ctrl[uid]
-            w = f"{where}: {uid or 'ctrl'}"
-            if rc.action_dim or not (KNOWN_BUGS["empty_child_processed_action"] and not self.single):
-                np.testing.assert_allclose(
-                    c.processed_action.numpy(), rc.processed_action, atol=TOL, rtol=0, err_msg=f"{w}.processed_action"
-                )
-            if rc.has_qpos:
-                np.testing.assert_allclose(
-                    c.target_qpos.numpy(), rc.target_qpos, atol=TOL, rtol=0, err_msg=f"{w}.target_qpos"
-                )
-                np.testing.assert_allclose(
-                    c.start_qpos.numpy(), rc.start_qpos, atol=TOL, rtol=0, err_msg=f"{w}.start_qpos"
-                )
-            if rc.has_vel_target:
-                np.testing.assert_allclose(
-                    c.target_qvel.numpy(), rc.target_qvel, atol=TOL, rtol=0, err_msg=f"{w}.target_qvel"
-                )
-        self.check_drive_properties(where)
-        for uid, rc in ref.children.items():
-            c = self.child(uid)
-            w = f"{where}: {uid or 'ctrl'}"
-            for f, a in zip(DRIVE, (rc.kp, rc.kd, rc.force_limit, rc.friction)):
-                np.testing.assert_array_equal(getattr(c, f).numpy(), a, err_msg=f"{w}.{f}")
-            if ref.track_effort:
-                for f in ("computed_effort", "applied_effort"):
-                    np.testing.assert_allclose(
-                        getattr(c, f).numpy(), getattr(rc, f), atol=TOL, rtol=1e-6, err_msg=f"{w}.{f}"
-                    )
-                # |u| vs the limit: a float32 rounding at the boundary may flip one count; none were seen
-                np.testing.assert_array_equal(c.saturation_count.numpy(), rc.saturation_count, err_msg=f"{w}.sat")
-            else:
-                assert c.computed_effort is None
-        got_state = ctrl.get_state()
-        exp_state = ref.get_state(self.single)
-        assert _keys(got_state) == _keys(exp_state), where
-        for path, arr in _leaves(exp_state):
-            np.testing.assert_allclose(_get(got_state, path).numpy(), arr, atol=TOL, rtol=0, err_msg=f"{where} {path}")
-
-    # -- operations -------------------------------------------------------------------------------------------------
-
-    def random_action(self):
-        rng, N, D = self.rng, self.N, self.ref.action_dim
-        a = rng.uniform(-1.5, 1.5, (N, D))
-        if D and rng.random() < 0.3:
-            a *= rng.choice([0.01, 10.0, 1e3])
-        if D and rng.random() < 0.3:
-            envs = rng.random(N) < 0.4
-            cols = rng.integers(0, D, N)
-            a[envs, cols[envs]] = rng.choice([np.nan, np.inf, -np.inf], int(envs.sum()))
-        return a
-
-    def as_input(self, a: np.ndarray):
-        """The same action as one of the accepted input kinds."""
-        kind = self.rng.integers(0, 7)
-        if kind == 0:
-            return a.astype(np.float64)
-        if kind == 1:
-            return np.asfortranarray(a.astype(np.float32))
-        if kind == 2:
-            return torch.from_numpy(a.astype(np.float32))
-        if kind == 3:
-            return torch.from_numpy(a.astype(np.float64))
-        if kind == 4:
-            return torch.from_numpy(np.ascontiguousarray(a.astype(np.float32).T)).t()  # strided view
-        if kind == 5:
-            return wp.array(a.astype(np.float32), dtype=wp.float32, device="cpu")
-        return a.astype(np.float32)
-
-    def random_env_ids(self):
-        rng, N = self.rng, self.N
-        kind = rng.integers(0, 8)
-        if kind == 0:
-            return None
-        if kind == 1:
-            return int(rng.integers(0, N))
-        if kind == 2:
-            return rng.integers(0, N, rng.integers(0, N + 2)).tolist()  # duplicates and empty lists included
-        if kind == 3:
-            return rng.random(N) < 0.5
-        if kind == 4:
-            return torch.from_numpy(rng.random(N) < 0.5)
-        if kind == 5:
-            return torch.from_numpy(rng.choice(N, rng.integers(1, N + 1), replace=False))
-        if kind == 6:
-            return wp.array(rng.random(N) < 0.5, dtype=wp.bool, device="cpu")
-        return wp.array(rng.choice(N, rng.integers(1, N + 1), replace=False).astype(np.int32), dtype=wp.int32)
-
-    def op_reset(self):
-        self.put_state()
-        env_ids = self.random_env_ids()
-        with_control = bool(self.rng.random() < 0.5)
-        self.ctrl.reset(self.state, env_ids, control=self.control if with_control else None)
-        self.apply(self.ref.reset(self.q, self.qd, env_ids, with_control))
-        self.read_delay()
-        self.check(f"reset({env_ids!r}, control={with_control})")
-
-    def op_step(self, with_action: bool):
-        self.put_state()
-        if with_action:
-            a = self.random_action()
-            if self.nan_policy == "raise" and not np.isfinite(a.astype(np.float32)).all():
-                with pytest.raises(ValueError, match="non-finite"):
-                    self.ctrl.set_action(self.as_input(a), self.state)
-            else:
-                self.ctrl.set_action(self.as_input(a), self.state)
-                self.apply(self.ref.set_action(a, self.q))
-            self.check("set_action")
-        for k in range(self.K + int(self.rng.integers(0, 2)) * self.K):  # sometimes keep stepping past K
-            if self.rng.random() < 0.5:
-                self.put_state()
-            self.ctrl.before_simulation_step(self.state, self.control)
-            self.apply(self.ref.before_simulation_step(self.q, self.qd, self.response()))
-            self.check(f"substep {k + 1}")
-
-    def op_drive(self):
-        """set_drive_properties or randomize_drive_properties on a random child, random envs (no duplicate ids)."""
-        rng, N = self.rng, self.N
-        uid = list(self.ref.children)[int(rng.integers(0, len(self.ref.children)))]
-        c, rc = self.child(uid), self.ref.children[uid]
-        n = rc.n
-        kind = rng.integers(0, 4)
-        env_ids = [None, int(rng.integers(0, N)), rng.random(N) < 0.5, rng.choice(N, rng.integers(1, N + 1), False)][
-            kind
-        ]
-        if kind == 3 and rng.random() < 0.5:
-            env_ids = wp.array(env_ids.astype(np.int32), dtype=wp.int32, device="cpu")
-        mask = np.zeros(N, bool)
-        if env_ids is None:
-            mask[:] = True
-        elif kind == 2:
-            mask = env_ids.copy()
-        else:
-            mask[np.asarray(env_ids.numpy() if isinstance(env_ids, wp.array) else env_ids).reshape(-1)] = True
-        fields = [f for f in DRIVE if rng.random() < 0.5] or ["stiffness"]
-        if rng.random() < 0.5:
-            sel = {0: N, 1: 1, 2: N, 3: int(mask.sum())}[kind]
-            vals = {}
-            for f in fields:
-                shape = (n,) if rng.random() < 0.5 else (sel, n)
-                v = rng.uniform(0.0, 500.0, shape).astype(np.float32)
-                vals[f] = torch.from_numpy(v) if rng.random() < 0.3 else v
-            c.set_drive_properties(env_ids=env_ids, **vals)
-            for f, v in vals.items():
-                v = np.asarray(v, np.float32)
-                full = np.zeros((N, n), np.float32)
-                if v.ndim == 1:
-                    full[:] = v
-                elif kind in (0, 2):
-                    full[:] = v
-                else:
-                    ids = np.asarray(env_ids.numpy() if isinstance(env_ids, wp.array) else env_ids).reshape(-1)
-                    full[ids] = v
-                rc.set_drive(f, full, mask)
-            self.check(f"set_drive_properties({sorted(vals)}, {env_ids!r})")
-            return
-        mode = "scale" if rng.random() < 0.6 else "abs"
-        ranges = {}
-        for f in fields:
-            if rng.random() < 0.3:
-                ranges[f] = (1.0, 1.0) if mode == "scale" else (3.5, 3.5)  # zero range: exact
-            else:
-                lo = float(rng.uniform(0.0, 2.0 if mode == "scale" else 100.0))
-                ranges[f] = (lo, lo + float(rng.uniform(0.0, 2.0 if mode == "scale" else 100.0)))
-        before = {f: getattr(c, f).numpy().copy() for f in DRIVE}
-        c.randomize_drive_properties(env_ids=env_ids, mode=mode, seed=int(rng.integers(0, 1000)), **ranges)
-        for f in DRIVE:
-            got = getattr(c, f).numpy().copy()
-            np.testing.assert_array_equal(got[~mask], before[f][~mask], err_msg=f"randomize {f}: untouched envs")
-            if f not in ranges:
-                np.testing.assert_array_equal(got, before[f], err_msg=f"randomize {f}: not drawn")
-                continue
-            lo, hi = ranges[f]
-            nom = self.nominal[uid][f] if mode == "scale" else np.float32(1.0)
-            g = got[mask]
-            lo_v, hi_v = np.float32(lo) * nom, np.float32(hi) * nom
-            if lo == hi:
-                np.testing.assert_array_equal(g, np.broadcast_to(lo_v, g.shape), err_msg=f"zero range {f}")
-            else:
-                assert ((g >= lo_v * (1 - 1e-6) - 1e-6) & (g <= hi_v * (1 + 1e-6) + 1e-6)).all(), (f, g, lo_v, hi_v)
-            rc.set_drive(f, got, mask)
-        self.check(f"randomize_drive_properties({ranges}, {mode}, {env_ids!r})")
-
-    def op_set_state(self):
-        exp = self.ref.get_state(self.single)
-        if not exp:
-            self.ctrl.set_state(None)
-            return
-        new = _map(exp, lambda x: self.rng.uniform(-2, 2, x.shape).astype(np.float32))
-        self.ctrl.set_state(new)
-        self.ref.set_state(new, self.single)
-        self.check("set_state")
-
-
-def _keys(d):
-    return {k: _keys(v) for k, v in d.items()} if isinstance(d, dict) else None
-
-
-def _leaves(d, path=()):
-    for k, v in d.items():
-        if isinstance(v, dict):
-            yield from _leaves(v, path + (k,))
-        else:
-            yield path + (k,), v
-
-
-def _get(d, path):
-    for k in path:
-        d = d[k]
-    return d
-
-
-def _map(d, fn):
-    return {k: _map(v, fn) if isinstance(v, dict) else fn(v) for k, v in d.items()}
 
 
 # ----------------------------------------------------------------------------------------------------------------------
 # Tests.
 
-_LIMITS = {s: tuple(map(float, lim)) for s, lim in zip(PANDA_JOINTS, model_for(ENV_COUNTS[0])[1].limits)}
-
-
-@settings(
-    max_examples=MAX_EXAMPLES, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large]
+_LIMITS = {s: tuple(map(float, lim)) for s, lim in zip(PANDA_JOINTS, model_for("replicated", 3)[1].limits)}
+SETTINGS = dict(deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+EXPLICIT = st.sampled_from(
+    [("implicit", "naive"), ("explicit", "naive"), ("explicit", "stable"), ("explicit", "coupled")]
 )
+
+
+@settings(max_examples=MAX_EXAMPLES, **SETTINGS)
 @given(
     mode=control_mode(_LIMITS),
-    num_envs=st.sampled_from(ENV_COUNTS),
+    layout=st.sampled_from(LAYOUTS),
     num_substeps=st.sampled_from([1, 2, 5]),
-    actuation=st.sampled_from(["implicit", "explicit"]),
-    explicit_pd=st.sampled_from(["naive", "naive", "stable"]),
+    actuation=EXPLICIT,
     inertia_update=st.sampled_from(["control", "substep"]),
     nan_policy=st.sampled_from(["hold", "hold", "raise"]),
-    seed=st.integers(0, 2**32 - 1),
     opts=actuation_options(),
+    data=st.data(),
 )
-def test_matches_reference(
-    mode, num_envs, num_substeps, actuation, explicit_pd, inertia_update, nan_policy, seed, opts
-):
-    run_stream(mode, num_envs, num_substeps, actuation, explicit_pd, inertia_update, nan_policy, seed, opts)
+def test_matches_reference(mode, layout, num_substeps, actuation, inertia_update, nan_policy, opts, data):
+    h = Harness(mode, layout, num_substeps, *actuation, nan_policy, inertia_update, data.draw, opts)
+    run_stream(h, data.draw)
 
 
-@settings(max_examples=max(MAX_EXAMPLES // 5, 10), deadline=None, suppress_health_check=[HealthCheck.too_slow])
+PANDA_MODES = ["pd_joint_delta_pos", "pd_joint_target_delta_pos", "pd_joint_pos_vel", "pd_ee_delta_pos",
+               "pd_ee_delta_pose"]  # fmt: skip
+
+
+@settings(max_examples=max(MAX_EXAMPLES // 5, 10), **SETTINGS)
+@given(
+    name=st.sampled_from(PANDA_MODES),
+    layout=st.sampled_from(LAYOUTS),
+    num_substeps=st.sampled_from([1, 5]),
+    actuation=EXPLICIT,
+    inertia_update=st.sampled_from(["control", "substep"]),
+    opts=actuation_options(),
+    data=st.data(),
+)
+def test_panda_modes_match_reference(name, layout, num_substeps, actuation, inertia_update, opts, data):
+    """ManiSkill's Panda modes, end-effector ones included (one DLS step at the measured state, the Jacobian from
+    Newton's forward kinematics)."""
+    mode = copy.deepcopy(panda_control_modes()[name])
+    if name.startswith("pd_ee") and layout[0] == "flat":  # the EE kernels compile one chain layout for all worlds
+        with pytest.raises(wpctrl.ConfigError, match="laid out differently across worlds"):
+            Harness(mode, layout, num_substeps, *actuation, "hold", inertia_update, data.draw, opts)
+        return
+    h = Harness(mode, layout, num_substeps, *actuation, "hold", inertia_update, data.draw, opts)
+    run_stream(h, data.draw)
+
+
+@settings(max_examples=max(MAX_EXAMPLES // 5, 10), **SETTINGS)
 @given(
     mode=big_mimic(_LIMITS),
     num_substeps=st.sampled_from([1, 5]),
     actuation=st.sampled_from(["implicit", "explicit"]),
-    seed=st.integers(0, 2**32 - 1),
+    data=st.data(),
 )
-def test_mimic_matches_reference(mode, num_substeps, actuation, seed):
+def test_mimic_matches_reference(mode, num_substeps, actuation, data):
     """Mimic maps with several control joints, as the mixed stream above draws them rarely."""
-    run_stream(mode, ENV_COUNTS[0], num_substeps, actuation, "naive", "control", "hold", seed)
-
-
-def run_stream(mode, num_envs, num_substeps, actuation, explicit_pd, inertia_update, nan_policy, seed, opts=None):
-    rng = np.random.default_rng(seed)
-    h = Harness(mode, num_envs, num_substeps, actuation, nan_policy, rng, explicit_pd, inertia_update, opts)
-    ref, ctrl = h.ref, h.ctrl
-
-    # Metadata: action spaces, mapping, model drive properties.
-    assert ctrl.single_action_space.shape == (ref.action_dim,)
-    np.testing.assert_array_equal(ctrl.single_action_space.low, ref.action_low)
-    np.testing.assert_array_equal(ctrl.single_action_space.high, ref.action_high)
-    assert ctrl.action_space.shape == ((num_envs, ref.action_dim))
-    if not h.single:
-        assert ctrl.action_mapping == ref.action_mapping
-    for uid, rc in ref.children.items():
-        c = ctrl if h.single else ctrl[uid]
-        if rc.normalize:
-            np.testing.assert_array_equal(c._original_single_action_space.low, rc.low)
-            np.testing.assert_array_equal(c._original_single_action_space.high, rc.high)
-    h.check("construction")
-
-    # The operation stream; the first reset may come late (buffers start at the model's initial pose).
-    n_ops = int(rng.integers(6, 14))
-    for _ in range(n_ops):
-        r = rng.random()
-        if r < 0.2:
-            h.op_reset()
-        elif r < 0.7:
-            h.op_step(with_action=True)
-        elif r < 0.8:
-            h.op_step(with_action=False)
-        elif r < 0.9:
-            h.op_drive()
-        else:
-            h.op_set_state()
+    h = Harness(mode, ("replicated", 3), num_substeps, actuation, "naive", "hold", "control", data.draw)
+    run_stream(h, data.draw)
 
 
 def test_strategies_cover_every_config_type():
@@ -719,17 +302,17 @@ def test_strategies_cover_every_config_type():
 
 
 # ----------------------------------------------------------------------------------------------------------------------
-# Regression tests: minimal reproductions of the bugs in KNOWN_BUGS (fixed).
+# Regression tests: minimal reproductions of bugs this file found (fixed).
 
 
 def test_processed_action_of_a_child_without_action_columns():
-    model, _ = model_for(ENV_COUNTS[0])
+    model, _ = model_for("replicated", 3)
     mode = {
         "arm": C.PDJointPosControllerConfig(["panda_joint1"], -1.0, 1.0, 100.0, 10.0),
         "knuckle": C.PassiveControllerConfig(["panda_joint2"], damping=1.0),
     }
     ctrl = wpctrl.build_controller(mode, model)
-    assert ctrl["knuckle"].processed_action.shape == (ENV_COUNTS[0], 0)
+    assert ctrl["knuckle"].processed_action.shape == (3, 0)
 
 
 def test_float64_torch_action_outlives_its_conversion(monkeypatch):
@@ -749,7 +332,7 @@ def test_float64_torch_action_outlives_its_conversion(monkeypatch):
         return out
 
     monkeypatch.setattr(torch.Tensor, "to", poisoning_to)
-    model, _ = model_for(ENV_COUNTS[0])
+    model, _ = model_for("replicated", 3)
     cfg = C.PDJointVelControllerConfig(["panda_joint1"], 0.0, 0.0, 0.0, normalize_action=False)
     ctrl = wpctrl.build_controller(cfg, model)
     a = np.array([[0.1], [0.2], [0.3]])

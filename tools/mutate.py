@@ -1,0 +1,542 @@
+"""Mutation check: does the test suite notice a small, deliberate bug in the kernels and the engine?
+
+Each mutation below is one exact text replacement in one file of ``wpctrl/`` (a sign flip, an off-by-one, a dropped
+term, a check that skips a case). For each one this script copies the working tree to a temporary directory, applies
+the replacement there, and runs the fast tests of the copy against the copy's ``wpctrl`` (the editable install's
+import hook, which maps ``wpctrl`` to this checkout, is removed from the child interpreter, and the child checks that
+the module it imported holds the mutated text). ``-x`` stops at the first failing test: that test *killed* the
+mutation. A mutation that passes every test it ran *survived*: a blind spot of the suite.
+
+Not part of CI: every mutation recompiles the kernels of the mutated module (Warp caches them by source, so the
+mutated kernels land next to the real ones in Warp's kernel cache; ``--warp-cache DIR`` puts them elsewhere).
+
+    python tools/mutate.py                    # every mutation, one at a time
+    python tools/mutate.py --list             # names and what each one breaks
+    python tools/mutate.py -k delay -k ema    # the mutations whose name contains "delay" or "ema"
+    python tools/mutate.py --baseline         # the fast tests on an unmutated copy (must pass)
+    python tools/mutate.py --markdown out.md  # also write the result table
+
+Exit status: 0 when every mutation run was killed, 1 when one survived, 2 on a stale mutation (its text is no longer
+in the file exactly once) or a baseline failure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import textwrap
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+FAST_TESTS = (
+    "tests/test_semantics.py",
+    "tests/test_conformance.py",
+    "tests/test_launches.py",
+    "tests/test_actuation.py",
+    "tests/test_base_controllers.py",
+    "tests/test_errors.py",
+    "tests/test_binding.py",
+    "tests/test_plan.py",
+    "tests/test_acceleration.py",
+    "tests/test_coupled.py",
+    "tests/test_ee.py",
+    "tests/test_ee_conformance.py",
+    "tests/test_alloc_sync.py",
+    "tests/test_properties.py",
+)
+"""The fast tests a mutation runs after its own targeted ones (a minute or less each on a 2-core CPU, warm cache)."""
+
+PROPERTY_EXAMPLES = "60"
+"""Hypothesis examples per property test in a mutant (``WPCTRL_PROPERTY_EXAMPLES``); the suite's default is larger."""
+
+
+@dataclass(frozen=True)
+class Mutation:
+    name: str
+    file: str
+    old: str
+    new: str
+    what: str
+    tests: tuple[str, ...] = ()
+    """Tests run first (the ones expected to kill it); the rest of FAST_TESTS follows."""
+
+
+M = Mutation
+MUTATIONS: list[Mutation] = [
+    # -- the response r = (H^-1)_ii, acceleration drives and stable PD ---------------------------------------------
+    M(
+        "substep_inertia_only_in_set_action",
+        "wpctrl/engine/parts/response.py",
+        "    def before_set_action(self, engine, action, state) -> None:\n"
+        "        if not self.update_per_substep:\n"
+        "            self.update(engine, state)\n\n"
+        "    def before_substep(self, engine, state, control) -> None:\n"
+        "        if self.update_per_substep:\n"
+        "            self.update(engine, state)\n",
+        "    def before_set_action(self, engine, action, state) -> None:\n"
+        "        self.update(engine, state)\n\n"
+        "    def before_substep(self, engine, state, control) -> None:\n"
+        "        pass\n",
+        'inertia_update="substep" refreshes r only in set_action',
+        ("tests/test_acceleration.py",),
+    ),
+    M(
+        "accel_gains_not_notified",
+        "wpctrl/engine/parts/response.py",
+        "            engine.notify_solver()\n",
+        "",
+        "the implicit acceleration drive does not notify the solver after writing Kp/r, Kd/r",
+        ("tests/test_acceleration.py",),
+    ),
+    M(
+        "accel_gain_times_r",
+        "wpctrl/kernels/pd_substep.py",
+        "                        kpr = kpr / resp[r]\n",
+        "                        kpr = kpr * resp[r]\n",
+        "explicit acceleration drive multiplies Kp by r instead of dividing",
+        ("tests/test_acceleration.py",),
+    ),
+    M(
+        "accel_model_kd_from_kp",
+        "wpctrl/kernels/pd.py",
+        "joint_target_kd_out[di] = kd[_bidx(kd.shape[0], env), r] / resp",
+        "joint_target_kd_out[di] = kp[_bidx(kp.shape[0], env), r] / resp",
+        "implicit acceleration drive writes Kp/r as the solver's damping",
+        ("tests/test_actuation.py",),
+    ),
+    M(
+        "stable_pd_denominator_without_kp",
+        "wpctrl/kernels/pd_substep.py",
+        "1.0 + resp[r] * dt * (kdr + dt * kpr)",
+        "1.0 + resp[r] * dt * kdr",
+        "stable explicit PD drops the dt^2 Kp term of its denominator",
+        ("tests/test_coupled.py", "tests/test_acceleration.py"),
+    ),
+    # -- the coupled drive ------------------------------------------------------------------------------------------
+    M(
+        "coupled_clamp_never_released",
+        "wpctrl/kernels/drive.py",
+        "if (s > wp.float64(0.0) and w < lim[r]) or (s < wp.float64(0.0) and w > -lim[r]):",
+        "if (s > wp.float64(2.0) and w < lim[r]) or (s < wp.float64(-2.0) and w > -lim[r]):",
+        "the coupled solve never releases a clamped row",
+        ("tests/test_coupled.py",),
+    ),
+    M(
+        "coupled_d_without_dt2_kp",
+        "wpctrl/kernels/drive.py",
+        "d[r] = h * kde + h * h * kpe",
+        "d[r] = h * kde",
+        "the coupled drive's D = dt Kd + dt^2 Kp loses its Kp term",
+        ("tests/test_coupled.py",),
+    ),
+    # -- set_action ----------------------------------------------------------------------------------------------
+    M(
+        "mimic_offset_dropped",
+        "wpctrl/kernels/pd_set_action.py",
+        "t[r] = t[wp.static(max(SRC[r], 0))] * row_f[r, ROW_F_MUL] + row_f[r, ROW_F_OFF]",
+        "t[r] = t[wp.static(max(SRC[r], 0))] * row_f[r, ROW_F_MUL]",
+        "a mimic follower ignores its offset",
+        ("tests/test_semantics.py",),
+    ),
+    M(
+        "nan_check_skips_last_column",
+        "wpctrl/kernels/pd_set_action.py",
+        "            ok = ok & int(wp.isfinite(a[c]))\n",
+        "            if c < wp.static(A - 1):\n                ok = ok & int(wp.isfinite(a[c]))\n",
+        "the joint kernel's NaN/Inf check skips the last action column",
+        ("tests/test_semantics.py",),
+    ),
+    M(
+        "ee_nan_check_own_columns",
+        "wpctrl/kernels/ee.py",
+        "        if not _action_finite(action_in, env):\n            return\n",
+        "        bad = int(0)\n"
+        "        for k in range(3 + 3 * pose):\n"
+        "            if not wp.isfinite(action_in[env, col0 + k]):\n"
+        "                bad = 1\n"
+        "        if bad != 0:\n"
+        "            return\n",
+        "the EE kernel checks NaN/Inf only in its own action columns",
+        ("tests/test_ee.py",),
+    ),
+    M(
+        "ema_coefficient_swapped",
+        "wpctrl/kernels/pd_set_action.py",
+        "al * t[r] + (1.0 - al) * tp",
+        "(1.0 - al) * t[r] + al * tp",
+        "the EMA weights the previous target with alpha",
+        ("tests/test_base_controllers.py",),
+    ),
+    M(
+        "target_delta_from_measured",
+        "wpctrl/kernels/pd_set_action.py",
+        "                    t[r] = t[r] + x[c]\n",
+        "                    t[r] = q[r] + x[c]\n",
+        "use_target deltas start from the measured position",
+        ("tests/test_semantics.py",),
+    ),
+    M(
+        "normalize_without_clip",
+        "wpctrl/kernels/pd.py",
+        "    c = wp.clamp(a, -1.0, 1.0)\n",
+        "    c = a\n",
+        "normalised actions are scaled without clipping to [-1, 1]",
+        ("tests/test_semantics.py",),
+    ),
+    M(
+        "clip_targets_skips_followers",
+        "wpctrl/kernels/pd_set_action.py",
+        "                if wp.static(CLIP):\n"
+        "                    t[r] = wp.clamp(t[r], row_f[r, ROW_F_QLO], row_f[r, ROW_F_QHI])\n",
+        "                if wp.static(False):\n"
+        "                    t[r] = wp.clamp(t[r], row_f[r, ROW_F_QLO], row_f[r, ROW_F_QHI])\n",
+        'clip_targets="joint_limits" leaves mimic followers unclamped',
+        ("tests/test_actuation.py",),
+    ),
+    M(
+        "rejected_env_stops_counting",
+        "wpctrl/kernels/pd_set_action.py",
+        "step_out[env] = step_out[env] + host_substeps",
+        "step_out[env] = step_out[env]",
+        "an env whose action is rejected loses the substeps the host counted",
+        ("tests/test_launches.py",),
+    ),
+    M(
+        "elided_set_action_skips_control",
+        "wpctrl/engine/core.py",
+        'ln.bind("joint_target_q_out", None if known is None else known[0])',
+        'ln.bind("joint_target_q_out", None)',
+        "without per-substep work, set_action no longer writes the position targets into the known Control",
+        ("tests/test_launches.py",),
+    ),
+    # -- substep --------------------------------------------------------------------------------------------------
+    M(
+        "pd_damping_sign_flipped",
+        "wpctrl/kernels/pd_substep.py",
+        "u[r] = kpr * e + kdr * (tqd[r] - qd[r])",
+        "u[r] = kpr * e + kdr * (qd[r] - tqd[r])",
+        "the naive PD law's damping term has the wrong sign",
+        ("tests/test_actuation.py",),
+    ),
+    M(
+        "interpolation_off_by_one",
+        "wpctrl/kernels/pd.py",
+        "return start + step_size * float(wp.min(k, num_substeps))",
+        "return start + step_size * float(wp.min(k - 1, num_substeps))",
+        "interpolation lags one substep",
+        ("tests/test_semantics.py",),
+    ),
+    M(
+        "delay_off_by_one",
+        "wpctrl/kernels/pd_substep.py",
+        "d = wp.clamp(delay_in[env], 0, max_delay)",
+        "d = wp.clamp(delay_in[env] + 1, 0, max_delay)",
+        "the command delay is one substep longer than drawn",
+        ("tests/test_actuation.py",),
+    ),
+    M(
+        "force_limit_one_sided",
+        "wpctrl/kernels/pd_substep.py",
+        "f[r] = wp.clamp(u[r], -lim[r], lim[r])",
+        "f[r] = wp.min(u[r], lim[r])",
+        "explicit torques are clamped only from above",
+        ("tests/test_actuation.py",),
+    ),
+    M(
+        "saturation_count_inverted",
+        "wpctrl/kernels/pd_substep.py",
+        "if f[r] != u[r]:",
+        "if f[r] == u[r]:",
+        "the effort readout counts unsaturated substeps",
+        ("tests/test_actuation.py",),
+    ),
+    # -- reset --------------------------------------------------------------------------------------------------------
+    M(
+        "reset_keeps_joint_f",
+        "wpctrl/kernels/pd.py",
+        "            joint_f_out[di] = 0.0\n",
+        "            joint_f_out[di] = joint_f_out[di]\n",
+        "a reset given a Control leaves the explicit joint_f of the reset envs",
+        ("tests/test_semantics.py",),
+    ),
+    M(
+        "partial_reset_ignores_mask",
+        "wpctrl/kernels/pd.py",
+        "        if not env_mask_in[env]:\n            return\n    if r == 0:",
+        "        if not env_mask_in[env]:\n            pass\n    if r == 0:",
+        "a reset with a bool mask resets every env",
+        ("tests/test_semantics.py",),
+    ),
+    M(
+        "velocity_target_kept_on_reset",
+        "wpctrl/kernels/pd.py",
+        "    target_qvel_out[env, r] = v\n",
+        "    target_qvel_out[env, r] = target_qvel_out[env, r]\n",
+        "a reset keeps the stale velocity target (ManiSkill's behaviour, not wpctrl's)",
+        ("tests/test_semantics.py",),
+    ),
+    M(
+        "posvel_first_reset_ignores_velocity",
+        "wpctrl/kernels/pd.py",
+        "if first != 0 and kind == ROW_POS and vel_target:",
+        "if first == 2 and kind == ROW_POS and vel_target:",
+        "the first reset of a PDJointPosVel does not take the measured velocity",
+        ("tests/test_semantics.py",),
+    ),
+    M(
+        "delay_history_not_refilled",
+        "wpctrl/kernels/pd.py",
+        "            delay_q_out[i, env, r] = held\n",
+        "            delay_q_out[i, env, r] = delay_q_out[i, env, r]\n",
+        "a reset leaves the previous episode's commands in the delay ring",
+        ("tests/test_actuation.py",),
+    ),
+    M(
+        "effort_count_not_zeroed_on_reset",
+        "wpctrl/kernels/pd.py",
+        "        saturation_count_out[env, r] = 0\n",
+        "        saturation_count_out[env, r] = saturation_count_out[env, r]\n",
+        "a reset keeps the saturation count",
+        ("tests/test_actuation.py",),
+    ),
+    # -- randomness -------------------------------------------------------------------------------------------------
+    M(
+        "randomize_ignores_seed",
+        "wpctrl/controllers/actuation.py",
+        'eng.part("drive").randomize(eng, lo, hi, enabled, mode == "abs", int(seed),',
+        'eng.part("drive").randomize(eng, lo, hi, enabled, mode == "abs", 0,',
+        "randomize_drive_properties ignores its seed",
+        ("tests/test_actuation.py",),
+    ),
+    M(
+        "randomize_same_draw_every_env",
+        "wpctrl/kernels/actuation.py",
+        "state = wp.rand_init(key, env * kp_out.shape[1] + r)",
+        "state = wp.rand_init(key, r)",
+        "randomize_drive_properties draws the same values for every env",
+        ("tests/test_actuation.py",),
+    ),
+    M(
+        "delay_draw_ignores_seed",
+        "wpctrl/kernels/pd.py",
+        "st = wp.rand_init(seed, rng_counter_in[0])",
+        "st = wp.rand_init(0, rng_counter_in[0])",
+        "the per-env delay draw ignores the build's seed",
+        ("tests/test_actuation.py",),
+    ),
+    # -- end effector, state ---------------------------------------------------------------------------------------
+    M(
+        "ee_use_target_ignored",
+        "wpctrl/kernels/ee.py",
+        "                prev = _read_pose(target_pose_out, env)\n",
+        "                prev = t_ee\n",
+        "EE use_target composes on the measured pose",
+        ("tests/test_ee.py",),
+    ),
+    M(
+        "set_state_keeps_control",
+        "wpctrl/controllers/base.py",
+        "        eng.forget_control()  # the Control's drive targets are now stale: the next substep rewrites them\n",
+        "",
+        "set_state leaves the known Control's stale drive targets",
+        ("tests/test_launches.py",),
+    ),
+]
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# Running one mutation in a copy.
+
+_CHILD = textwrap.dedent(
+    """
+    import importlib, json, sys, time
+    root, out, mod, new = sys.argv[1], sys.argv[2], sys.argv[3], sys.argv[4]
+    # The editable install's finder maps 'wpctrl' to the original checkout: drop it, import the copy's.
+    sys.meta_path[:] = [f for f in sys.meta_path if '__editable__' not in getattr(f, '__module__', '')]
+    sys.path_hooks[:] = [h for h in sys.path_hooks if '__editable__' not in getattr(h, '__module__', '')]
+    sys.path_importer_cache.clear()
+    sys.path.insert(0, root)
+    import wpctrl
+    assert wpctrl.__file__.startswith(root), ('wpctrl imported from', wpctrl.__file__)
+    if mod:
+        m = importlib.import_module(mod)
+        with open(m.__file__) as f:
+            src = f.read()
+        assert m.__file__.startswith(root) and new in src, ('mutation not active in', m.__file__)
+    import pytest
+
+    class Recorder:
+        def __init__(self):
+            self.failed, self.ran = [], 0
+
+        def pytest_runtest_logreport(self, report):
+            if report.when == 'call':
+                self.ran += 1
+            if report.failed and report.nodeid not in self.failed:
+                self.failed.append(report.nodeid)
+
+        def pytest_collectreport(self, report):
+            if report.failed:
+                self.failed.append(report.nodeid or 'collection')
+
+    rec = Recorder()
+    t0 = time.time()
+    code = pytest.main(sys.argv[5:], plugins=[rec])
+    with open(out, 'w') as f:
+        json.dump({'exit': int(code), 'failed': rec.failed, 'ran': rec.ran, 'seconds': time.time() - t0}, f)
+    """
+)
+
+
+def tree_files(root: Path) -> list[str]:
+    """Tracked and untracked, not ignored files of the working tree."""
+    out = subprocess.run(
+        ["git", "ls-files", "-co", "--exclude-standard", "-z"], cwd=root, check=True, capture_output=True
+    ).stdout.decode()
+    return [p for p in out.split("\0") if p and (root / p).is_file()]
+
+
+def make_copy(root: Path, files: list[str]) -> Path:
+    dst = Path(tempfile.mkdtemp(prefix="wpctrl-mutant-"))
+    for rel in files:
+        target = dst / rel
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(root / rel, target)
+    return dst
+
+
+def apply(copy: Path, m: Mutation) -> None:
+    path = copy / m.file
+    text = path.read_text()
+    n = text.count(m.old)
+    if n != 1:
+        raise LookupError(f"{m.name}: its text occurs {n} times in {m.file} (expected once): update the mutation")
+    path.write_text(text.replace(m.old, m.new))
+
+
+def module_name(file: str) -> str:
+    return file[:-3].replace("/", ".") if file.startswith("wpctrl/") and file.endswith(".py") else ""
+
+
+def run_tests(copy: Path, tests: list[str], mod: str, marker: str, args) -> dict:
+    out = copy / "mutate-result.json"
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(copy)
+    env["PYTHONDONTWRITEBYTECODE"] = "1"
+    env.setdefault("WPCTRL_PROPERTY_EXAMPLES", PROPERTY_EXAMPLES)
+    if args.warp_cache:
+        env["WARP_CACHE_PATH"] = args.warp_cache
+    cmd = [sys.executable, "-c", _CHILD, str(copy), str(out), mod, marker]
+    cmd += ["-x", "-q", "-p", "no:cacheprovider", "--no-header", *tests]
+    t0 = time.time()
+    try:
+        proc = subprocess.run(cmd, cwd=copy, env=env, capture_output=True, text=True, timeout=args.timeout)
+    except subprocess.TimeoutExpired:
+        return {"exit": -1, "failed": [], "ran": 0, "seconds": time.time() - t0, "log": "timeout"}
+    if not out.exists():
+        log = proc.stderr[-3000:]
+        return {"exit": proc.returncode, "failed": [], "ran": 0, "seconds": time.time() - t0, "log": log}
+    res = json.loads(out.read_text())
+    res["seconds"] = time.time() - t0
+    res["log"] = (proc.stdout + proc.stderr)[-3000:]
+    return res
+
+
+def test_list(m: Mutation | None, copy: Path) -> list[str]:
+    first = list(m.tests) if m else []
+    tests = [t for t in first + [t for t in FAST_TESTS if t not in first] if (copy / t.split("::")[0]).exists()]
+    if not tests:
+        raise LookupError("no test to run (the listed test files are missing)")
+    return tests
+
+
+def run_one(m: Mutation | None, files: list[str], args) -> dict:
+    copy = make_copy(ROOT, files)
+    try:
+        if m is not None:
+            apply(copy, m)
+        res = run_tests(copy, test_list(m, copy), module_name(m.file) if m else "", m.new if m else "", args)
+    finally:
+        if not args.keep:
+            shutil.rmtree(copy, ignore_errors=True)
+    if res["exit"] == -1:
+        res["status"] = "timeout"
+    elif res["failed"]:
+        res["status"] = "killed"
+    elif res["exit"] == 0:
+        res["status"] = "survived"
+    else:
+        res["status"] = "error"
+    return res
+
+
+def markdown(rows: list[tuple[Mutation, dict]]) -> str:
+    lines = ["| mutation | what it breaks | result | killed by | time [s] |", "|---|---|---|---|---|"]
+    for m, r in rows:
+        killer = r["failed"][0] if r["failed"] else "—"
+        lines.append(f"| `{m.name}` | {m.what} | {r['status']} | `{killer}` | {r['seconds']:.0f} |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("-k", action="append", default=[], help="run only mutations whose name contains this")
+    ap.add_argument("--list", action="store_true", help="list the mutations and exit")
+    ap.add_argument("--baseline", action="store_true", help="run the fast tests on an unmutated copy")
+    ap.add_argument("--timeout", type=float, default=1800.0, help="seconds per mutation")
+    ap.add_argument("--warp-cache", default=None, help="Warp kernel cache for the mutants (default: Warp's own)")
+    ap.add_argument("--keep", action="store_true", help="keep the temporary copies")
+    ap.add_argument("--markdown", default=None, help="write the result table to this file")
+    ap.add_argument("--json", default=None, help="write the raw results to this file")
+    args = ap.parse_args(argv)
+
+    chosen = [m for m in MUTATIONS if not args.k or any(k in m.name for k in args.k)]
+    if args.list:
+        for m in chosen:
+            print(f"{m.name:40s} {m.file:36s} {m.what}")
+        return 0
+    files = tree_files(ROOT)
+    if args.baseline:
+        r = run_one(None, files, args)
+        print(f"baseline: {r['status']} ({r['ran']} tests, {r['seconds']:.0f} s) {r['failed'][:3]}")
+        return 0 if r["status"] == "survived" else 2
+    stale = []
+    for m in chosen:
+        text = (ROOT / m.file).read_text()
+        if text.count(m.old) != 1:
+            stale.append(m.name)
+    if stale:
+        print("stale mutations (their text is not in the file exactly once):", ", ".join(stale))
+        return 2
+    rows = []
+    for i, m in enumerate(chosen):
+        print(f"[{i + 1}/{len(chosen)}] {m.name} ...", end="", flush=True)
+        r = run_one(m, files, args)
+        rows.append((m, r))
+        killer = r["failed"][0] if r["failed"] else ""
+        print(f" {r['status']} in {r['seconds']:.0f} s ({r['ran']} tests) {killer}", flush=True)
+        if r["status"] in ("error", "timeout"):
+            print(textwrap.indent(r.get("log", ""), "    "))
+    table = markdown(rows)
+    print()
+    print(table)
+    if args.markdown:
+        Path(args.markdown).write_text(table + "\n")
+    if args.json:
+        Path(args.json).write_text(json.dumps([{"name": m.name, **r} for m, r in rows], indent=1))
+    survived = [m.name for m, r in rows if r["status"] != "killed"]
+    if survived:
+        print("\nnot killed:", ", ".join(survived))
+    return 1 if survived else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

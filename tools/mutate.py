@@ -49,6 +49,10 @@ FAST_TESTS = (
     "tests/test_coupled.py",
     "tests/test_ee.py",
     "tests/test_ee_conformance.py",
+    "tests/test_actuator_models.py",
+    "tests/test_actuator_net.py",
+    "tests/test_multi_axis.py",
+    "tests/test_gravity.py",
     "tests/test_alloc_sync.py",
     "tests/test_properties.py",
 )
@@ -155,6 +159,30 @@ MUTATIONS: list[Mutation] = [
         ("tests/test_semantics.py",),
     ),
     M(
+        "mimic_multiplier_dropped",
+        "wpctrl/kernels/pd_set_action.py",
+        "t[r] = t[wp.static(max(SRC[r], 0))] * row_f[r, ROW_F_MUL] + row_f[r, ROW_F_OFF]",
+        "t[r] = t[wp.static(max(SRC[r], 0))] + row_f[r, ROW_F_OFF]",
+        "a mimic follower ignores its multiplier",
+        ("tests/test_semantics.py",),
+    ),
+    M(
+        "binary_zero_closes",
+        "wpctrl/kernels/pd_set_action.py",
+        "                    if a[c] < 0.0:\n",
+        "                    if a[c] <= 0.0:\n",
+        "a binary command of exactly 0 closes (it opens: upper for a >= 0)",
+        ("tests/test_actuator_models.py",),
+    ),
+    M(
+        "base_yaw_sign_flipped",
+        "wpctrl/kernels/pd_set_action.py",
+        "vt[r] = cy * ax + (-sy) * ay",
+        "vt[r] = cy * ax + sy * ay",
+        "the ego-centric base velocity rotates vy by the wrong sign of the yaw",
+        ("tests/test_base_controllers.py",),
+    ),
+    M(
         "ee_nan_check_own_columns",
         "wpctrl/kernels/ee.py",
         "        if not _action_finite(action_in, env):\n            return\n",
@@ -173,7 +201,7 @@ MUTATIONS: list[Mutation] = [
         "al * t[r] + (1.0 - al) * tp",
         "(1.0 - al) * t[r] + al * tp",
         "the EMA weights the previous target with alpha",
-        ("tests/test_base_controllers.py",),
+        ("tests/test_actuator_models.py",),
     ),
     M(
         "target_delta_from_measured",
@@ -218,6 +246,14 @@ MUTATIONS: list[Mutation] = [
         ("tests/test_launches.py",),
     ),
     # -- substep --------------------------------------------------------------------------------------------------
+    M(
+        "stable_pd_on_the_start_state",
+        "wpctrl/kernels/pd_substep.py",
+        "u[r] = (kpr * (e - dt * qd[r]) + kdr * (tqd[r] - qd[r])) / (",
+        "u[r] = (kpr * e + kdr * (tqd[r] - qd[r])) / (",
+        "stable explicit PD evaluates its position error on the start state, not the predicted one",
+        ("tests/test_acceleration.py",),
+    ),
     M(
         "pd_damping_sign_flipped",
         "wpctrl/kernels/pd_substep.py",
@@ -333,6 +369,14 @@ MUTATIONS: list[Mutation] = [
         ("tests/test_actuation.py",),
     ),
     # -- end effector, state ---------------------------------------------------------------------------------------
+    M(
+        "ee_rotation_not_norm_clipped",
+        "wpctrl/kernels/ee.py",
+        "                if nrm > 1.0:\n",
+        "                if nrm > 10.0:\n",
+        "the EE rotation action is not clipped to norm 1",
+        ("tests/test_ee.py",),
+    ),
     M(
         "ee_use_target_ignored",
         "wpctrl/kernels/ee.py",

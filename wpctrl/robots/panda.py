@@ -64,7 +64,7 @@ PANDA_REST_QPOS: tuple[float, ...] = (
 PANDA_INITIAL_Q: tuple[float, ...] = PANDA_REST_QPOS[:7] + (0.035, 0.035)
 """Default initial pose of :func:`panda`: the rest keyframe with the fingers at 0.035 m, 5 mm inside their
 [0, 0.04] m range. A finger started exactly on its limit sits in the limit spring from the first step; 0.035 m is the
-opening measured stable on Newton 1.8 (shared/reference/newton.md §8)."""
+opening measured stable on Newton 1.8."""
 
 # ----------------------------------------------------------------------------------------------------------------------
 # URDF facts (panda_v2.urdf, ManiSkill 3.0.1). Every inertial origin has rpy = 0.

@@ -39,16 +39,18 @@ ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_TRACES = ROOT / "tests" / "data" / "conformance"  # the traces that ship with the tests
 ARM = 7
 
-# label: (actuation, explicit_pd, substeps per 10 ms, clamp at the MuJoCo actuator's force range)
+# label: (actuation, explicit_pd, substeps per 10 ms, clamp at the MuJoCo actuator's force range, inertia_update)
+# inertia_update: stable PD refreshes r every substep here; None keeps the drive's default (the coupled drive: A every
+# substep)
 OPTIONS = {
-    "implicit": ("implicit", "naive", 1, False),
-    "implicit-actclamp": ("implicit", "naive", 1, True),
-    "naive": ("explicit", "naive", 1, False),
-    "stable": ("explicit", "stable", 1, False),
-    "coupled": ("explicit", "coupled", 1, False),
-    "stable x15": ("explicit", "stable", 15, False),
-    "coupled x15": ("explicit", "coupled", 15, False),
-    "coupled A per control step": ("explicit", "coupled", 1, False),
+    "implicit": ("implicit", "naive", 1, False, None),
+    "implicit-actclamp": ("implicit", "naive", 1, True, None),
+    "naive": ("explicit", "naive", 1, False, None),
+    "stable": ("explicit", "stable", 1, False, "substep"),
+    "coupled": ("explicit", "coupled", 1, False, None),
+    "stable x15": ("explicit", "stable", 15, False, "substep"),
+    "coupled x15": ("explicit", "coupled", 15, False, None),
+    "coupled A per control step": ("explicit", "coupled", 1, False, "control"),
 }
 LARGE_MODES = ("pd_joint_pos", "pd_joint_pos_vel")
 
@@ -93,12 +95,7 @@ class Rig:
         import wpctrl
         from wpctrl.robots import panda
 
-        actuation, explicit_pd, mult, actclamp = OPTIONS[option]
-        # stable PD refreshes r every substep here; the coupled drive keeps its default (A every substep) unless the
-        # option asks for A once per control step
-        inertia_update = "substep" if explicit_pd == "stable" else None
-        if option.endswith("A per control step"):
-            inertia_update = "control"
+        actuation, explicit_pd, mult, actclamp, inertia_update = OPTIONS[option]
         setup = trace["setup"]
         builder = newton.ModelBuilder()
         builder.replicate(panda(inertia_merge=inertia_merge, visual_shapes=False), num_envs)

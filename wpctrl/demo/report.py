@@ -283,6 +283,19 @@ def plot(path: Path, hist: dict, env_err: np.ndarray, task, summary: dict) -> No
 # Timing
 
 
+def _median_seconds(fn, device, repeats: int) -> float:
+    """Median wall time [s] of ``fn`` over ``repeats`` calls, each synchronised with ``device``."""
+    import warp as wp
+
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        wp.synchronize_device(device)
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times))
+
+
 def time_parts(controller_part, solver_part, device, graph: bool, repeats: int = 10):
     """Seconds per control step of the controller alone (set_action + K substep calls) and of the K solver steps
     alone, each captured in a graph when ``graph`` (as the rollout runs) or eager. Run after the rollout: it
@@ -302,13 +315,7 @@ def time_parts(controller_part, solver_part, device, graph: bool, repeats: int =
 
         fn()
         wp.synchronize_device(device)
-        times = []
-        for _ in range(repeats):
-            t0 = time.perf_counter()
-            fn()
-            wp.synchronize_device(device)
-            times.append(time.perf_counter() - t0)
-        out.append(float(np.median(times)))
+        out.append(_median_seconds(fn, device, repeats))
     return out[0], out[1]
 
 
@@ -323,19 +330,10 @@ def solo_vs_concurrent(ctx, graph, control_step, device, envs: int, repeats: int
         else:
             control_step()
 
-    def timed() -> float:
-        times = []
-        for _ in range(repeats):
-            t0 = time.perf_counter()
-            step()
-            wp.synchronize_device(device)
-            times.append(time.perf_counter() - t0)
-        return float(np.median(times))
-
     ctx.barrier()
-    solo = timed() if ctx.is_main else 0.0
+    solo = _median_seconds(step, device, repeats) if ctx.is_main else 0.0
     ctx.barrier()
-    concurrent = timed()
+    concurrent = _median_seconds(step, device, repeats)
     ctx.barrier()
     both = ctx.all_gather([solo, concurrent])
     solo_s = float(both[0, 0])

@@ -1,7 +1,7 @@
-"""Robot models built in code, and ManiSkill's control-mode dicts for them: :mod:`.panda` (the Panda from its URDF
+"""Robot models built in code, and ManiSkill's control-mode dicts for them: :mod:`.panda_model` (the Panda from its URDF
 numbers, no file read at run time) and :mod:`.panda_modes` (ManiSkill's Panda control modes)."""
 
-from .panda import (
+from .panda_model import (
     PANDA_ARM_JOINTS,
     PANDA_BODIES,
     PANDA_FRAMES,

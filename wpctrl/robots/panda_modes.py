@@ -12,7 +12,7 @@ from ..config import (
     PDJointVelControllerConfig,
 )
 from ..config.ee import PDEEPosControllerConfig, PDEEPoseControllerConfig
-from .panda import PANDA_ARM_JOINTS, PANDA_GRIPPER_JOINTS
+from .panda_model import PANDA_ARM_JOINTS, PANDA_GRIPPER_JOINTS
 
 __all__ = ["PANDA_CONTROL_MODES", "panda_control_modes"]
 

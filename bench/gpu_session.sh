@@ -6,6 +6,8 @@
 #   STAGE=ab    bash bench/gpu_session.sh      # the control step A/B against BASE_TREE (default .gpu/base)
 #   STAGE=act   bash bench/gpu_session.sh      # actuator models' cost, the reach env's step by part
 #   STAGE=train bash bench/gpu_session.sh      # PPO on 4,096 reach envs to 95 % success (bench/train_gpu.sh)
+#   STAGE=coupled bash bench/gpu_session.sh    # the coupled drive against MuJoCo-Warp; Nsight Compute of its kernel
+#   STAGE=models  bash bench/gpu_session.sh    # DC motor / position table against the plain step; Nsight Compute
 set -uo pipefail
 cd "$(dirname "$0")/.."
 OUT=${OUT:-bench/results/gpu}
@@ -32,5 +34,30 @@ case "$STAGE" in
     timeout 200 $PY bench/train_rate.py --envs 4096 --out "$OUT" 2>&1 | tee -a "$log" | tail -12 ;;
   train)
     OUT="$OUT" PYTHON="$PY" timeout 590 bash bench/train_gpu.sh 2>&1 | tee -a "$log" | tail -40 ;;
-  *) echo "STAGE: expected tests, ab, act or train, got '${STAGE:-}'"; exit 2 ;;
+  coupled)
+    timeout 300 $PY bench/inertia_update.py --device cuda:0 --envs "${COUPLED_ENVS:-1,4k,64k}" --variants coupled \
+      --mujoco --repeats 5 --out "$OUT" 2>&1 | tee -a "$log" | tail -20
+    # one graph-replayed coupled launch at 4k envs (the bench's warm-up launches skipped)
+    timeout 200 ncu --kernel-name regex:coupled_drive --launch-skip 20 --launch-count 1 --section SpeedOfLight \
+      --section LaunchStats --section Occupancy --section WarpStateStats --section MemoryWorkloadAnalysis \
+      $PY bench/inertia_update.py --device cuda:0 --envs 4k --variants "coupled, H per substep" --repeats 1 \
+      --out "$(mktemp -d)" > "$OUT/ncu_coupled.txt" 2>&1; tail -5 "$OUT/ncu_coupled.txt" ;;
+  models)
+    for v in dc_motor position_limit; do
+      timeout 100 $PY bench/actuator_cost.py --envs "${ACT_ENVS:-1,4k,64k}" --repeats 5 --variants "plain,$v" \
+        --tag "cuda_$v" --out "$OUT" 2>&1 | grep -E "x plain|skipped" | tee -a "$log"
+    done
+    : > "$OUT/ncu_substep.txt"
+    for v in plain dc_motor position_limit; do  # one graph-replayed substep launch at 4k envs per variant
+      echo "=== $v" >> "$OUT/ncu_substep.txt"
+      timeout 100 ncu --kernel-name regex:wpctrl_substep --launch-skip 20 --launch-count 1 --section SpeedOfLight \
+        --section LaunchStats --section WarpStateStats $PY bench/actuator_cost.py --envs 4k --repeats 1 \
+        --variants "$v" --tag ncu --out "$(mktemp -d)" >> "$OUT/ncu_substep.txt" 2>&1
+    done
+    grep -E "^===|Duration|Registers Per" "$OUT/ncu_substep.txt"
+    for v in plain dc_motor position_limit; do  # 1M envs: one controller per process
+      timeout 100 $PY bench/actuator_cost.py --envs 1M --repeats 5 --variants "$v" --tag "cuda_1M_$v" --out "$OUT" 2>&1 \
+        | grep -E "graph|skipped" | tee -a "$log"
+    done ;;
+  *) echo "STAGE: expected tests, ab, act, train, coupled or models, got '${STAGE:-}'"; exit 2 ;;
 esac

@@ -41,7 +41,7 @@ VARIANTS = (
     ("stable, H per control step [fused]", "force", "explicit", "stable", "control", "fused"),
     ("stable, H per substep [fused]", "force", "explicit", "stable", "substep", "fused"),
     ("coupled, H per substep [fused, in the drive kernel]", "force", "explicit", "coupled", "substep", "fused"),
-    ("coupled, A per control step [fused, in the drive kernel]", "force", "explicit", "coupled", "control", "fused"),
+    ("coupled, H per control step [fused, in the drive kernel]", "force", "explicit", "coupled", "control", "fused"),
 )
 
 

@@ -203,7 +203,7 @@ class Harness:
         self.single = not isinstance(mode, dict)
         self.explicit = actuation == "explicit"
         self.coupled = self.explicit and explicit_pd == "coupled"
-        if self.coupled:  # A every substep (its default): A once per control step has its own test in test_coupled.py
+        if self.coupled:  # H every substep (its default): H once per control step has its own test in test_coupled.py
             inertia_update = "substep"
         children = {"": mode} if self.single else mode
         self.ee_cols = [

@@ -114,6 +114,43 @@ def test_position_based_limit_equals_newtons_clamping_position_based():
     assert np.abs(tau2).max() <= 10.0 + 1e-6
 
 
+def test_position_table_steps_knots_and_ends_equal_newtons_component():
+    """The compiled-in table at its knots, on both sides of a step (a repeated position), outside both ends, and a
+    one-entry table: Newton's ClampingPositionBased on the same positions, and numpy's left-continuous reading."""
+    from newton.actuators import ClampingPositionBased
+
+    model = build_panda(1)
+    cases = [
+        ([-1.0, 0.0, 0.0, 0.5, 2.0], [10.0, 20.0, 4.0, 8.0, 30.0]),  # a step at 0 (left value 20, then 4)
+        ([0.3], [7.0]),  # one entry: a constant limit
+    ]
+    for positions, efforts in cases:
+        ctrl = wpctrl.build_controller(
+            _arm(wpctrl.PositionBasedEffortLimit(positions, efforts), force_limit=1e9), model, 100, 100, "explicit"
+        )
+        b = ctrl._engine.binding
+        s = model.state()
+        c = model.control()
+        ctrl.reset(s, control=c)
+        # 7 arm joints: the knots, just around the step and outside both ends
+        qs = np.array([-1.5, -1.0, -1e-3, 0.0, 1e-3, 0.5, 2.5], f32)
+        q = s.joint_q.numpy()
+        q[b.coord_index[0]] = qs
+        s.joint_q.assign(q)
+        ctrl.set_action(qs + f32(10.0), s)  # a large PD torque on every joint: the table binds everywhere
+        ctrl.before_simulation_step(s, c)
+        tau = c.joint_f.numpy()[b.dof_index[0]]
+        comp = ClampingPositionBased(lookup_positions=tuple(positions), lookup_efforts=tuple(efforts))
+        comp.finalize(wp.get_device("cpu"), 7)
+        pd = f32(400.0) * f32(10.0) * np.ones(7, f32)
+        np.testing.assert_allclose(tau, _newton_clamp(comp, pd, qs, np.zeros(7, f32), 7), rtol=1e-6)
+        x, y = np.asarray(positions, np.float64), np.asarray(efforts, np.float64)
+        ref = np.array([y[0] if v <= x[0] else y[-1] if v >= x[-1] else np.interp(v, x, y) for v in qs])
+        if len(x) > 1:  # numpy's interp takes the right value at a repeated position; the table the left one
+            ref[3] = 20.0
+        np.testing.assert_allclose(tau, ref, rtol=1e-6)
+
+
 def test_zero_range_randomisation_is_bit_identical_and_draws_differ_per_env():
     model = build_panda(E)
     ctrl = wpctrl.build_controller(_arm(wpctrl.DCMotor(80.0, 3.0)), model, 20, 100, "explicit")

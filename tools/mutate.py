@@ -128,8 +128,8 @@ MUTATIONS: list[Mutation] = [
     M(
         "coupled_clamp_never_released",
         "wpctrl/kernels/drive.py",
-        "if (s > wp.float64(0.0) and w < lim[r]) or (s < wp.float64(0.0) and w > -lim[r]):",
-        "if (s > wp.float64(2.0) and w < lim[r]) or (s < wp.float64(-2.0) and w > -lim[r]):",
+        "if (s == 1 and w < lim[r]) or (s == -1 and w > -lim[r]):",
+        "if (s == 3 and w < lim[r]) or (s == -3 and w > -lim[r]):",
         "the coupled solve never releases a clamped row",
         ("tests/test_coupled.py",),
     ),
@@ -139,6 +139,14 @@ MUTATIONS: list[Mutation] = [
         "d[r] = h * kde + h * h * kpe",
         "d[r] = h * kde",
         "the coupled drive's D = dt Kd + dt^2 Kp loses its Kp term",
+        ("tests/test_coupled.py",),
+    ),
+    M(
+        "coupled_h_recovery_keeps_d",
+        "wpctrl/kernels/drive.py",
+        "L[wp.static(ROWD[r]), wp.static(ROWD[r])] = L[wp.static(ROWD[r]), wp.static(ROWD[r])] - dprev[r]",
+        "L[wp.static(ROWD[r]), wp.static(ROWD[r])] = L[wp.static(ROWD[r]), wp.static(ROWD[r])]",
+        "a later active-set iteration of the coupled drive keeps the last free rows' D inside H",
         ("tests/test_coupled.py",),
     ),
     # -- set_action ----------------------------------------------------------------------------------------------

@@ -17,6 +17,7 @@ from ..config import ConfigError
 from ..config import rows as cfg
 from ..config.actuators import ACT_DC_MOTOR, ACT_NET, ACT_NONE, ACT_POSITION_LIMIT
 from ..config.ee import EESpec
+from ..kernels import actuators as KA
 from ..kernels import pd_step as KS
 from .launch import _index_table
 
@@ -89,8 +90,9 @@ class Plan:
 
     @property
     def needs_response(self) -> bool:
-        """Acceleration drives and stable / coupled explicit PD use the joint-space response r = (H^-1)_ii."""
-        return self.has_accel or self.explicit_mode >= 2
+        """Acceleration drives and stable explicit PD use the joint-space response r = (H^-1)_ii (the coupled drive
+        solves with H itself and computes r only for acceleration drives)."""
+        return self.has_accel or self.explicit_mode == 2
 
     @property
     def has_effort_rows(self) -> bool:
@@ -230,15 +232,15 @@ def _layout(plan: Plan) -> KS.StepLayout:
         bx_col=ints(rows.bx_col) if base else (),
         by_col=ints(rows.by_col) if base else (),
         act_model=ints(rows.act_model) if plan.has_actuator_models else (),
-        table_len=_table_lengths(rows) if plan.has_actuator_models else (),
+        limit_table=_limit_tables(rows) if plan.has_actuator_models else (),
     )
 
 
-def _table_lengths(rows: cfg.Rows) -> tuple:
-    """Each row's position-table length (0: no table)."""
-    n = [0] * rows.count
+def _limit_tables(rows: cfg.Rows) -> tuple:
+    """Each row's position table as the substep kernel's constants (``()``: no table)."""
+    t = [()] * rows.count
     for r0, count, what in rows.extras:
         if isinstance(what, tuple):  # (positions, efforts)
             for r in range(r0, r0 + count):
-                n[r] = len(what[0])
-    return tuple(n)
+                t[r] = KA.table_constants(*what)
+    return tuple(t)

@@ -3,34 +3,39 @@
 Private module. One thread per env, one launch per substep, run right after the substep kernel (which writes the drive
 targets into the ``Control``; this kernel reads them back from there, so it sees exactly what the solver is given).
 
-Per env, with ``A`` the controlled block of the articulation's inverse joint-space inertia ``H^-1`` (computed in the
-same thread from ``joint_q``: :mod:`wpctrl.kernels.inertia`), the drive torques ``tau`` [N·m or N] of the controlled
-rows satisfy the PD law evaluated on the end-of-substep state of a semi-implicit Euler step,
-``qd+ = qd + dt A tau``, ``q+ = q + dt qd+``, each clamped to its force limit ``l``:
+Per env, with ``H`` the articulation's joint-space inertia (computed in the same thread from ``joint_q``:
+:mod:`wpctrl.kernels.inertia`), ``S`` the selection of the controlled rows' DOFs and ``A = S H^-1 S^T``, the drive
+torques ``tau`` [N·m or N] of the controlled rows satisfy the PD law evaluated on the end-of-substep state of a
+semi-implicit Euler step, ``qd+ = qd + dt A tau``, ``q+ = q + dt qd+``, each clamped to its force limit ``l``:
 
     tau = clamp(b - D A tau, -l, l),   b = Kp (q* - q - dt qd) + Kd (qd* - qd),   D = diag(dt Kd + dt^2 Kp)
 
 (the velocity-bias term, Coriolis and gravity, is left out: see the README). Without active limits this is the linear
 system ``(I + D A) tau = b``. With them it is the KKT system of the convex box QP
 ``min 1/2 tau^T (D^-1 + A) tau - (D^-1 b)^T tau  s.t. |tau| <= l`` (``D^-1 + A`` is SPD). Rows with
-``Kp = Kd = 0`` get ``tau = 0`` and stay out of the QP (their DOFs still move through ``A``).
+``Kp = Kd = 0`` get ``tau = 0`` and stay out of the QP (their DOFs still move through ``H``).
 
-Method: primal-dual active set (a semismooth Newton method on the clamp equation), float64, in registers. Each
-iteration solves ``(D_F^-1 + A_FF) tau_F = D_F^-1 b_F - A_FC tau_C`` for the free rows F by Cholesky, with the
-clamped rows C at their bounds, then moves every free row that violates its bound onto it and releases every clamped
-row whose unclamped PD value ``b_i - d_i (A tau)_i`` lies back inside; it stops when the active set repeats, which is
-then an exact KKT point. Iteration 1 is the unconstrained solution, so without active limits the result is exact
-after one iteration; at most ``rows + 2`` iterations are run, then projected Gauss–Seidel sweeps polish the (rare)
-unconverged case. Acceleration drives divide Kp, Kd by ``A_ii`` (the joint's response), as the stable drive does.
+Method: primal-dual active set (a semismooth Newton method on the clamp equation), float64, in registers, solved in
+the articulation's own coordinates so that ``H^-1`` is never formed: with the free rows F, the rows C clamped at
+their bounds and ``v = H^-1 S^T tau``, the free rows' law ``tau_F = b_F - D_F S_F v`` is the SPD system
+
+    (H + S_F^T D_F S_F) v = S_F^T b_F + S_C^T tau_C,   then   tau_F = b_F - D_F S_F v,
+
+one Cholesky factorisation of an n x n matrix per iteration (n the articulation's DOFs). Every free row that violates
+its bound then moves onto it, and every clamped row whose unclamped PD value ``b_i - d_i (S v)_i`` lies back inside
+is released; it stops when the active set repeats, which is then an exact KKT point. Iteration 1 is the
+unconstrained solution, so without active limits the result is exact after one iteration; a later iteration recovers
+``H`` from the last factor (``H = L L^T - S_F^T D_F S_F``). At most ``rows + 2`` iterations are run, then projected
+Gauss–Seidel sweeps on the block ``A`` polish the (rare) unconverged case. Acceleration drives divide Kp, Kd by
+``A_ii`` (the joint's response), as the stable drive does; only they make the kernel compute the response.
 """
-
-from __future__ import annotations
 
 import warp as wp
 
 from ..config import rows as _cfg
-from .inertia import chain_funcs
+from .inertia import chain_h_func
 from .pd import _bidx
+from .spatial import _FLOAT32_EPS
 
 wp.set_module_options({"enable_backward": False})
 
@@ -43,61 +48,131 @@ _FLAG_VEL_TARGET = _cfg.FLAG_VEL_TARGET
 _cache: dict[tuple, wp.Kernel] = {}
 
 
-def coupled_matrix_type(nr: int):
-    """The (nr, nr) float64 matrix type of A (one element of the coupled kernel's ``a_cache``)."""
-    return wp.types.matrix(shape=(nr, nr), dtype=wp.float64)
+def coupled_matrix_type(n: int):
+    """The (n, n) float64 matrix type of H (one element of the coupled kernel's ``h_cache``), n the articulation's
+    DOFs."""
+    return wp.types.matrix(shape=(n, n), dtype=wp.float64)
 
 
-def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None = None) -> wp.Kernel:
-    """The coupled drive kernel for an articulation of nj joints and n DOFs, nr controlled rows (cached); the
-    inertia part unrolled with ``template`` (:meth:`wpctrl.kernels.inertia.ChainLayout.template`). Its ``a_cache``
-    argument (an array of ``coupled_matrix_type(nr)``) keeps A over a control step."""
-    key = (nj, n, nr, template)
+@wp.func
+def _rcp(x: wp.float64):
+    """1 / x in float64 without an IEEE division's slow-path branch: the hardware's approximate reciprocal refined by
+    two Newton steps (to the last bit or so; exact division on the CPU)."""
+    r = wp.div_approx(wp.float64(1.0), x)
+    e = wp.float64(1.0) - x * r
+    r = r + r * e
+    e = wp.float64(1.0) - x * r
+    return r + r * e
+
+
+def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None, row_dof: tuple, accel: tuple) -> wp.Kernel:
+    """The coupled drive kernel for an articulation of nj joints and n DOFs, nr controlled rows at the articulation's
+    DOFs ``row_dof`` (cached); the inertia part unrolled with ``template``
+    (:meth:`wpctrl.kernels.inertia.ChainLayout.template`); ``accel``: each row's acceleration-drive flag. Its
+    ``h_cache`` argument (an array of ``coupled_matrix_type(n)``) keeps H over a control step."""
+    key = (nj, n, nr, template, tuple(row_dof), tuple(accel))
     if key in _cache:
         return _cache[key]
-    chain_rows_factor, MatR, VecR = chain_funcs(nj, n, nr, template)
-    NR = nr  # the row loops have a compile-time bound: unrolled, so A, M and the vectors stay in registers
+    chain_h = chain_h_func(nj, n, nr, template)
+    N, NR = n, nr  # compile-time bounds: every loop unrolls, H / L and the vectors stay in registers on CUDA
+    ROWD = tuple(int(x) for x in row_dof)
+    ACC = tuple(int(x) for x in accel)
+    ANY_ACC = any(ACC)
+    MatN = coupled_matrix_type(n)
+    VecN = wp.types.vector(length=n, dtype=wp.float64)
+    MatR = wp.types.matrix(shape=(nr, nr), dtype=wp.float64)
+    VecR = wp.types.vector(length=nr, dtype=wp.float64)
+    VecRi = wp.types.vector(length=nr, dtype=wp.int32)
+    eps32 = wp.float64(_FLOAT32_EPS)
     row_pos = wp.constant(_ROW_POS)
     flag_vel = wp.constant(_FLAG_VEL_TARGET)
 
     @wp.func
-    def solve_masked(A: MatR, dinv: VecR, rhs: VecR, free: VecR):
-        """Solve ``(diag(dinv) + A)_FF x_F = rhs_F`` with ``x_i = rhs_i`` on the rows where ``free`` is 0."""
-        M = MatR()
-        for i in range(NR):
-            if free[i] > wp.float64(0.0):
-                for j in range(NR):
-                    if free[j] > wp.float64(0.0):
-                        M[i, j] = A[i, j]
-                M[i, i] = M[i, i] + dinv[i]
-            else:
-                M[i, i] = wp.float64(1.0)
-        # Cholesky in place (SPD: D^-1 + A restricted to F, identity elsewhere).
-        for jc in range(NR):
+    def factor(M: MatN):
+        """Cholesky ``M = L L^T`` (lower triangle, in place), pivots floored as Newton's JointSpaceResponse; returns
+        L and the pivots' reciprocals."""
+        inv = VecN()
+        for jc in range(wp.static(N)):
             s = M[jc, jc]
-            for k in range(jc):
+            for k in range(wp.static(jc)):
                 s -= M[jc, k] * M[jc, k]
-            s = wp.max(s, wp.float64(1.0e-300))
+            s = wp.max(s, eps32 * wp.max(wp.abs(M[jc, jc]), wp.float64(1.0)))
             dg = wp.sqrt(s)
             M[jc, jc] = dg
-            for i in range(jc + 1, NR):
+            inv[jc] = _rcp(dg)
+            for i in range(wp.static(jc + 1), wp.static(N)):
                 t = M[i, jc]
-                for k in range(jc):
+                for k in range(wp.static(jc)):
                     t -= M[i, k] * M[jc, k]
-                M[i, jc] = t / dg
-        x = VecR()
-        for i in range(NR):
-            t = rhs[i]
-            for k in range(i):
-                t -= M[i, k] * x[k]
-            x[i] = t / M[i, i]
-        for ii in range(NR):
-            i = NR - 1 - ii
+                M[i, jc] = t * inv[jc]
+        return M, inv
+
+    @wp.func
+    def solve(L: MatN, inv: VecN, x: VecN):
+        """``(L L^T)^-1 x``."""
+        y = VecN()
+        for i in range(wp.static(N)):
             t = x[i]
-            for k in range(i + 1, NR):
-                t -= M[k, i] * x[k]
-            x[i] = t / M[i, i]
-        return x
+            for k in range(wp.static(i)):
+                t -= L[i, k] * y[k]
+            y[i] = t * inv[i]
+        z = VecN()
+        for ii in range(wp.static(N)):
+            i = wp.static(N - 1 - ii)
+            t = y[i]
+            for k in range(wp.static(i + 1), wp.static(N)):
+                t -= L[k, i] * z[k]
+            z[i] = t * inv[i]
+        return z
+
+    @wp.func
+    def recover(L: MatN, dprev: VecR):
+        """H from the factor L of ``H + S^T diag(dprev) S``: ``L L^T`` (lower triangle) in place, rows last to first
+        and each row's columns last to first, so every entry is overwritten after its last use; then the rows'
+        ``dprev`` off the diagonal."""
+        for ii in range(wp.static(N)):
+            i = wp.static(N - 1 - ii)
+            for jj in range(wp.static(i + 1)):
+                j = wp.static(i - jj)
+                t = wp.float64(0.0)
+                for k in range(wp.static(j + 1)):
+                    t += L[i, k] * L[j, k]
+                L[i, j] = t
+        for r in range(wp.static(NR)):
+            L[wp.static(ROWD[r]), wp.static(ROWD[r])] = L[wp.static(ROWD[r]), wp.static(ROWD[r])] - dprev[r]
+        return L
+
+    @wp.func
+    def rows_block(H: MatN):
+        """``A = S H^-1 S^T`` (rows x rows) from H (lower triangle)."""
+        L, inv = factor(H)
+        A = MatR()
+        for c in range(wp.static(NR)):
+            e = VecN()
+            e[wp.static(ROWD[c])] = wp.float64(1.0)
+            z = solve(L, inv, e)
+            for r in range(wp.static(NR)):
+                A[r, c] = z[wp.static(ROWD[r])]
+        return A
+
+    @wp.func
+    def rows_diag(H: MatN):
+        """``diag(S H^-1 S^T)`` from H (lower triangle): ``|L^-1 e_d|^2`` per row."""
+        L, inv = factor(H)
+        out = VecR()
+        for r in range(wp.static(NR)):
+            y = VecN()
+            acc = wp.float64(0.0)
+            for i in range(wp.static(ROWD[r]), wp.static(N)):
+                t = wp.float64(0.0)
+                if wp.static(i == ROWD[r]):
+                    t = wp.float64(1.0)
+                for k in range(wp.static(ROWD[r]), wp.static(i)):
+                    t -= L[i, k] * y[k]
+                y[i] = t * inv[i]
+                acc += y[i] * y[i]
+            out[r] = acc
+        return out
 
     @wp.kernel(enable_backward=False, module="unique")
     def _coupled_drive_kernel(
@@ -127,7 +202,6 @@ def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None = None) -> w
         row_flags: wp.array[wp.int32],
         row_q_off: wp.array[wp.int32],
         row_qd_off: wp.array[wp.int32],
-        row_accel: wp.array[wp.int32],
         # Envs:
         env_q_base: wp.array[wp.int32],
         env_qd_base: wp.array[wp.int32],
@@ -144,10 +218,10 @@ def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None = None) -> w
         joint_target_qd_in: wp.array[float],
         # Out:
         joint_f_out: wp.array[float],
-        response_out: wp.array2d[float],  # optional: (H^-1)_ii of each row [1/(kg m^2) or 1/kg]
-        a_cache: wp.array[MatR],  # optional, in/out: A per env, kept over a control step (inertia_update="control")
-        step_in: wp.array[wp.int32],  # with a_cache: the substep counter (the substep kernel's, ManiSkill's _step)
-        num_substeps: int,  # with a_cache: K; A is recomputed at the first substep of each control step
+        response_out: wp.array2d[float],  # with acceleration rows: (H^-1)_ii of each row [1/(kg m^2) or 1/kg]
+        h_cache: wp.array[MatN],  # optional, in/out: H per env, kept over a control step (inertia_update="control")
+        step_in: wp.array[wp.int32],  # with h_cache: the substep counter (the substep kernel's, ManiSkill's _step)
+        num_substeps: int,  # with h_cache: K; H is recomputed at the first substep of each control step
         iterations_out: wp.array[wp.int32],  # optional: active-set iterations (rows + 3 + sweeps: not settled)
         computed_effort_out: wp.array2d[float],  # optional [N·m or N]: the PD law at the predicted state, unclamped
         applied_effort_out: wp.array2d[float],  # optional [N·m or N]: the solved torque
@@ -156,26 +230,33 @@ def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None = None) -> w
         """Per env: coupled implicit PD torques [N·m or N] of every controlled row, clamped inside the solve."""
         env = wp.tid()
         fresh = int(1)
-        if a_cache:  # A of the control step's first substep, reused by the others
+        if h_cache:  # H of the control step's first substep, reused by the others
             fresh = int((step_in[env] - 1) % num_substeps == 0)
-        A = MatR()
+        H = MatN()
         if fresh != 0:
-            A = chain_rows_factor(
+            H = chain_h(
                 num_dofs, env_joint_base[env], env_dof_base[env], chain_type, chain_parent, chain_dof, chain_anc,
                 row_dof, joint_q_start, joint_qd_start, joint_X_p, joint_X_c, joint_axis, joint_child, joint_armature,
                 body_mass, body_com, body_inertia, joint_q_in,
             )  # fmt: skip
-            if a_cache:
-                a_cache[env] = A
+            if h_cache:
+                h_cache[env] = H
         else:
-            A = a_cache[env]
+            H = h_cache[env]
+        resp = VecR()
+        if wp.static(ANY_ACC):
+            resp = rows_diag(H)
+            for r in range(wp.static(NR)):
+                response_out[env, r] = float(resp[r])
         h = wp.float64(dt)
         b = VecR()  # unclamped PD force at the start-of-step prediction [N·m or N]
         d = VecR()  # dt Kd + dt^2 Kp
-        dinv = VecR()
         lim = VecR()
-        active = VecR()  # 1: in the QP (Kp or Kd > 0), 0: passive (tau = 0)
-        for r in range(NR):
+        state = VecRi()  # 0 free, +1 / -1 at the upper / lower bound, 2 passive (Kp = Kd = 0: tau = 0)
+        kbp = _bidx(kp.shape[0], env)
+        kbd = _bidx(kd.shape[0], env)
+        kbl = _bidx(force_limit.shape[0], env)
+        for r in range(wp.static(NR)):
             kind = row_kind[r]
             qi = env_q_base[env] + row_q_off[r]
             di = env_qd_base[env] + row_qd_off[r]
@@ -183,96 +264,99 @@ def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None = None) -> w
             kpe = wp.float64(0.0)
             e = wp.float64(0.0)
             if kind == row_pos:
-                kpe = wp.float64(kp[_bidx(kp.shape[0], env), r])
+                kpe = wp.float64(kp[kbp, r])
                 e = wp.float64(joint_target_q_in[qi]) - wp.float64(joint_q_in[qi])
             tqd = wp.float64(0.0)
             if kind != row_pos or (row_flags[r] & flag_vel) != 0:
                 tqd = wp.float64(joint_target_qd_in[di])
-            kde = wp.float64(kd[_bidx(kd.shape[0], env), r])
-            if row_accel[r] != 0:  # acceleration drive: gains times the effective inertia 1 / A_ii
-                kpe = kpe / A[r, r]
-                kde = kde / A[r, r]
+            kde = wp.float64(kd[kbd, r])
+            if wp.static(ACC[r] != 0):  # acceleration drive: gains times the effective inertia 1 / A_ii
+                kpe = kpe / resp[r]
+                kde = kde / resp[r]
             b[r] = kpe * (e - h * qd) + kde * (tqd - qd)
             d[r] = h * kde + h * h * kpe
-            lim[r] = wp.float64(force_limit[_bidx(force_limit.shape[0], env), r])
-            if d[r] > wp.float64(0.0):
-                active[r] = wp.float64(1.0)
-                dinv[r] = wp.float64(1.0) / d[r]
-            if response_out:
-                response_out[env, r] = float(A[r, r])
+            lim[r] = wp.float64(force_limit[kbl, r])
+            if not d[r] > wp.float64(0.0):
+                state[r] = 2
 
-        # Primal-dual active set. state: 0 free, +1 / -1 at the upper / lower bound, 2 passive.
-        state = VecR()
-        for r in range(NR):
-            if active[r] == wp.float64(0.0):
-                state[r] = wp.float64(2.0)
+        # Primal-dual active set in the articulation's coordinates (see the module docstring).
         tau = VecR()
+        av = VecR()  # (S v)_r = (A tau)_r of the last solve
+        dprev = VecR()  # D_F of the last factorisation (to recover H from its factor)
         settled = int(0)
         it = int(0)
         while it < NR + 2 and settled == 0:
+            if it > 0:
+                H = recover(H, dprev)
             it += 1
-            free = VecR()
-            fixed = VecR()
-            for r in range(NR):
-                if state[r] == wp.float64(0.0):
-                    free[r] = wp.float64(1.0)
-                elif state[r] == wp.float64(1.0):
-                    fixed[r] = lim[r]
-                elif state[r] == wp.float64(-1.0):
-                    fixed[r] = -lim[r]
-            rhs = VecR()
-            for r in range(NR):
-                if free[r] > wp.float64(0.0):
-                    t = b[r] * dinv[r]
-                    for c in range(NR):
-                        t -= A[r, c] * fixed[c]
-                    rhs[r] = t
-                else:
-                    rhs[r] = fixed[r]
-            tau = solve_masked(A, dinv, rhs, free)
+            x = VecN()
+            for r in range(wp.static(NR)):
+                dd = wp.static(ROWD[r])
+                dprev[r] = wp.float64(0.0)
+                if state[r] == 0:
+                    dprev[r] = d[r]
+                    H[dd, dd] = H[dd, dd] + d[r]
+                    x[dd] = b[r]
+                elif state[r] == 1:
+                    x[dd] = lim[r]
+                elif state[r] == -1:
+                    x[dd] = -lim[r]
+            H, inv = factor(H)
+            v = solve(H, inv, x)
             changed = int(0)
-            for r in range(NR):
+            for r in range(wp.static(NR)):
+                vr = v[wp.static(ROWD[r])]
+                av[r] = vr
                 s = state[r]
-                if s == wp.float64(0.0):
-                    if tau[r] > lim[r]:
-                        state[r] = wp.float64(1.0)
+                w = b[r] - d[r] * vr  # the PD force this row asks for at the predicted state
+                if s == 0:
+                    tau[r] = w
+                    if w > lim[r]:
+                        state[r] = 1
                         changed = 1
-                    elif tau[r] < -lim[r]:
-                        state[r] = wp.float64(-1.0)
+                    elif w < -lim[r]:
+                        state[r] = -1
                         changed = 1
-                elif s == wp.float64(1.0) or s == wp.float64(-1.0):
-                    at = wp.float64(0.0)
-                    for c in range(NR):
-                        at += A[r, c] * tau[c]
-                    w = b[r] - d[r] * at  # the PD force this row asks for at the predicted state
-                    if (s > wp.float64(0.0) and w < lim[r]) or (s < wp.float64(0.0) and w > -lim[r]):
-                        state[r] = wp.float64(0.0)
+                elif s == 1 or s == -1:
+                    tau[r] = wp.float64(s) * lim[r]
+                    if (s == 1 and w < lim[r]) or (s == -1 and w > -lim[r]):  # back inside: released
+                        state[r] = 0
                         changed = 1
+                else:
+                    tau[r] = wp.float64(0.0)
             if changed == 0:
                 settled = 1
         if settled == 0:
-            # Not settled (cycling between active sets): projected Gauss–Seidel on the clamp equation.
-            for r in range(NR):
-                tau[r] = wp.clamp(tau[r], -lim[r], lim[r]) * active[r]
+            # Not settled (cycling between active sets): projected Gauss–Seidel on the clamp equation, with A.
+            A = rows_block(recover(H, dprev))
+            for r in range(wp.static(NR)):
+                if state[r] == 2:
+                    tau[r] = wp.float64(0.0)
+                else:
+                    tau[r] = wp.clamp(tau[r], -lim[r], lim[r])
             for _sweep in range(pgs_sweeps):
-                for r in range(NR):
-                    if active[r] > wp.float64(0.0):
+                for r in range(wp.static(NR)):
+                    if state[r] != 2:
                         at = wp.float64(0.0)
-                        for c in range(NR):
+                        for c in range(wp.static(NR)):
                             at += A[r, c] * tau[c]
                         res = tau[r] - b[r] + d[r] * at  # residual of tau = b - D A tau
                         tau[r] = wp.clamp(tau[r] - res / (wp.float64(1.0) + d[r] * A[r, r]), -lim[r], lim[r])
-            it += pgs_sweeps + 1
-        for r in range(NR):
-            di = env_qd_base[env] + row_qd_off[r]
-            joint_f_out[di] = float(tau[r] * active[r])
-            if computed_effort_out:
+            for r in range(wp.static(NR)):
                 at = wp.float64(0.0)
-                for c in range(NR):
+                for c in range(wp.static(NR)):
                     at += A[r, c] * tau[c]
-                w = (b[r] - d[r] * at) * active[r]
+                av[r] = at
+            it += pgs_sweeps + 1
+        for r in range(wp.static(NR)):
+            joint_f_out[env_qd_base[env] + row_qd_off[r]] = float(tau[r])
+        if computed_effort_out:
+            for r in range(wp.static(NR)):
+                w = wp.float64(0.0)
+                if state[r] != 2:
+                    w = b[r] - d[r] * av[r]
                 computed_effort_out[env, r] = float(w)
-                applied_effort_out[env, r] = float(tau[r] * active[r])
+                applied_effort_out[env, r] = float(tau[r])
                 if wp.abs(w) > lim[r]:
                     saturation_count_out[env, r] = saturation_count_out[env, r] + 1
         if iterations_out:

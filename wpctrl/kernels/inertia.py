@@ -147,6 +147,17 @@ def chain_funcs(nj: int, n: int, nr: int, template: tuple | None = None, full: b
     With ``template`` (:meth:`ChainLayout.template`) the articulation's structure is compiled in and every loop is
     unrolled (:mod:`wpctrl.kernels.inertia_unrolled`); ``full=False`` then fills only the diagonal of ``A``.
     """
+    return _chain_funcs(nj, n, nr, template, full)[0]
+
+
+def chain_h_func(nj: int, n: int, nr: int, template: tuple | None = None):
+    """``chain_h``: the ``@wp.func`` of H alone (same arguments as ``chain_rows_factor``): the articulation's
+    joint-space inertia with the armature, float64, lower triangle filled [kg m^2 or kg]; unrolled with ``template``
+    as :func:`chain_funcs`."""
+    return _chain_funcs(nj, n, nr, template, True)[1]
+
+
+def _chain_funcs(nj: int, n: int, nr: int, template: tuple | None, full: bool):
     if template is not None:
         key = (nj, n, nr, template, bool(full))
         if key not in _funcs_cache:
@@ -165,7 +176,7 @@ def chain_funcs(nj: int, n: int, nr: int, template: tuple | None = None, full: b
     eps32 = wp.float64(_FLOAT32_EPS)
 
     @wp.func
-    def chain_rows_factor(
+    def chain_h(
         num_dofs: int,
         jb: int,
         db: int,
@@ -190,7 +201,6 @@ def chain_funcs(nj: int, n: int, nr: int, template: tuple | None = None, full: b
         # ~20 s to compile on the CPU backend for no measured gain.
         nj_rt = chain_type.shape[0]
         n_rt = num_dofs
-        nr_rt = row_dof.shape[0]
         H = MatN()
         ax = MatN3()  # DOF axes in world
         pt = MatN3()  # DOF anchor points in world [m]
@@ -249,6 +259,36 @@ def chain_funcs(nj: int, n: int, nr: int, template: tuple | None = None, full: b
                             H[i, jj] = H[i, jj] + m * wp.dot(jvi, jv[jj]) + wp.dot(Ijwi, jw[jj])
         for i in range(n_rt):
             H[i, i] = H[i, i] + wp.float64(joint_armature[db + i])
+        return H
+
+    @wp.func
+    def chain_rows_factor(
+        num_dofs: int,
+        jb: int,
+        db: int,
+        chain_type: wp.array[wp.int32],
+        chain_parent: wp.array[wp.int32],
+        chain_dof: wp.array[wp.int32],
+        chain_anc: wp.array[wp.int32],
+        row_dof: wp.array[wp.int32],
+        joint_q_start: wp.array[wp.int32],
+        joint_qd_start: wp.array[wp.int32],
+        joint_X_p: wp.array[wp.transform],
+        joint_X_c: wp.array[wp.transform],
+        joint_axis: wp.array[wp.vec3],
+        joint_child: wp.array[wp.int32],
+        joint_armature: wp.array[float],
+        body_mass: wp.array[float],
+        body_com: wp.array[wp.vec3],
+        body_inertia: wp.array[wp.mat33],
+        joint_q: wp.array[float],
+    ):
+        H = chain_h(
+            num_dofs, jb, db, chain_type, chain_parent, chain_dof, chain_anc, row_dof, joint_q_start, joint_qd_start,
+            joint_X_p, joint_X_c, joint_axis, joint_child, joint_armature, body_mass, body_com, body_inertia, joint_q,
+        )  # fmt: skip
+        n_rt = num_dofs
+        nr_rt = row_dof.shape[0]
         # Cholesky H = L L^T in place (lower triangle), pivots floored as in Newton's JointSpaceResponse.
         for jc in range(n_rt):
             s = H[jc, jc]
@@ -283,7 +323,7 @@ def chain_funcs(nj: int, n: int, nr: int, template: tuple | None = None, full: b
                 A[cc, rr] = v
         return A
 
-    out = (chain_rows_factor, MatR, VecR)
+    out = ((chain_rows_factor, MatR, VecR), chain_h)
     _funcs_cache[key] = out
     return out
 

@@ -18,7 +18,8 @@ wp.set_module_options({"enable_backward": False})
 
 def unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool):
     """The fused inertia function with the articulation's structure as compile-time constants (same signature and
-    result as :func:`chain_funcs`' runtime-loop version; the chain tables passed to it are not read).
+    result as :func:`chain_funcs`' runtime-loop version; the chain tables passed to it are not read), and the function
+    of H alone it is built on (``chain_h``, same arguments: H with the armature, lower triangle).
 
     Every loop is unrolled and every local matrix is indexed by constants, so on CUDA the matrices live in registers
     instead of per-thread local memory, and H is only accumulated over the DOF pairs that move a body (its ancestor
@@ -43,7 +44,7 @@ def unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool):
     FULL = bool(full)
 
     @wp.func
-    def chain_rows_factor(
+    def chain_h(
         num_dofs: int,
         jb: int,
         db: int,
@@ -117,6 +118,34 @@ def unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool):
                     H[i, i2] = h
         for i in range(wp.static(n)):
             H[i, i] = H[i, i] + wp.float64(joint_armature[db + i])
+        return H
+
+    @wp.func
+    def chain_rows_factor(
+        num_dofs: int,
+        jb: int,
+        db: int,
+        chain_type: wp.array[wp.int32],
+        chain_parent: wp.array[wp.int32],
+        chain_dof: wp.array[wp.int32],
+        chain_anc: wp.array[wp.int32],
+        row_dof: wp.array[wp.int32],
+        joint_q_start: wp.array[wp.int32],
+        joint_qd_start: wp.array[wp.int32],
+        joint_X_p: wp.array[wp.transform],
+        joint_X_c: wp.array[wp.transform],
+        joint_axis: wp.array[wp.vec3],
+        joint_child: wp.array[wp.int32],
+        joint_armature: wp.array[float],
+        body_mass: wp.array[float],
+        body_com: wp.array[wp.vec3],
+        body_inertia: wp.array[wp.mat33],
+        joint_q: wp.array[float],
+    ):
+        H = chain_h(
+            num_dofs, jb, db, chain_type, chain_parent, chain_dof, chain_anc, row_dof, joint_q_start, joint_qd_start,
+            joint_X_p, joint_X_c, joint_axis, joint_child, joint_armature, body_mass, body_com, body_inertia, joint_q,
+        )  # fmt: skip
         # Cholesky H = L L^T in place (lower triangle), pivots floored as in Newton's JointSpaceResponse; the
         # reciprocals of the pivots are kept (n float64 divisions in all, none in the substitutions below).
         inv = VecN()
@@ -154,4 +183,4 @@ def unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool):
                 A[c2, rr] = v
         return A
 
-    return (chain_rows_factor, MatR, VecR)
+    return (chain_rows_factor, MatR, VecR), chain_h

@@ -61,7 +61,7 @@ _SUBSTEP: dict[StepLayout, wp.Kernel] = {}
 def set_action_kernel(layout: StepLayout) -> wp.Kernel:
     """The set_action kernel of ``layout`` (compiled once per layout and process; Warp caches it on disk);
     substep-only fields of the layout are ignored."""
-    key = layout._replace(act_model=(), table_len=())
+    key = layout._replace(act_model=(), limit_table=())
     k = _SET_ACTION.get(key)
     if k is None:
         k = _SET_ACTION[key] = _make_set_action_kernel(key)

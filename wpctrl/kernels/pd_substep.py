@@ -24,7 +24,12 @@ def _make_substep_kernel(L: StepLayout) -> wp.Kernel:
     # Effort rows carry their commanded effort in the target register (so a delay delays it too).
     IS_EFF = tuple(int(k == EFF) for k in KIND)
     ACT = L.act_model or (_ca.ACT_NONE,) * R
-    TLEN = L.table_len or (0,) * R
+    # Position tables as compile-time constants: (x, y, segments, slopes) per row, () without one.
+    TAB = L.limit_table or ((),) * R
+    TX = tuple(t[0] if t else (0.0,) for t in TAB)
+    TY = tuple(t[1] if t else (0.0,) for t in TAB)
+    TSEG = tuple(tuple(reversed(t[2])) if t else () for t in TAB)  # tried last to first: the first match wins
+    TSLOPE = tuple(t[3] if t else (0.0,) for t in TAB)
     # Rows whose torque this kernel computes: PD rows with explicit actuation or the effort readout (not the rows of
     # an actuator network, whose own launch follows), and effort rows.
     TAU = tuple(int(IS_EFF[r] or ((EXPLICIT or EFFORT) and ACT[r] != _ca.ACT_NET)) for r in range(R))
@@ -49,8 +54,6 @@ def _make_substep_kernel(L: StepLayout) -> wp.Kernel:
         force_limit: wp.array2d[float],  # [N·m or N]
         sat_effort: wp.array2d[float],  # with DC motors: stall effort [N·m or N]
         vel_limit: wp.array2d[float],  # with DC motors: no-load speed [rad/s or m/s]
-        limit_table_q: wp.array2d[float],  # with position-based limits: (rows, n) sample positions [rad or m]
-        limit_table_f: wp.array2d[float],  # (rows, n) effort limits [N·m or N]
         num_substeps: int,
         dt: float,  # [s] one solver substep
         max_delay: int,  # [substeps]
@@ -203,9 +206,17 @@ def _make_substep_kernel(L: StepLayout) -> wp.Kernel:
                     if wp.static(ACT[r] == _ca.ACT_DC_MOTOR):
                         f[r] = _act.dc_motor_clamp(u[r], qd[r], sate[r], vlim[r], lim[r])
                     elif wp.static(ACT[r] == _ca.ACT_POSITION_LIMIT):
-                        f[r] = _act.position_limit_clamp(
-                            u[r], q[r], limit_table_q, limit_table_f, r, wp.static(TLEN[r]), lim[r]
-                        )
+                        # The table at q (end values held outside): the first piece whose right end is >= q.
+                        fl = wp.static(TY[r][-1])
+                        for kk in range(wp.static(len(TSEG[r]))):
+                            if q[r] <= wp.static(TX[r][TSEG[r][kk] + 1]):
+                                fl = wp.static(TY[r][TSEG[r][kk]]) + (q[r] - wp.static(TX[r][TSEG[r][kk]])) * wp.static(
+                                    TSLOPE[r][TSEG[r][kk]]
+                                )
+                        if q[r] <= wp.static(TX[r][0]):
+                            fl = wp.static(TY[r][0])
+                        fl = wp.min(fl, lim[r])
+                        f[r] = wp.clamp(u[r], -fl, fl)
                     else:
                         f[r] = wp.clamp(u[r], -lim[r], lim[r])
             for r in range(wp.static(R)):

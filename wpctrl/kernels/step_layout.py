@@ -47,9 +47,10 @@ class StepLayout(NamedTuple):
     base_axis: tuple = ()
     bx_col: tuple = ()
     by_col: tuple = ()
-    # Actuator models (substep only): each row's model code (config.actuators.ACT_*) and position-table length.
+    # Actuator models (substep only): each row's model code (config.actuators.ACT_*) and position table as
+    # compile-time constants (kernels.actuators.table_constants; () for a row without one).
     act_model: tuple = ()
-    table_len: tuple = ()
+    limit_table: tuple = ()
 
 
 def row_float_table(rows: _cfg.Rows, qlimits: np.ndarray) -> np.ndarray:

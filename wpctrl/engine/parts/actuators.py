@@ -3,8 +3,9 @@
 - :class:`EffortCommand`: the ``(num_envs, rows)`` commanded effort of effort rows (JointEffortController), written by
   ``set_action``, read by the substep kernel (delayed like any target when a delay is on), zeroed by a reset.
 - :class:`ActuatorModels`: per-env DC-motor parameters (``saturation_effort`` / ``velocity_limit``, randomisable like
-  the drive properties), the position-limit tables, and the actuator networks: each network's rows get one launch
-  after the substep kernel (:mod:`wpctrl.kernels.actuator_net`), and a reset zeroes their history / hidden state.
+  the drive properties) and the actuator networks: each network's rows get one launch after the substep kernel
+  (:mod:`wpctrl.kernels.actuator_net`), and a reset zeroes their history / hidden state. Position tables need no
+  part: they are compiled into the substep kernel.
 """
 
 from __future__ import annotations
@@ -40,7 +41,7 @@ class EffortCommand(Part):
 
 class ActuatorModels(Part):
     name = "actuators"
-    OPTIONAL_ARGS = ("sat_effort", "vel_limit", "limit_table_q", "limit_table_f")
+    OPTIONAL_ARGS = ("sat_effort", "vel_limit")
 
     @staticmethod
     def wanted(plan) -> bool:
@@ -52,15 +53,6 @@ class ActuatorModels(Part):
         self.sat_effort = alloc.per_env(R, fill=rows.sat_effort)
         self.vel_limit = alloc.per_env(R, fill=rows.vel_limit)
         self.nominal = alloc.up(np.stack([rows.sat_effort, rows.vel_limit]).reshape(2, R), wp.float32)
-        tables = [(r0, n, what) for r0, n, what in rows.extras if isinstance(what, tuple)]
-        width = max([len(t[2][0]) for t in tables] + [1])
-        tq = np.zeros((max(R, 1), width), np.float32)
-        tf = np.zeros((max(R, 1), width), np.float32)
-        for r0, n, (pos, eff) in tables:
-            tq[r0 : r0 + n, : pos.size] = pos
-            tf[r0 : r0 + n, : eff.size] = eff
-        self.limit_table_q = alloc.up(tq, wp.float32)
-        self.limit_table_f = alloc.up(tf, wp.float32)
         self.nets = [
             _NetGroup(plan, alloc, r0, n, spec) for r0, n, spec in rows.extras if isinstance(spec, ActuatorNet)
         ]
@@ -69,8 +61,6 @@ class ActuatorModels(Part):
         return {
             "sat_effort": self.sat_effort,
             "vel_limit": self.vel_limit,
-            "limit_table_q": self.limit_table_q,
-            "limit_table_f": self.limit_table_f,
         }
 
     def after_substep(self, engine, state, control) -> None:

@@ -6,8 +6,8 @@
   (``"substep"``): one launch of the fused H / Cholesky kernel where the articulation allows it
   (:mod:`wpctrl.kernels.inertia`), else Newton's ``JointSpaceResponse`` and a gather.
 - :class:`CoupledDrive`: PhysX's articulation drive, one extra launch after every substep that solves all rows jointly
-  with the articulation's inverse-inertia block (:mod:`wpctrl.kernels.drive`); it writes ``joint_f``, ``r`` and the
-  effort readout itself.
+  with the articulation's joint-space inertia (:mod:`wpctrl.kernels.drive`); it writes ``joint_f`` and the effort
+  readout itself, and ``r`` where acceleration drives need it.
 """
 
 from __future__ import annotations
@@ -129,11 +129,13 @@ class CoupledDrive(JointSpaceResponse):
         super().__init__(plan, alloc)
         self.coupled_iterations = wp.zeros(plan.num_envs, dtype=wp.int32, device=alloc.device)
         self._launch: _Launch | None = None
-        # inertia_update="control": A computed at a control step's first substep and reused by the other K - 1
-        self.a_cache = None
-        if plan.options.inertia_update == "control":
-            nr = plan.num_rows
-            self.a_cache = wp.zeros(plan.num_envs, dtype=KD.coupled_matrix_type(nr), device=alloc.device)
+        self.h_cache = None  # inertia_update="control": H of a control step's first substep, reused by the other K - 1
+
+    def build(self, engine, model, solver) -> None:
+        super().build(engine, model, solver)
+        if self.plan.options.inertia_update == "control":
+            n = self._fused.layout.num_dofs
+            self.h_cache = wp.zeros(self.plan.num_envs, dtype=KD.coupled_matrix_type(n), device=engine.device)
 
     def kernel_args(self) -> dict:
         # The substep kernel leaves the effort readout to the coupled drive (it writes the clamped torque itself).
@@ -148,8 +150,8 @@ class CoupledDrive(JointSpaceResponse):
         )
 
     def update(self, engine, state) -> None:
-        """The coupled kernel computes H (and r) itself, at every substep or (``inertia_update="control"``) at each
-        control step's first; at build, r of the initial pose."""
+        """The coupled kernel computes H (and r, for acceleration drives) itself, at every substep or
+        (``inertia_update="control"``) at each control step's first; at build, r of the initial pose."""
         self._fused.launch_response(state.joint_q, self.response)
 
     def before_set_action(self, engine, action, state) -> None:
@@ -173,14 +175,15 @@ class CoupledDrive(JointSpaceResponse):
                 "joint_f_out": control.joint_f,
                 "response_out": self.response,
                 "iterations_out": self.coupled_iterations,
-                "a_cache": self.a_cache,
-                "step_in": engine.core.step if self.a_cache is not None else None,
+                "h_cache": self.h_cache,
+                "step_in": engine.core.step if self.h_cache is not None else None,
                 "num_substeps": engine.num_substeps,
                 "computed_effort_out": None if effort is None else effort.computed_effort,
                 "applied_effort_out": None if effort is None else effort.applied_effort,
                 "saturation_count_out": None if effort is None else effort.saturation_count,
             }
-            kernel = KD.coupled_kernel(*fc.kernel_key())
+            accel = tuple(int(a) for a in self.plan.rows.accel)
+            kernel = KD.coupled_kernel(*fc.kernel_key(), tuple(int(x) for x in fc.layout.row_dof), accel)
             names = [a.label for a in kernel.adj.args]
             for n in names:
                 if n not in params:

@@ -39,7 +39,7 @@ case "$STAGE" in
       --mujoco --repeats 5 --out "$OUT" 2>&1 | tee -a "$log" | tail -20
     # one graph-replayed coupled launch at 4k envs (the bench's warm-up launches skipped)
     timeout 200 ncu --kernel-name regex:coupled_drive --launch-skip 20 --launch-count 1 --section SpeedOfLight \
-      --section LaunchStats --section Occupancy --section WarpStateStats --section MemoryWorkloadAnalysis \
+      --section LaunchStats --section Occupancy --section WarpStateStats --section MemoryWorkloadAnalysis --section InstructionStats \
       $PY bench/inertia_update.py --device cuda:0 --envs 4k --variants "coupled, H per substep" --repeats 1 \
       --out "$(mktemp -d)" > "$OUT/ncu_coupled.txt" 2>&1; tail -5 "$OUT/ncu_coupled.txt" ;;
   models)

@@ -55,22 +55,25 @@ def coupled_matrix_type(n: int):
 
 
 @wp.func
-def _rcp(x: wp.float64):
-    """1 / x in float64 without an IEEE division's slow-path branch: the hardware's approximate reciprocal refined by
-    two Newton steps (to the last bit or so; exact division on the CPU)."""
-    r = wp.div_approx(wp.float64(1.0), x)
-    e = wp.float64(1.0) - x * r
-    r = r + r * e
-    e = wp.float64(1.0) - x * r
-    return r + r * e
+def _rsqrt(x: wp.float64):
+    """1 / sqrt(x) in float64 for a positive normal x without the IEEE square root's and division's slow paths: a
+    float32 estimate refined by two Newton steps (relative error ~1e-7, then ~1e-14, then rounding)."""
+    y = wp.float64(1.0 / wp.sqrt(wp.float32(x)))
+    h = wp.float64(0.5) * x
+    y = y * (wp.float64(1.5) - h * y * y)
+    return y * (wp.float64(1.5) - h * y * y)
 
 
-def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None, row_dof: tuple, accel: tuple) -> wp.Kernel:
+def coupled_kernel(
+    nj: int, n: int, nr: int, template: tuple | None, row_dof: tuple, accel: tuple, fast_math: bool = False
+) -> wp.Kernel:
     """The coupled drive kernel for an articulation of nj joints and n DOFs, nr controlled rows at the articulation's
     DOFs ``row_dof`` (cached); the inertia part unrolled with ``template``
     (:meth:`wpctrl.kernels.inertia.ChainLayout.template`); ``accel``: each row's acceleration-drive flag. Its
-    ``h_cache`` argument (an array of ``coupled_matrix_type(n)``) keeps H over a control step."""
-    key = (nj, n, nr, template, tuple(row_dof), tuple(accel))
+    ``h_cache`` argument (an array of ``coupled_matrix_type(n)``) keeps H over a control step. ``fast_math``
+    compiles it with the GPU's approximate single-precision intrinsics (the forward kinematics' sines and cosines,
+    the pivots' first estimate; float64 is unaffected): the CUDA default."""
+    key = (nj, n, nr, template, tuple(row_dof), tuple(accel), bool(fast_math))
     if key in _cache:
         return _cache[key]
     chain_h = chain_h_func(nj, n, nr, template)
@@ -97,9 +100,9 @@ def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None, row_dof: tu
             for k in range(wp.static(jc)):
                 s -= M[jc, k] * M[jc, k]
             s = wp.max(s, eps32 * wp.max(wp.abs(M[jc, jc]), wp.float64(1.0)))
-            dg = wp.sqrt(s)
-            M[jc, jc] = dg
-            inv[jc] = _rcp(dg)
+            y = _rsqrt(s)
+            M[jc, jc] = s * y
+            inv[jc] = y
             for i in range(wp.static(jc + 1), wp.static(N)):
                 t = M[i, jc]
                 for k in range(wp.static(jc)):
@@ -174,7 +177,7 @@ def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None, row_dof: tu
             out[r] = acc
         return out
 
-    @wp.kernel(enable_backward=False, module="unique")
+    @wp.kernel(enable_backward=False, module="unique", module_options={"fast_math": bool(fast_math)})
     def _coupled_drive_kernel(
         # Chain (articulation template):
         chain_type: wp.array[wp.int32],

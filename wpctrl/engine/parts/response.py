@@ -183,7 +183,8 @@ class CoupledDrive(JointSpaceResponse):
                 "saturation_count_out": None if effort is None else effort.saturation_count,
             }
             accel = tuple(int(a) for a in self.plan.rows.accel)
-            kernel = KD.coupled_kernel(*fc.kernel_key(), tuple(int(x) for x in fc.layout.row_dof), accel)
+            rows = tuple(int(x) for x in fc.layout.row_dof)
+            kernel = KD.coupled_kernel(*fc.kernel_key(), rows, accel, fast_math=engine.device.is_cuda)
             names = [a.label for a in kernel.adj.args]
             for n in names:
                 if n not in params:

@@ -41,7 +41,17 @@ case "$STAGE" in
     timeout 200 ncu --kernel-name regex:coupled_drive --launch-skip 20 --launch-count 1 --section SpeedOfLight \
       --section LaunchStats --section Occupancy --section WarpStateStats --section MemoryWorkloadAnalysis --section InstructionStats \
       $PY bench/inertia_update.py --device cuda:0 --envs 4k --variants "coupled, H per substep" --repeats 1 \
-      --out "$(mktemp -d)" > "$OUT/ncu_coupled.txt" 2>&1; tail -5 "$OUT/ncu_coupled.txt" ;;
+      --out "$(mktemp -d)" > "$OUT/ncu_coupled.txt" 2>&1; tail -5 "$OUT/ncu_coupled.txt"
+    if [ -n "${NCU_SOURCE:-}" ]; then  # per-source-line instruction counts and stall samples (kernel built with lineinfo)
+      timeout 240 ncu --kernel-name regex:coupled_drive --launch-skip 20 --launch-count 1 --section SourceCounters \
+        --section WarpStateStats --import-source yes -f -o "$OUT/coupled_src" $PY -c "import runpy, sys, warp as wp
+wp.config.lineinfo = True
+sys.argv = ['inertia_update.py', '--device', 'cuda:0', '--envs', '4k', '--variants', 'coupled, H per substep',
+            '--repeats', '1', '--out', '/tmp/ncu_src']
+runpy.run_path('bench/inertia_update.py', run_name='__main__')" > "$OUT/ncu_coupled_source.log" 2>&1
+      ncu -i "$OUT/coupled_src.ncu-rep" --page source --csv --print-source cuda > "$OUT/ncu_coupled_source.csv" 2>&1
+      rm -f "$OUT/coupled_src.ncu-rep"; wc -l "$OUT/ncu_coupled_source.csv"
+    fi ;;
   models)
     for v in dc_motor position_limit; do
       timeout 100 $PY bench/actuator_cost.py --envs "${ACT_ENVS:-1,4k,64k}" --repeats 5 --variants "plain,$v" \

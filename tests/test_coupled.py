@@ -108,6 +108,71 @@ def test_unrolled_fused_kernel_matches_the_runtime_loop_kernel():
     assert np.abs(torques[0]).max() > 1.0  # the drive pushes (a test of something)
 
 
+def _tree(dfs: bool, num_envs: int = 2):
+    """A fixed-base tree of 4 DOFs (a revolute trunk; two branches, one revolute then prismatic, one revolute), its
+    joints written depth first (every subtree a contiguous run: H in composite form) or breadth first (the second
+    branch between the first and its child: H body by body)."""
+    b = newton.ModelBuilder()
+    axes = [(0.0, 0.0, 1.0), (0.0, 1.0, 0.0), (1.0, 0.0, 0.0)]
+
+    def link(i, mass):
+        inertia = wp.mat33(*np.diag([0.02, 0.03, 0.01 + 0.01 * i]).reshape(-1).tolist())
+        return b.add_link(mass=mass, com=wp.vec3(0.05 * i, 0.1, -0.02 * i), inertia=inertia)
+
+    def rev(parent, child, i, pos):
+        xf = wp.transform(pos, wp.quat_identity())
+        return b.add_joint_revolute(parent, child, parent_xform=xf, axis=axes[i % 3], armature=0.01)
+
+    def slide(parent, child):
+        xf = wp.transform((0.0, 0.3, 0.1), wp.quat_identity())
+        return b.add_joint_prismatic(parent, child, parent_xform=xf, axis=(0.0, 0.0, 1.0), armature=0.01)
+
+    for _ in range(num_envs):
+        trunk, left, right, tip = link(0, 3.0), link(1, 1.5), link(2, 1.2), link(3, 0.5)
+        js = [rev(-1, trunk, 0, (0.0, 0.0, 0.3)), rev(trunk, left, 1, (0.2, 0.0, 0.4))]
+        if dfs:
+            js += [slide(left, tip), rev(trunk, right, 2, (-0.2, 0.1, 0.4))]
+        else:
+            js += [rev(trunk, right, 2, (-0.2, 0.1, 0.4)), slide(left, tip)]
+        b.add_articulation(js)
+    return b.finalize(device="cpu")
+
+
+@pytest.mark.parametrize("dfs", [True, False])
+def test_unrolled_inertia_composite_and_body_by_body_match_the_runtime_loops(dfs):
+    """H^-1 of a branched chain with a prismatic joint, unrolled (composite form for depth-first joints, body by body
+    otherwise) against the runtime-loop kernel and Newton's JointSpaceResponse."""
+    from newton.actuators import JointSpaceResponse
+
+    from wpctrl.kernels.inertia import FusedChain, chain_layout
+    from wpctrl.kernels.inertia_unrolled import subtrees_contiguous
+
+    model = _tree(dfs)
+    dof = np.arange(8, dtype=np.int32).reshape(2, 4)
+    joints = model.joint_qd_start.numpy()
+    jidx = np.array([[np.searchsorted(joints, d, side="right") - 1 for d in row] for row in dof], np.int32)
+    layout, why = chain_layout(model, jidx, dof)
+    assert layout is not None, why
+    assert subtrees_contiguous(layout.template(), layout.num_dofs) == dfs
+    jsr = JointSpaceResponse(model)
+    s = model.state()
+    rng = np.random.default_rng(4)
+    for _ in range(3):
+        s.joint_q.assign(rng.uniform(-1.5, 1.5, 8).astype(np.float32))
+        newton.eval_fk(model, s.joint_q, s.joint_qd, s)
+        got = []
+        for unroll in (False, True):
+            resp = wp.zeros((2, 4), dtype=wp.float32)
+            blk = wp.zeros((2, 4, 4), dtype=wp.float32)
+            FusedChain(layout, model, unroll=unroll).launch_response(s.joint_q, resp, blk)
+            got.append(blk.numpy().astype(np.float64))
+        scale = np.abs(got[0]).max()
+        assert np.abs(got[1] - got[0]).max() <= 1e-6 * scale
+        jsr.refresh(s)
+        ref = jsr.inverse_blocks.numpy().astype(np.float64).reshape(2, 4, 4)
+        assert np.abs(got[1] - ref).max() <= 1e-5 * scale
+
+
 def _coupled_ctrl(model, force_limit, drive_mode="force", gripper_passive=False, kp=1e3, kd=1e2, **kw):
     arm = wpctrl.PDJointPosControllerConfig(
         PANDA_ARM_JOINTS, None, None, kp, kd, force_limit, normalize_action=False, drive_mode=drive_mode

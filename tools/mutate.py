@@ -149,6 +149,14 @@ MUTATIONS: list[Mutation] = [
         "a later active-set iteration of the coupled drive keeps the last free rows' D inside H",
         ("tests/test_coupled.py",),
     ),
+    M(
+        "composite_inertia_without_parallel_axis",
+        "wpctrl/kernels/inertia_unrolled.py",
+        "pj = pj + Iw + m * (wp.dot(rr, rr) * wp.identity(n=3, dtype=wp.float64) - wp.outer(rr, rr))",
+        "pj = pj + Iw",
+        "the composite form of H drops the parallel-axis term of each body's inertia about the reference point",
+        ("tests/test_coupled.py",),
+    ),
     # -- set_action ----------------------------------------------------------------------------------------------
     M(
         "mimic_offset_dropped",

@@ -16,14 +16,31 @@ from .spatial import _FLOAT32_EPS, J_FIXED, J_REVOLUTE, _body_world_inertia
 wp.set_module_options({"enable_backward": False})
 
 
+def subtrees_contiguous(template: tuple, n: int) -> bool:
+    """Whether every DOF's subtree is a contiguous run of the articulation's joints, starting at the DOF's own joint
+    (joints in parents-first depth-first order, as builders write articulations). Then H is built in composite form
+    (the composite rigid-body algorithm's ``I^c`` of a subtree as the difference of two running sums over the
+    bodies); otherwise body by body over the DOF pairs that move each body."""
+    JT, PAR, DOF, ANC, ROWD = template
+    nj = len(JT)
+    for i in range(n):
+        sub = [k for k in range(nj) if (ANC[k] >> i) & 1]
+        k0 = [k for k in range(nj) if DOF[k] == i]
+        if not k0 or sub != list(range(k0[0], k0[0] + len(sub))):
+            return False
+    return True
+
+
 def unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool):
     """The fused inertia function with the articulation's structure as compile-time constants (same signature and
     result as :func:`chain_funcs`' runtime-loop version; the chain tables passed to it are not read), and the function
     of H alone it is built on (``chain_h``, same arguments: H with the armature, lower triangle).
 
     Every loop is unrolled and every local matrix is indexed by constants, so on CUDA the matrices live in registers
-    instead of per-thread local memory, and H is only accumulated over the DOF pairs that move a body (its ancestor
-    mask, known at compile time)."""
+    instead of per-thread local memory. H is built in composite form where :func:`subtrees_contiguous` allows it
+    (per DOF one product of a running composite inertia with its unit motion where its subtree starts and one where
+    it ends, then one 6-vector dot per entry of H), else accumulated body by body over the DOF pairs that move each
+    body (its ancestor mask, known at compile time)."""
     JT, PAR, DOF, ANC, ROWD = template
     MatN = wp.types.matrix(shape=(n, n), dtype=wp.float64)
     MatN3 = wp.types.matrix(shape=(n, 3), dtype=wp.float64)
@@ -42,9 +59,18 @@ def unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool):
     # DOF pairs (i >= j) moving body k, with whether both are revolute (an angular term).
     PAIRS = [tuple((a, b, REV[a] and REV[b]) for a in MOV[k] for b in MOV[k] if b <= a) for k in range(nj)]
     FULL = bool(full)
+    # The composite form of H: every DOF's subtree a contiguous run of bodies K_i .. LAST[i] (K_i: its own joint).
+    KDOF = [0] * n
+    for k in range(nj):
+        if DOF[k] >= 0:
+            KDOF[DOF[k]] = k
+    COMPOSITE = subtrees_contiguous(template, n)
+    LAST = [max(k for k in range(nj) if (ANC[k] >> i) & 1) for i in range(n)] if COMPOSITE else [0] * n
+    ENDS = [tuple(i for i in range(n) if LAST[i] == k) for k in range(nj)]  # DOFs whose subtree ends at body k
+    ANCD = [MOV[KDOF[i]] for i in range(n)]  # DOF i and the DOFs above it (j <= i): the row of H it fills
 
     @wp.func
-    def chain_h(
+    def chain_h_pairs(
         num_dofs: int,
         jb: int,
         db: int,
@@ -119,6 +145,102 @@ def unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool):
         for i in range(wp.static(n)):
             H[i, i] = H[i, i] + wp.float64(joint_armature[db + i])
         return H
+
+    @wp.func
+    def chain_h_composite(
+        num_dofs: int,
+        jb: int,
+        db: int,
+        chain_type: wp.array[wp.int32],
+        chain_parent: wp.array[wp.int32],
+        chain_dof: wp.array[wp.int32],
+        chain_anc: wp.array[wp.int32],
+        row_dof: wp.array[wp.int32],
+        joint_q_start: wp.array[wp.int32],
+        joint_qd_start: wp.array[wp.int32],
+        joint_X_p: wp.array[wp.transform],
+        joint_X_c: wp.array[wp.transform],
+        joint_axis: wp.array[wp.vec3],
+        joint_child: wp.array[wp.int32],
+        joint_armature: wp.array[float],
+        body_mass: wp.array[float],
+        body_com: wp.array[wp.vec3],
+        body_inertia: wp.array[wp.mat33],
+        joint_q: wp.array[float],
+    ):
+        H = MatN()
+        ax = MatN3()  # each DOF's unit motion: angular part (revolute: the axis in world; prismatic: 0)
+        vo = MatN3()  # linear part: the velocity of the reference point O [m/s per unit rate]
+        pt = MatN3()  # DOF anchor points in world [m]
+        bp = MatJ3()  # child-body world positions
+        bq = MatJ4()  # child-body world rotations (x, y, z, w)
+        o = wp.vec3d()  # O: the root joint's anchor in world
+        pm = wp.float64(0.0)  # running composite of the bodies so far, about O: mass [kg],
+        ph = wp.vec3d()  # first moment [kg m],
+        pj = wp.mat33d()  # and rotational inertia [kg m^2]
+        for k in range(wp.static(nj)):
+            j = jb + k
+            Xw = wp.transform_identity()
+            if wp.static(PAR[k] >= 0):
+                pk = wp.static(max(PAR[k], 0))
+                Xw = wp.transform(
+                    wp.vec3(bp[pk, 0], bp[pk, 1], bp[pk, 2]), wp.quat(bq[pk, 0], bq[pk, 1], bq[pk, 2], bq[pk, 3])
+                )
+            Xj = Xw * joint_X_p[j]
+            Xm = wp.transform_identity()
+            if wp.static(JT[k] != J_FIXED):
+                a = joint_axis[joint_qd_start[j]]
+                qv = joint_q[joint_q_start[j]]
+                d = wp.static(max(DOF[k], 0))
+                aw = wp.transform_vector(Xj, a)
+                ow = wp.transform_get_translation(Xj)
+                ax[d] = wp.vec3d(wp.float64(aw[0]), wp.float64(aw[1]), wp.float64(aw[2]))
+                pt[d] = wp.vec3d(wp.float64(ow[0]), wp.float64(ow[1]), wp.float64(ow[2]))
+                if wp.static(JT[k] == J_REVOLUTE):
+                    Xm = wp.transform(wp.vec3(0.0), wp.quat_from_axis_angle(a, qv))
+                else:
+                    Xm = wp.transform(a * qv, wp.quat_identity())
+            Xb = Xj * Xm * wp.transform_inverse(joint_X_c[j])
+            p = wp.transform_get_translation(Xb)
+            r = wp.transform_get_rotation(Xb)
+            bp[k] = p
+            bq[k] = wp.vec4(r[0], r[1], r[2], r[3])
+            if wp.static(k == 0):
+                ow0 = wp.transform_get_translation(Xj)
+                o = wp.vec3d(wp.float64(ow0[0]), wp.float64(ow0[1]), wp.float64(ow0[2]))
+            # A DOF's subtree starts here: its unit motion, and minus the composite so far applied to it.
+            if wp.static(DOF[k] >= 0):
+                i = wp.static(max(DOF[k], 0))
+                if wp.static(REV[max(DOF[k], 0)]):
+                    vo[i] = wp.cross(ax[i], o - pt[i])
+                else:
+                    vo[i] = ax[i]
+                    ax[i] = wp.vec3d()
+                lm = pj * ax[i] + wp.cross(ph, vo[i])
+                pl = pm * vo[i] + wp.cross(ax[i], ph)
+                for jj in range(wp.static(len(ANCD[max(DOF[k], 0)]))):
+                    jd = wp.static(ANCD[max(DOF[k], 0)][jj])
+                    H[i, jd] = H[i, jd] - (wp.dot(ax[jd], lm) + wp.dot(vo[jd], pl))
+            # This body joins the composite.
+            if wp.static(len(MOV[k]) > 0):
+                m, c, Iw = _body_world_inertia(Xb, joint_child[j], body_mass, body_com, body_inertia)
+                rr = c - o
+                pm = pm + m
+                ph = ph + m * rr
+                pj = pj + Iw + m * (wp.dot(rr, rr) * wp.identity(n=3, dtype=wp.float64) - wp.outer(rr, rr))
+            # Subtrees ending here: the composite now minus the one at their start is their own (CRBA's I^c).
+            for ee in range(wp.static(len(ENDS[k]))):
+                i = wp.static(ENDS[k][ee])
+                lm = pj * ax[i] + wp.cross(ph, vo[i])
+                pl = pm * vo[i] + wp.cross(ax[i], ph)
+                for jj in range(wp.static(len(ANCD[ENDS[k][ee]]))):
+                    jd = wp.static(ANCD[ENDS[k][ee]][jj])
+                    H[i, jd] = H[i, jd] + wp.dot(ax[jd], lm) + wp.dot(vo[jd], pl)
+        for i in range(wp.static(n)):
+            H[i, i] = H[i, i] + wp.float64(joint_armature[db + i])
+        return H
+
+    chain_h = chain_h_composite if COMPOSITE else chain_h_pairs
 
     @wp.func
     def chain_rows_factor(

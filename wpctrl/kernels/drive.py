@@ -32,7 +32,6 @@ Gauss–Seidel sweeps on the block ``A`` polish the (rare) unconverged case. Acc
 
 import warp as wp
 
-from ..config import rows as _cfg
 from .inertia import chain_h_func
 from .pd import _bidx
 from .spatial import _FLOAT32_EPS
@@ -41,9 +40,6 @@ wp.set_module_options({"enable_backward": False})
 
 PGS_SWEEPS = 16
 """Projected Gauss–Seidel sweeps run only when the active-set iteration did not settle within ``rows + 2``."""
-
-_ROW_POS = _cfg.ROW_POS
-_FLAG_VEL_TARGET = _cfg.FLAG_VEL_TARGET
 
 _cache: dict[tuple, wp.Kernel] = {}
 
@@ -64,22 +60,21 @@ def _rsqrt(x: wp.float64):
     return y * (wp.float64(1.5) - h * y * y)
 
 
-def coupled_kernel(
-    nj: int, n: int, nr: int, template: tuple | None, row_dof: tuple, accel: tuple, fast_math: bool = False
-) -> wp.Kernel:
-    """The coupled drive kernel for an articulation of nj joints and n DOFs, nr controlled rows at the articulation's
-    DOFs ``row_dof`` (cached); the inertia part unrolled with ``template``
-    (:meth:`wpctrl.kernels.inertia.ChainLayout.template`); ``accel``: each row's acceleration-drive flag. Its
+def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None, rows: tuple, fast_math: bool = False) -> wp.Kernel:
+    """The coupled drive kernel for an articulation of nj joints and n DOFs and nr controlled rows (cached); the
+    inertia part unrolled with ``template`` (:meth:`wpctrl.kernels.inertia.ChainLayout.template`). ``rows``: per
+    row, as compile-time constants, (articulation DOF, acceleration drive 0/1, position row 0/1, velocity target
+    0/1, coordinate offset, DOF offset), the offsets from the env's first coordinate / DOF in Newton's arrays. Its
     ``h_cache`` argument (an array of ``coupled_matrix_type(n)``) keeps H over a control step. ``fast_math``
     compiles it with the GPU's approximate single-precision intrinsics (the forward kinematics' sines and cosines,
     the pivots' first estimate; float64 is unaffected): the CUDA default."""
-    key = (nj, n, nr, template, tuple(row_dof), tuple(accel), bool(fast_math))
+    rows = tuple(tuple(int(x) for x in r) for r in rows)
+    key = (nj, n, nr, template, rows, bool(fast_math))
     if key in _cache:
         return _cache[key]
     chain_h = chain_h_func(nj, n, nr, template)
     N, NR = n, nr  # compile-time bounds: every loop unrolls, H / L and the vectors stay in registers on CUDA
-    ROWD = tuple(int(x) for x in row_dof)
-    ACC = tuple(int(x) for x in accel)
+    ROWD, ACC, POS, VT, QOFF, DOFF = (tuple(r[c] for r in rows) for c in range(6))
     ANY_ACC = any(ACC)
     MatN = coupled_matrix_type(n)
     VecN = wp.types.vector(length=n, dtype=wp.float64)
@@ -87,8 +82,6 @@ def coupled_kernel(
     VecR = wp.types.vector(length=nr, dtype=wp.float64)
     VecRi = wp.types.vector(length=nr, dtype=wp.int32)
     eps32 = wp.float64(_FLOAT32_EPS)
-    row_pos = wp.constant(_ROW_POS)
-    flag_vel = wp.constant(_FLAG_VEL_TARGET)
 
     @wp.func
     def factor(M: MatN):
@@ -200,11 +193,6 @@ def coupled_kernel(
         body_com: wp.array[wp.vec3],
         body_inertia: wp.array[wp.mat33],
         num_dofs: int,
-        # Rows:
-        row_kind: wp.array[wp.int32],
-        row_flags: wp.array[wp.int32],
-        row_q_off: wp.array[wp.int32],
-        row_qd_off: wp.array[wp.int32],
         # Envs:
         env_q_base: wp.array[wp.int32],
         env_qd_base: wp.array[wp.int32],
@@ -259,19 +247,19 @@ def coupled_kernel(
         kbp = _bidx(kp.shape[0], env)
         kbd = _bidx(kd.shape[0], env)
         kbl = _bidx(force_limit.shape[0], env)
+        qb = env_q_base[env]
+        db = env_qd_base[env]
         for r in range(wp.static(NR)):
-            kind = row_kind[r]
-            qi = env_q_base[env] + row_q_off[r]
-            di = env_qd_base[env] + row_qd_off[r]
-            qd = wp.float64(joint_qd_in[di])
+            qd = wp.float64(joint_qd_in[db + wp.static(DOFF[r])])
             kpe = wp.float64(0.0)
             e = wp.float64(0.0)
-            if kind == row_pos:
+            if wp.static(POS[r] != 0):
                 kpe = wp.float64(kp[kbp, r])
+                qi = qb + wp.static(QOFF[r])
                 e = wp.float64(joint_target_q_in[qi]) - wp.float64(joint_q_in[qi])
             tqd = wp.float64(0.0)
-            if kind != row_pos or (row_flags[r] & flag_vel) != 0:
-                tqd = wp.float64(joint_target_qd_in[di])
+            if wp.static(VT[r] != 0):
+                tqd = wp.float64(joint_target_qd_in[db + wp.static(DOFF[r])])
             kde = wp.float64(kd[kbd, r])
             if wp.static(ACC[r] != 0):  # acceleration drive: gains times the effective inertia 1 / A_ii
                 kpe = kpe / resp[r]
@@ -352,7 +340,7 @@ def coupled_kernel(
                 av[r] = at
             it += pgs_sweeps + 1
         for r in range(wp.static(NR)):
-            joint_f_out[env_qd_base[env] + row_qd_off[r]] = float(tau[r])
+            joint_f_out[db + wp.static(DOFF[r])] = float(tau[r])
         if computed_effort_out:
             for r in range(wp.static(NR)):
                 w = wp.float64(0.0)

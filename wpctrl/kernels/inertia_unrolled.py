@@ -105,7 +105,7 @@ def unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool):
                     wp.vec3(bp[pk, 0], bp[pk, 1], bp[pk, 2]), wp.quat(bq[pk, 0], bq[pk, 1], bq[pk, 2], bq[pk, 3])
                 )
             Xj = Xw * joint_X_p[j]
-            Xm = wp.transform_identity()
+            Xjm = Xj  # Xj * X_joint(q), the identity and zero parts of X_joint left out
             if wp.static(JT[k] != J_FIXED):
                 a = joint_axis[joint_qd_start[j]]
                 qv = joint_q[joint_q_start[j]]
@@ -115,10 +115,15 @@ def unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool):
                 ax[d] = wp.vec3d(wp.float64(aw[0]), wp.float64(aw[1]), wp.float64(aw[2]))
                 pt[d] = wp.vec3d(wp.float64(ow[0]), wp.float64(ow[1]), wp.float64(ow[2]))
                 if wp.static(JT[k] == J_REVOLUTE):
-                    Xm = wp.transform(wp.vec3(0.0), wp.quat_from_axis_angle(a, qv))
+                    Xjm = wp.transform(ow, wp.transform_get_rotation(Xj) * wp.quat_from_axis_angle(a, qv))
                 else:
-                    Xm = wp.transform(a * qv, wp.quat_identity())
-            Xb = Xj * Xm * wp.transform_inverse(joint_X_c[j])
+                    Xjm = wp.transform(ow + aw * qv, wp.transform_get_rotation(Xj))
+            # Xb = Xjm * inverse(X_c): rotation q_jm q_c^-1, origin p_jm - R_b t_c (one rotation fewer)
+            Xc = joint_X_c[j]
+            qb = wp.transform_get_rotation(Xjm) * wp.quat_inverse(wp.transform_get_rotation(Xc))
+            Xb = wp.transform(
+                wp.transform_get_translation(Xjm) - wp.quat_rotate(qb, wp.transform_get_translation(Xc)), qb
+            )
             p = wp.transform_get_translation(Xb)
             r = wp.transform_get_rotation(Xb)
             bp[k] = p
@@ -187,7 +192,7 @@ def unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool):
                     wp.vec3(bp[pk, 0], bp[pk, 1], bp[pk, 2]), wp.quat(bq[pk, 0], bq[pk, 1], bq[pk, 2], bq[pk, 3])
                 )
             Xj = Xw * joint_X_p[j]
-            Xm = wp.transform_identity()
+            Xjm = Xj  # Xj * X_joint(q), the identity and zero parts of X_joint left out
             if wp.static(JT[k] != J_FIXED):
                 a = joint_axis[joint_qd_start[j]]
                 qv = joint_q[joint_q_start[j]]
@@ -197,10 +202,15 @@ def unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool):
                 ax[d] = wp.vec3d(wp.float64(aw[0]), wp.float64(aw[1]), wp.float64(aw[2]))
                 pt[d] = wp.vec3d(wp.float64(ow[0]), wp.float64(ow[1]), wp.float64(ow[2]))
                 if wp.static(JT[k] == J_REVOLUTE):
-                    Xm = wp.transform(wp.vec3(0.0), wp.quat_from_axis_angle(a, qv))
+                    Xjm = wp.transform(ow, wp.transform_get_rotation(Xj) * wp.quat_from_axis_angle(a, qv))
                 else:
-                    Xm = wp.transform(a * qv, wp.quat_identity())
-            Xb = Xj * Xm * wp.transform_inverse(joint_X_c[j])
+                    Xjm = wp.transform(ow + aw * qv, wp.transform_get_rotation(Xj))
+            # Xb = Xjm * inverse(X_c): rotation q_jm q_c^-1, origin p_jm - R_b t_c (one rotation fewer)
+            Xc = joint_X_c[j]
+            qb = wp.transform_get_rotation(Xjm) * wp.quat_inverse(wp.transform_get_rotation(Xc))
+            Xb = wp.transform(
+                wp.transform_get_translation(Xjm) - wp.quat_rotate(qb, wp.transform_get_translation(Xc)), qb
+            )
             p = wp.transform_get_translation(Xb)
             r = wp.transform_get_rotation(Xb)
             bp[k] = p

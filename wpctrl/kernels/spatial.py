@@ -26,13 +26,16 @@ def _body_world_inertia(
     """Body ``b`` at world pose ``Xb``: its mass [kg], world COM [m] and world inertia about its COM [kg m^2], float64
     (the inertia rotated in float32, as Newton stores it)."""
     m = wp.float64(body_mass[b])
-    cw = wp.transform_point(Xb, body_com[b])
-    c = wp.vec3d(wp.float64(cw[0]), wp.float64(cw[1]), wp.float64(cw[2]))
     R = wp.quat_to_matrix(wp.transform_get_rotation(Xb))
-    Iw32 = R * body_inertia[b] * wp.transpose(R)
-    Iw = wp.mat33d(
-        wp.float64(Iw32[0, 0]), wp.float64(Iw32[0, 1]), wp.float64(Iw32[0, 2]),
-        wp.float64(Iw32[1, 0]), wp.float64(Iw32[1, 1]), wp.float64(Iw32[1, 2]),
-        wp.float64(Iw32[2, 0]), wp.float64(Iw32[2, 1]), wp.float64(Iw32[2, 2]),
-    )  # fmt: skip
+    cw = R * body_com[b] + wp.transform_get_translation(Xb)  # the COM in world, with the rotation matrix needed below
+    c = wp.vec3d(wp.float64(cw[0]), wp.float64(cw[1]), wp.float64(cw[2]))
+    RI = R * body_inertia[b]
+    # R I R^T, symmetric: its upper triangle, mirrored
+    i00 = wp.float64(wp.dot(RI[0], R[0]))
+    i01 = wp.float64(wp.dot(RI[0], R[1]))
+    i02 = wp.float64(wp.dot(RI[0], R[2]))
+    i11 = wp.float64(wp.dot(RI[1], R[1]))
+    i12 = wp.float64(wp.dot(RI[1], R[2]))
+    i22 = wp.float64(wp.dot(RI[2], R[2]))
+    Iw = wp.mat33d(i00, i01, i02, i01, i11, i12, i02, i12, i22)
     return m, c, Iw

@@ -17,6 +17,7 @@ import numpy as np
 import warp as wp
 
 from ...config import ConfigError
+from ...config import rows as cfg
 from ...kernels import drive as KD
 from ...kernels import inertia as KI
 from ...kernels import pd as K
@@ -160,6 +161,15 @@ class CoupledDrive(JointSpaceResponse):
     def before_substep(self, engine, state, control) -> None:
         pass
 
+    def _row_constants(self, fc) -> tuple:
+        """Per row, what the coupled kernel compiles in: (articulation DOF, acceleration drive, position row, velocity
+        target, coordinate offset, DOF offset from the env's first)."""
+        rows, b = self.plan.rows, self.plan.binding
+        pos = rows.kind == cfg.ROW_POS
+        vt = ~pos | ((rows.flags & cfg.FLAG_VEL_TARGET) != 0)
+        cols = (fc.layout.row_dof, rows.accel, pos, vt, b.q_off, b.qd_off)
+        return tuple(tuple(int(c[r]) for c in cols) for r in range(rows.count))
+
     def after_substep(self, engine, state, control) -> None:
         """The coupled drive's launch: reads the targets the substep kernel just wrote, writes joint_f."""
         if self._launch is None:
@@ -182,9 +192,7 @@ class CoupledDrive(JointSpaceResponse):
                 "applied_effort_out": None if effort is None else effort.applied_effort,
                 "saturation_count_out": None if effort is None else effort.saturation_count,
             }
-            accel = tuple(int(a) for a in self.plan.rows.accel)
-            rows = tuple(int(x) for x in fc.layout.row_dof)
-            kernel = KD.coupled_kernel(*fc.kernel_key(), rows, accel, fast_math=engine.device.is_cuda)
+            kernel = KD.coupled_kernel(*fc.kernel_key(), self._row_constants(fc), fast_math=engine.device.is_cuda)
             names = [a.label for a in kernel.adj.args]
             for n in names:
                 if n not in params:

@@ -82,9 +82,9 @@ def build_controller(
             "PhysX-faithful drive (coupled)").
         inertia_update: When the inertia is recomputed from ``joint_q``: ``"control"`` (once per control step) or
             ``"substep"`` (before every substep). Stable PD and acceleration drives refresh r = (H^-1)_ii (default
-            ``"control"``, in ``set_action``); the coupled drive its block A of H^-1 (default ``"substep"``;
-            ``"control"`` computes A at each control step's first substep and reuses it for the other K - 1: about
-            half the drive's cost at K = 5, with A lagging the configuration by up to K - 1 substeps).
+            ``"control"``, in ``set_action``); the coupled drive H (default ``"substep"``; ``"control"`` computes H
+            at each control step's first substep and reuses it for the other K - 1: about a quarter of the drive's
+            cost off at K = 5, with H lagging the configuration by up to K - 1 substeps).
         delay: Command latency [substeps]: None (off), an int, or ``(min, max)`` drawn uniformly per env at each
             reset of that env (device RNG). The drive targets (implicit: ``Control.joint_target_q/qd``; explicit:
             the PD law's targets, with the current measured state) are those of d substeps ago; a reset fills the

@@ -108,7 +108,8 @@ def run_one(args, n_envs, model, small_model, sync, device) -> list[dict]:
         sync()
         with wp.ScopedCapture(device=device) as cap:
             step()
-        fns[name + ":graph"] = lambda g=cap.graph: wp.capture_launch(g)
+        # the graph replays into these arrays: keep them alive with it (a freed one would be reused or unmapped)
+        fns[name + ":graph"] = lambda g=cap.graph, keep=(su, action): wp.capture_launch(g)
         if args.eager:
             fns[name + ":eager"] = step
     if model is not None and "off" in setups:
@@ -123,7 +124,7 @@ def run_one(args, n_envs, model, small_model, sync, device) -> list[dict]:
         mask = wp.ones(n_envs, dtype=wp.bool, device=device)
         with wp.ScopedCapture(device=device) as cap:
             su.ctrl.reset(su.state, env_ids=mask)
-        fns["reset_delay:graph"] = lambda g=cap.graph: wp.capture_launch(g)
+        fns["reset_delay:graph"] = lambda g=cap.graph, keep=mask: wp.capture_launch(g)
 
     times = measure_interleaved(
         fns, sync, repeats=args.repeats, min_time=args.min_time, warmup=args.warmup, clock=args.clock

@@ -135,7 +135,8 @@ def run_one(args, n_envs, model, small_model, sync, device) -> list[dict]:
         sync()
         with wp.ScopedCapture(device=device) as cap:
             step()
-        fns[name + ":graph"] = lambda g=cap.graph: wp.capture_launch(g)
+        # the graph replays into these arrays: keep them alive with it (a freed one would be reused or unmapped)
+        fns[name + ":graph"] = lambda g=cap.graph, keep=(su, action, extra): wp.capture_launch(g)
         if args.eager:
             fns[name + ":eager"] = step
     times = measure_interleaved(

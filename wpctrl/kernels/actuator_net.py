@@ -1,12 +1,12 @@
 """Learned actuators in Warp: an MLP over a history of position errors and velocities, or an LSTM, per env and joint.
 
 Private module. One thread per (env, joint of the network's rows); the network's shape (layer widths, activations,
-the history taps or the LSTM's layers) is compiled into the kernel, every loop over a layer unrolled, so a thread's
-activations stay in registers. Weights are one flat float32 array read uniformly by all threads. The kernel runs after
-the substep kernel has written the drive targets into the Control (the network's position target is that substep's,
-interpolated and delayed as the targets of any other row): it reads ``joint_q``/``joint_qd`` and
-``joint_target_q``, advances the history (or the recurrent state), evaluates the network, applies the DC-motor
-envelope and the force limit, and writes ``joint_f`` and the effort readout.
+the history taps or the LSTM's layers) is compiled into the kernel: a layer's outputs in a run-time loop, each
+output's dot product unrolled over the layer's inputs, which stay in registers. Weights are one flat float32 array
+read uniformly by all threads. The kernel runs after the substep kernel has written the drive targets into the
+Control (the network's position target is that substep's, interpolated and delayed as the targets of any other row):
+it reads ``joint_q``/``joint_qd`` and ``joint_target_q``, advances the history (or the recurrent state), evaluates
+the network, applies the DC-motor envelope and the force limit, and writes ``joint_f`` and the effort readout.
 
 Activation codes: 0 identity, 1 ReLU, 2 ELU(a), 3 tanh, 4 sigmoid, 5 softsign, 6 LeakyReLU(a).
 """
@@ -164,13 +164,15 @@ def _make_net_kernel(L: NetLayout) -> wp.Kernel:
                     h[k] = lstm_h_out[li, s, k]
                     c[k] = lstm_c_out[li, s, k]
                 g = vec_g()
-                for o in range(wp.static(4 * H)):  # (every index below is a compile-time constant: unrolled)
-                    acc = weights[wp.static(LSTM[li][4] + o)] + weights[wp.static(LSTM[li][5] + o)]
+                for o in range(env * 0 + wp.static(4 * H)):  # a run-time loop over the gates (see the dense layers)
+                    acc = weights[wp.static(LSTM[li][4]) + o] + weights[wp.static(LSTM[li][5]) + o]
+                    wi = wp.static(LSTM[li][2]) + o * wp.static(LSTM[li][0])
                     for i in range(wp.static(LSTM[li][0])):
-                        acc += weights[wp.static(LSTM[li][2] + o * LSTM[li][0] + i)] * x[wp.static(i)]
+                        acc += weights[wi + i] * x[i]
+                    wh = wp.static(LSTM[li][3]) + o * wp.static(H)
                     for k in range(wp.static(H)):
-                        acc += weights[wp.static(LSTM[li][3] + o * H + k)] * h[wp.static(k)]
-                    g[wp.static(o)] = acc
+                        acc += weights[wh + k] * h[k]
+                    g[o] = acc
                 # PyTorch's gate order: input, forget, cell, output.
                 for k in range(wp.static(H)):
                     ig = _sigmoid(g[k])
@@ -185,12 +187,16 @@ def _make_net_kernel(L: NetLayout) -> wp.Kernel:
                 for k in range(wp.static(H)):
                     x[k] = h[k]
         for li in range(wp.static(ND)):
+            # Outputs in a run-time loop (its bound is not a compile-time constant, so it is not unrolled), each
+            # output's dot product unrolled with the inputs in registers: a fully unrolled layer lets the compiler
+            # hoist every weight load at once and spill.
             y = vec_w()
-            for o in range(wp.static(DENSE[li][1])):
-                acc = weights[wp.static(DENSE[li][5] + o)]
+            for o in range(env * 0 + wp.static(DENSE[li][1])):
+                acc = weights[wp.static(DENSE[li][5]) + o]
+                wr = wp.static(DENSE[li][4]) + o * wp.static(DENSE[li][0])
                 for i in range(wp.static(DENSE[li][0])):
-                    acc += weights[wp.static(DENSE[li][4] + o * DENSE[li][0] + i)] * x[wp.static(i)]
-                y[wp.static(o)] = _activate(acc, wp.static(DENSE[li][2]), wp.static(DENSE[li][3]))
+                    acc += weights[wr + i] * x[i]
+                y[o] = _activate(acc, wp.static(DENSE[li][2]), wp.static(DENSE[li][3]))
             x = y
         u = x[0] * torque_scale
         f = _act.dc_motor_clamp(u, qd, sat, vl, lim)

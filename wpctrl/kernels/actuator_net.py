@@ -100,6 +100,7 @@ def _make_net_kernel(L: NetLayout) -> wp.Kernel:
         q_stride: int,
         qd_stride: int,
         weights: wp.array[float],  # every layer's weights and biases, flat
+        layer_out: wp.array[wp.int32],  # outputs per dense layer, then 4 x hidden per LSTM layer (a run-time bound)
         pos_scale: float,
         vel_scale: float,
         torque_scale: float,
@@ -164,7 +165,7 @@ def _make_net_kernel(L: NetLayout) -> wp.Kernel:
                     h[k] = lstm_h_out[li, s, k]
                     c[k] = lstm_c_out[li, s, k]
                 g = vec_g()
-                for o in range(env * 0 + wp.static(4 * H)):  # a run-time loop over the gates (see the dense layers)
+                for o in range(layer_out[wp.static(ND + li)]):  # a run-time loop over the gates (see the dense layers)
                     acc = weights[wp.static(LSTM[li][4]) + o] + weights[wp.static(LSTM[li][5]) + o]
                     wi = wp.static(LSTM[li][2]) + o * wp.static(LSTM[li][0])
                     for i in range(wp.static(LSTM[li][0])):
@@ -187,11 +188,11 @@ def _make_net_kernel(L: NetLayout) -> wp.Kernel:
                 for k in range(wp.static(H)):
                     x[k] = h[k]
         for li in range(wp.static(ND)):
-            # Outputs in a run-time loop (its bound is not a compile-time constant, so it is not unrolled), each
-            # output's dot product unrolled with the inputs in registers: a fully unrolled layer lets the compiler
-            # hoist every weight load at once and spill.
+            # Outputs in a run-time loop (its bound is read from an array, so neither Warp nor the CUDA compiler can
+            # unroll it), each output's dot product unrolled with the inputs in registers: a fully unrolled layer lets
+            # the compiler hoist every weight load at once and spill.
             y = vec_w()
-            for o in range(env * 0 + wp.static(DENSE[li][1])):
+            for o in range(layer_out[wp.static(li)]):
                 acc = weights[wp.static(DENSE[li][5]) + o]
                 wr = wp.static(DENSE[li][4]) + o * wp.static(DENSE[li][0])
                 for i in range(wp.static(DENSE[li][0])):

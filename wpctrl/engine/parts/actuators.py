@@ -117,6 +117,8 @@ class _NetGroup:
             dense=net.dense, lstm=net.lstm, taps=taps, history=history, pos_first=spec.input_order == "pos_vel", rows=n
         )
         self.weights = wp.array(net.weights, dtype=wp.float32, device=dev)
+        widths = [d[1] for d in net.dense] + [4 * s[1] for s in net.lstm]
+        self.layer_out = wp.array(np.asarray(widths, np.int32), dtype=wp.int32, device=dev)
         self.hist_pos = wp.zeros((max(history, 1), E * n), dtype=wp.float32, device=dev)
         self.hist_vel = wp.zeros((max(history, 1), E * n), dtype=wp.float32, device=dev)
         layers, hidden = (len(net.lstm), net.lstm[0][1]) if net.lstm else (1, 1)
@@ -131,6 +133,7 @@ class _NetGroup:
             per_call = {
                 "row0": self.row0,
                 "weights": self.weights,
+                "layer_out": self.layer_out,
                 "pos_scale": float(s.pos_scale),
                 "vel_scale": float(s.vel_scale),
                 "torque_scale": float(s.torque_scale),

@@ -70,7 +70,7 @@ def unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool):
     ANCD = [MOV[KDOF[i]] for i in range(n)]  # DOF i and the DOFs above it (j <= i): the row of H it fills
 
     @wp.func
-    def chain_h_pairs(
+    def chain_h(
         num_dofs: int,
         jb: int,
         db: int,
@@ -92,95 +92,13 @@ def unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool):
         joint_q: wp.array[float],
     ):
         H = MatN()
-        ax = MatN3()  # DOF axes in world
+        ax = MatN3()  # DOF axes in world (composite form: each DOF's unit motion, angular part, 0 for a prismatic DOF)
+        vo = MatN3()  # composite form: the unit motion's linear part, the velocity of the point O [m/s per unit rate]
         pt = MatN3()  # DOF anchor points in world [m]
         bp = MatJ3()  # child-body world positions
         bq = MatJ4()  # child-body world rotations (x, y, z, w)
-        for k in range(wp.static(nj)):
-            j = jb + k
-            Xw = wp.transform_identity()
-            if wp.static(PAR[k] >= 0):
-                pk = wp.static(max(PAR[k], 0))
-                Xw = wp.transform(
-                    wp.vec3(bp[pk, 0], bp[pk, 1], bp[pk, 2]), wp.quat(bq[pk, 0], bq[pk, 1], bq[pk, 2], bq[pk, 3])
-                )
-            Xj = Xw * joint_X_p[j]
-            Xjm = Xj  # Xj * X_joint(q), the identity and zero parts of X_joint left out
-            if wp.static(JT[k] != J_FIXED):
-                a = joint_axis[joint_qd_start[j]]
-                qv = joint_q[joint_q_start[j]]
-                d = wp.static(max(DOF[k], 0))
-                aw = wp.transform_vector(Xj, a)
-                ow = wp.transform_get_translation(Xj)
-                ax[d] = wp.vec3d(wp.float64(aw[0]), wp.float64(aw[1]), wp.float64(aw[2]))
-                pt[d] = wp.vec3d(wp.float64(ow[0]), wp.float64(ow[1]), wp.float64(ow[2]))
-                if wp.static(JT[k] == J_REVOLUTE):
-                    Xjm = wp.transform(ow, wp.transform_get_rotation(Xj) * wp.quat_from_axis_angle(a, qv))
-                else:
-                    Xjm = wp.transform(ow + aw * qv, wp.transform_get_rotation(Xj))
-            # Xb = Xjm * inverse(X_c): rotation q_jm q_c^-1, origin p_jm - R_b t_c (one rotation fewer)
-            Xc = joint_X_c[j]
-            qb = wp.transform_get_rotation(Xjm) * wp.quat_inverse(wp.transform_get_rotation(Xc))
-            Xb = wp.transform(
-                wp.transform_get_translation(Xjm) - wp.quat_rotate(qb, wp.transform_get_translation(Xc)), qb
-            )
-            p = wp.transform_get_translation(Xb)
-            r = wp.transform_get_rotation(Xb)
-            bp[k] = p
-            bq[k] = wp.vec4(r[0], r[1], r[2], r[3])
-            # This body's contribution to H over the DOF pairs that move it.
-            if wp.static(len(MOV[k]) > 0):
-                m, c, Iw = _body_world_inertia(Xb, joint_child[j], body_mass, body_com, body_inertia)
-                jv = MatN3()  # COM velocity per unit rate of each DOF that moves this body [m/s]
-                Ijw = MatN3()  # I_world times the angular velocity per unit rate (revolute DOFs)
-                for ii in range(wp.static(len(MOV[k]))):
-                    i = wp.static(MOV[k][ii])
-                    if wp.static(REV[MOV[k][ii]]):
-                        jv[i] = wp.cross(ax[i], c - pt[i])
-                        Ijw[i] = Iw * ax[i]
-                    else:
-                        jv[i] = ax[i]
-                for pp in range(wp.static(len(PAIRS[k]))):
-                    i = wp.static(PAIRS[k][pp][0])
-                    i2 = wp.static(PAIRS[k][pp][1])
-                    h = H[i, i2] + m * wp.dot(jv[i], jv[i2])
-                    if wp.static(PAIRS[k][pp][2]):
-                        h = h + wp.dot(Ijw[i], ax[i2])
-                    H[i, i2] = h
-        for i in range(wp.static(n)):
-            H[i, i] = H[i, i] + wp.float64(joint_armature[db + i])
-        return H
-
-    @wp.func
-    def chain_h_composite(
-        num_dofs: int,
-        jb: int,
-        db: int,
-        chain_type: wp.array[wp.int32],
-        chain_parent: wp.array[wp.int32],
-        chain_dof: wp.array[wp.int32],
-        chain_anc: wp.array[wp.int32],
-        row_dof: wp.array[wp.int32],
-        joint_q_start: wp.array[wp.int32],
-        joint_qd_start: wp.array[wp.int32],
-        joint_X_p: wp.array[wp.transform],
-        joint_X_c: wp.array[wp.transform],
-        joint_axis: wp.array[wp.vec3],
-        joint_child: wp.array[wp.int32],
-        joint_armature: wp.array[float],
-        body_mass: wp.array[float],
-        body_com: wp.array[wp.vec3],
-        body_inertia: wp.array[wp.mat33],
-        joint_q: wp.array[float],
-    ):
-        H = MatN()
-        ax = MatN3()  # each DOF's unit motion: angular part (revolute: the axis in world; prismatic: 0)
-        vo = MatN3()  # linear part: the velocity of the reference point O [m/s per unit rate]
-        pt = MatN3()  # DOF anchor points in world [m]
-        bp = MatJ3()  # child-body world positions
-        bq = MatJ4()  # child-body world rotations (x, y, z, w)
-        o = wp.vec3d()  # O: the root joint's anchor in world
-        pm = wp.float64(0.0)  # running composite of the bodies so far, about O: mass [kg],
+        o = wp.vec3d()  # composite form: O, the root joint's anchor in world,
+        pm = wp.float64(0.0)  # and the running composite of the bodies so far, about O: mass [kg],
         ph = wp.vec3d()  # first moment [kg m],
         pj = wp.mat33d()  # and rotational inertia [kg m^2]
         for k in range(wp.static(nj)):
@@ -215,42 +133,61 @@ def unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool):
             r = wp.transform_get_rotation(Xb)
             bp[k] = p
             bq[k] = wp.vec4(r[0], r[1], r[2], r[3])
-            if wp.static(k == 0):
-                ow0 = wp.transform_get_translation(Xj)
-                o = wp.vec3d(wp.float64(ow0[0]), wp.float64(ow0[1]), wp.float64(ow0[2]))
-            # A DOF's subtree starts here: its unit motion, and minus the composite so far applied to it.
-            if wp.static(DOF[k] >= 0):
-                i = wp.static(max(DOF[k], 0))
-                if wp.static(REV[max(DOF[k], 0)]):
-                    vo[i] = wp.cross(ax[i], o - pt[i])
-                else:
-                    vo[i] = ax[i]
-                    ax[i] = wp.vec3d()
-                lm = pj * ax[i] + wp.cross(ph, vo[i])
-                pl = pm * vo[i] + wp.cross(ax[i], ph)
-                for jj in range(wp.static(len(ANCD[max(DOF[k], 0)]))):
-                    jd = wp.static(ANCD[max(DOF[k], 0)][jj])
-                    H[i, jd] = H[i, jd] - (wp.dot(ax[jd], lm) + wp.dot(vo[jd], pl))
-            # This body joins the composite.
-            if wp.static(len(MOV[k]) > 0):
-                m, c, Iw = _body_world_inertia(Xb, joint_child[j], body_mass, body_com, body_inertia)
-                rr = c - o
-                pm = pm + m
-                ph = ph + m * rr
-                pj = pj + Iw + m * (wp.dot(rr, rr) * wp.identity(n=3, dtype=wp.float64) - wp.outer(rr, rr))
-            # Subtrees ending here: the composite now minus the one at their start is their own (CRBA's I^c).
-            for ee in range(wp.static(len(ENDS[k]))):
-                i = wp.static(ENDS[k][ee])
-                lm = pj * ax[i] + wp.cross(ph, vo[i])
-                pl = pm * vo[i] + wp.cross(ax[i], ph)
-                for jj in range(wp.static(len(ANCD[ENDS[k][ee]]))):
-                    jd = wp.static(ANCD[ENDS[k][ee]][jj])
-                    H[i, jd] = H[i, jd] + wp.dot(ax[jd], lm) + wp.dot(vo[jd], pl)
+            if wp.static(COMPOSITE):
+                if wp.static(k == 0):
+                    ow0 = wp.transform_get_translation(Xj)
+                    o = wp.vec3d(wp.float64(ow0[0]), wp.float64(ow0[1]), wp.float64(ow0[2]))
+                # A DOF's subtree starts here: its unit motion, and minus the composite so far applied to it.
+                if wp.static(DOF[k] >= 0):
+                    i = wp.static(max(DOF[k], 0))
+                    if wp.static(REV[max(DOF[k], 0)]):
+                        vo[i] = wp.cross(ax[i], o - pt[i])
+                    else:
+                        vo[i] = ax[i]
+                        ax[i] = wp.vec3d()
+                    lm = pj * ax[i] + wp.cross(ph, vo[i])
+                    pl = pm * vo[i] + wp.cross(ax[i], ph)
+                    for jj in range(wp.static(len(ANCD[max(DOF[k], 0)]))):
+                        jd = wp.static(ANCD[max(DOF[k], 0)][jj])
+                        H[i, jd] = H[i, jd] - (wp.dot(ax[jd], lm) + wp.dot(vo[jd], pl))
+                # This body joins the composite.
+                if wp.static(len(MOV[k]) > 0):
+                    m, c, Iw = _body_world_inertia(Xb, joint_child[j], body_mass, body_com, body_inertia)
+                    rr = c - o
+                    pm = pm + m
+                    ph = ph + m * rr
+                    pj = pj + Iw + m * (wp.dot(rr, rr) * wp.identity(n=3, dtype=wp.float64) - wp.outer(rr, rr))
+                # Subtrees ending here: the composite now minus the one at their start is their own (CRBA's I^c).
+                for ee in range(wp.static(len(ENDS[k]))):
+                    i = wp.static(ENDS[k][ee])
+                    lm = pj * ax[i] + wp.cross(ph, vo[i])
+                    pl = pm * vo[i] + wp.cross(ax[i], ph)
+                    for jj in range(wp.static(len(ANCD[ENDS[k][ee]]))):
+                        jd = wp.static(ANCD[ENDS[k][ee]][jj])
+                        H[i, jd] = H[i, jd] + wp.dot(ax[jd], lm) + wp.dot(vo[jd], pl)
+            else:
+                # This body's contribution to H over the DOF pairs that move it.
+                if wp.static(len(MOV[k]) > 0):
+                    m, c, Iw = _body_world_inertia(Xb, joint_child[j], body_mass, body_com, body_inertia)
+                    jv = MatN3()  # COM velocity per unit rate of each DOF that moves this body [m/s]
+                    Ijw = MatN3()  # I_world times the angular velocity per unit rate (revolute DOFs)
+                    for ii in range(wp.static(len(MOV[k]))):
+                        i = wp.static(MOV[k][ii])
+                        if wp.static(REV[MOV[k][ii]]):
+                            jv[i] = wp.cross(ax[i], c - pt[i])
+                            Ijw[i] = Iw * ax[i]
+                        else:
+                            jv[i] = ax[i]
+                    for pp in range(wp.static(len(PAIRS[k]))):
+                        i = wp.static(PAIRS[k][pp][0])
+                        i2 = wp.static(PAIRS[k][pp][1])
+                        h = H[i, i2] + m * wp.dot(jv[i], jv[i2])
+                        if wp.static(PAIRS[k][pp][2]):
+                            h = h + wp.dot(Ijw[i], ax[i2])
+                        H[i, i2] = h
         for i in range(wp.static(n)):
             H[i, i] = H[i, i] + wp.float64(joint_armature[db + i])
         return H
-
-    chain_h = chain_h_composite if COMPOSITE else chain_h_pairs
 
     @wp.func
     def chain_rows_factor(

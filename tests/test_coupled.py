@@ -323,6 +323,54 @@ def test_coupled_matches_the_box_qp_on_random_states(drive_mode):
     assert saturated > 20 and free > 20 and clamped_then_freed > 5, (saturated, free, clamped_then_freed)
 
 
+def _pgs(A, b, d, lim, tau, sweeps):
+    """numpy's projected Gauss-Seidel on ``tau = clamp(b - D A tau)`` from ``tau`` clamped (rows with d = 0 at 0)."""
+    act = d > 0
+    tau = np.where(act, np.clip(tau, -lim, lim), 0.0)
+    for _ in range(sweeps):
+        for r in np.nonzero(act)[0]:
+            res = tau[r] - b[r] + d[r] * (A[r] @ tau)
+            tau[r] = np.clip(tau[r] - res / (1.0 + d[r] * A[r, r]), -lim[r], lim[r])
+    return tau
+
+
+def test_coupled_fallback_sweeps_match_numpy_when_the_active_set_does_not_settle():
+    """The rare path: with the active-set iterations capped at 1 (rows + 2 by default), every env whose first solve
+    leaves a row past its limit falls back to projected Gauss-Seidel on A (rebuilt from H in the kernel). The result
+    equals the same sweeps in numpy from the same start, with A from Newton's JointSpaceResponse, and the iteration
+    count says so (1 + sweeps + 1)."""
+    from newton.actuators import JointSpaceResponse
+
+    from wpctrl.kernels.drive import PGS_SWEEPS
+
+    model = build_panda(E)
+    lim = 30.0
+    ctrl = _coupled_ctrl(model, lim)
+    ctrl._engine.part("coupled").max_iterations = 1
+    s, c, q, qd, target = _setup(ctrl, model, np.random.default_rng(2), spread=0.5)
+    ctrl.set_action(target, s)
+    ctrl.before_simulation_step(s, c)
+    tau = c.joint_f.numpy()[ctrl._engine.binding.dof_index].astype(np.float64)
+    its = ctrl._engine.coupled_iterations.numpy()
+    jsr = JointSpaceResponse(model)
+    jsr.refresh(s)
+    inv = jsr.inverse_blocks.numpy().astype(np.float64)
+    fell_back = 0
+    for e in range(E):
+        A = inv[e][:9, :9]
+        b, d = _system(A, 1e3, 1e2, q[e], qd[e], target[e])
+        first = np.linalg.solve(np.eye(9) + np.diag(d) @ A, b)  # the first (unconstrained) active-set solve
+        if (np.abs(first) > lim).any():
+            fell_back += 1
+            assert its[e] == 1 + PGS_SWEEPS + 1
+            want = _pgs(A, b, d, np.full(9, lim), first, PGS_SWEEPS)
+        else:
+            assert its[e] == 1
+            want = first
+        np.testing.assert_allclose(tau[e], want, rtol=0, atol=1e-4 * max(np.abs(want).max(), 1.0))
+    assert fell_back >= 2  # the case exercises the fallback
+
+
 def test_coupled_effort_readout_is_zeroed_by_reset():
     """The coupled drive writes the effort readout itself; a reset still zeroes the reset envs' rows of it (computed,
     applied, saturation count) and leaves the others."""

@@ -150,6 +150,14 @@ MUTATIONS: list[Mutation] = [
         ("tests/test_coupled.py",),
     ),
     M(
+        "coupled_fallback_on_the_factor",
+        "wpctrl/kernels/drive.py",
+        "A = rows_block(recover(H, dprev))",
+        "A = rows_block(H)",
+        "the coupled drive's fallback sweeps build A from the last factor instead of H",
+        ("tests/test_coupled.py",),
+    ),
+    M(
         "composite_inertia_without_parallel_axis",
         "wpctrl/kernels/inertia_unrolled.py",
         "pj = pj + Iw + m * (wp.dot(rr, rr) * wp.identity(n=3, dtype=wp.float64) - wp.outer(rr, rr))",

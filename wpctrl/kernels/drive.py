@@ -39,7 +39,8 @@ from .spatial import _FLOAT32_EPS
 wp.set_module_options({"enable_backward": False})
 
 PGS_SWEEPS = 16
-"""Projected Gauss–Seidel sweeps run only when the active-set iteration did not settle within ``rows + 2``."""
+"""Projected Gauss–Seidel sweeps run only when the active-set iteration did not settle within ``rows + 2``
+iterations (the kernel's ``max_iterations``)."""
 
 _cache: dict[tuple, wp.Kernel] = {}
 
@@ -202,6 +203,7 @@ def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None, rows: tuple
         force_limit: wp.array2d[float],
         dt: float,
         pgs_sweeps: int,
+        max_iterations: int,  # active-set iterations before the sweeps take over (rows + 2)
         # In:
         joint_q_in: wp.array[float],
         joint_qd_in: wp.array[float],
@@ -276,7 +278,7 @@ def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None, rows: tuple
         dprev = VecR()  # D_F of the last factorisation (to recover H from its factor)
         settled = int(0)
         it = int(0)
-        while it < NR + 2 and settled == 0:
+        while it < max_iterations and settled == 0:
             if it > 0:
                 H = recover(H, dprev)
             it += 1

@@ -131,6 +131,7 @@ class CoupledDrive(JointSpaceResponse):
         self.coupled_iterations = wp.zeros(plan.num_envs, dtype=wp.int32, device=alloc.device)
         self._launch: _Launch | None = None
         self.h_cache = None  # inertia_update="control": H of a control step's first substep, reused by the other K - 1
+        self.max_iterations = None  # active-set iterations before the fallback sweeps (None: rows + 2); tests lower it
 
     def build(self, engine, model, solver) -> None:
         super().build(engine, model, solver)
@@ -178,6 +179,7 @@ class CoupledDrive(JointSpaceResponse):
             effort = engine.part("effort")
             extra = {
                 "pgs_sweeps": KD.PGS_SWEEPS,
+                "max_iterations": self.max_iterations or self.plan.num_rows + 2,
                 "joint_q_in": state.joint_q,
                 "joint_qd_in": state.joint_qd,
                 "joint_target_q_in": control.joint_target_q,

@@ -28,6 +28,8 @@ import newton
 import numpy as np
 import warp as wp
 
+from ..engine.hostmath import qaxis, qmul, rpy_quat
+
 __all__ = [
     "PANDA_ARM_JOINTS",
     "PANDA_BODIES",
@@ -166,32 +168,6 @@ _VISUAL_BOXES = [
 # Small float64 rigid-transform helpers. Quaternions are (x, y, z, w) like Warp's; a transform is (p, q).
 
 
-def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    ax, ay, az, aw = a
-    bx, by, bz, bw = b
-    return np.array(
-        [
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-            aw * bw - ax * bx - ay * by - az * bz,
-        ]
-    )
-
-
-def _qaxis(axis: Sequence[float], angle: float) -> np.ndarray:
-    a = np.asarray(axis, dtype=np.float64)
-    a = a / np.linalg.norm(a)
-    s = math.sin(0.5 * angle)
-    return np.array([a[0] * s, a[1] * s, a[2] * s, math.cos(0.5 * angle)])
-
-
-def _qrpy(rpy: Sequence[float]) -> np.ndarray:
-    """URDF fixed-axis roll-pitch-yaw: R = Rz(yaw) Ry(pitch) Rx(roll)."""
-    r, p, y = rpy
-    return _qmul(_qmul(_qaxis((0, 0, 1), y), _qaxis((0, 1, 0), p)), _qaxis((1, 0, 0), r))
-
-
 def _qmat(q: np.ndarray) -> np.ndarray:
     x, y, z, w = q
     return np.array(
@@ -204,7 +180,7 @@ def _qmat(q: np.ndarray) -> np.ndarray:
 
 
 def _tmul(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    return a[0] + _qmat(a[1]) @ b[0], _qmul(a[1], b[1])
+    return a[0] + _qmat(a[1]) @ b[0], qmul(a[1], b[1])
 
 
 def _tident() -> tuple[np.ndarray, np.ndarray]:
@@ -244,7 +220,7 @@ def _collapse(inertia_merge: str):
     for row in _JOINTS:
         name, jtype, parent, child, xyz, rpy = row[:6]
         s, x_sp = survivor[parent]
-        x_pc = _tmul(x_sp, (np.asarray(xyz, dtype=np.float64), _qrpy(rpy)))
+        x_pc = _tmul(x_sp, (np.asarray(xyz, dtype=np.float64), rpy_quat(rpy)))
         if jtype == "fixed":
             survivor[child] = (s, x_pc)
         else:
@@ -360,7 +336,7 @@ def panda(
     for k, (row, parent, x_p) in enumerate(joints):
         jtype, child, axis = row[1], row[3], row[6]
         if jtype == "revolute":
-            motion = (np.zeros(3), _qaxis(axis, q0[k]))
+            motion = (np.zeros(3), qaxis(axis, q0[k]))
         else:
             motion = (np.asarray(axis, dtype=np.float64) * q0[k], np.array([0.0, 0.0, 0.0, 1.0]))
         world[child] = _tmul(_tmul(world[parent], x_p), motion)
@@ -438,9 +414,9 @@ def _add_visual_shapes(builder: newton.ModelBuilder, body_of: dict[str, int], su
         z = np.array([0.0, 0.0, 1.0])
         axis = np.cross(z, d / length)
         if np.linalg.norm(axis) < 1e-9:
-            rot = np.array([0.0, 0.0, 0.0, 1.0]) if d[2] > 0 else _qaxis((1, 0, 0), math.pi)
+            rot = np.array([0.0, 0.0, 0.0, 1.0]) if d[2] > 0 else qaxis((1, 0, 0), math.pi)
         else:
-            rot = _qaxis(axis, math.acos(float(np.clip(d[2] / length, -1.0, 1.0))))
+            rot = qaxis(axis, math.acos(float(np.clip(d[2] / length, -1.0, 1.0))))
         body, xform = place(link, (0.5 * (a + b), rot))
         builder.add_shape_capsule(
             body,

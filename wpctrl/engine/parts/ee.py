@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import difflib
 import logging
-import math
 import os
 import xml.etree.ElementTree as ET
 
@@ -26,6 +25,7 @@ from ...config import ConfigError
 from ...config.ee import MAX_EE_DOF, EESpec
 from ...kernels import ee as KE
 from ...kernels.dims import PER_ENV_BLOCK_DIM
+from ..hostmath import qmul, rpy_quat
 from ..launch import _Launch
 from . import Part
 
@@ -41,32 +41,6 @@ def _short(label: str) -> str:
 
 def _find(labels, ids, name: str) -> list[int]:
     return [i for i in ids if labels[i] == name or _short(labels[i]) == name]
-
-
-def _rpy_quat(rpy) -> np.ndarray:
-    """URDF roll-pitch-yaw (R = Rz Ry Rx) as an (x, y, z, w) quaternion."""
-    r, p, y = (float(v) for v in rpy)
-
-    def axis(k, a):
-        q = np.zeros(4)
-        q[k] = math.sin(0.5 * a)
-        q[3] = math.cos(0.5 * a)
-        return q
-
-    return _qmul(_qmul(axis(2, y), axis(1, p)), axis(0, r))
-
-
-def _qmul(a, b):
-    ax, ay, az, aw = a
-    bx, by, bz, bw = b
-    return np.array(
-        [
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-            aw * bw - ax * bx - ay * by - az * bz,
-        ]
-    )
 
 
 def _urdf_offset(path: str, ee_link: str, kept: set[str]) -> tuple[str, wp.transform]:
@@ -97,10 +71,10 @@ def _urdf_offset(path: str, ee_link: str, kept: set[str]) -> tuple[str, wp.trans
         o = j.find("origin")
         xyz = np.array([float(v) for v in (o.get("xyz", "0 0 0") if o is not None else "0 0 0").split()])
         rpy = [float(v) for v in (o.get("rpy", "0 0 0") if o is not None else "0 0 0").split()]
-        q = _rpy_quat(rpy)
+        q = rpy_quat(rpy)
         # offset <- X_joint * offset
         wp_p = xyz + _rotate(q, wp_p)
-        wp_q = _qmul(q, wp_q)
+        wp_q = qmul(q, wp_q)
         link = j.find("parent").get("link")
     return link, wp.transform(wp.vec3(*wp_p), wp.quat(*wp_q))
 

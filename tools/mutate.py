@@ -152,8 +152,8 @@ MUTATIONS: list[Mutation] = [
     M(
         "coupled_fallback_on_the_factor",
         "wpctrl/kernels/drive.py",
-        "A = rows_block(recover(H, dprev))",
-        "A = rows_block(H)",
+        "A = inverse_block(recover(H, dprev))",
+        "A = inverse_block(H)",
         "the coupled drive's fallback sweeps build A from the last factor instead of H",
         ("tests/test_coupled.py",),
     ),

@@ -32,9 +32,9 @@ Gauss–Seidel sweeps on the block ``A`` polish the (rare) unconverged case. Acc
 
 import warp as wp
 
+from .cholesky import cholesky_funcs
 from .inertia import chain_h_func
 from .pd import _bidx
-from .spatial import _FLOAT32_EPS
 
 wp.set_module_options({"enable_backward": False})
 
@@ -49,16 +49,6 @@ def coupled_matrix_type(n: int):
     """The (n, n) float64 matrix type of H (one element of the coupled kernel's ``h_cache``), n the articulation's
     DOFs."""
     return wp.types.matrix(shape=(n, n), dtype=wp.float64)
-
-
-@wp.func
-def _rsqrt(x: wp.float64):
-    """1 / sqrt(x) in float64 for a positive normal x without the IEEE square root's and division's slow paths: a
-    float32 estimate refined by two Newton steps (relative error ~1e-7, then ~1e-14, then rounding)."""
-    y = wp.float64(1.0 / wp.sqrt(wp.float32(x)))
-    h = wp.float64(0.5) * x
-    y = y * (wp.float64(1.5) - h * y * y)
-    return y * (wp.float64(1.5) - h * y * y)
 
 
 def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None, rows: tuple, fast_math: bool = False) -> wp.Kernel:
@@ -79,48 +69,10 @@ def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None, rows: tuple
     ANY_ACC = any(ACC)
     MatN = coupled_matrix_type(n)
     VecN = wp.types.vector(length=n, dtype=wp.float64)
-    MatR = wp.types.matrix(shape=(nr, nr), dtype=wp.float64)
     VecR = wp.types.vector(length=nr, dtype=wp.float64)
     VecRi = wp.types.vector(length=nr, dtype=wp.int32)
-    eps32 = wp.float64(_FLOAT32_EPS)
 
-    @wp.func
-    def factor(M: MatN):
-        """Cholesky ``M = L L^T`` (lower triangle, in place), pivots floored as Newton's JointSpaceResponse; returns
-        L and the pivots' reciprocals."""
-        inv = VecN()
-        for jc in range(wp.static(N)):
-            s = M[jc, jc]
-            for k in range(wp.static(jc)):
-                s -= M[jc, k] * M[jc, k]
-            s = wp.max(s, eps32 * wp.max(wp.abs(M[jc, jc]), wp.float64(1.0)))
-            y = _rsqrt(s)
-            M[jc, jc] = s * y
-            inv[jc] = y
-            for i in range(wp.static(jc + 1), wp.static(N)):
-                t = M[i, jc]
-                for k in range(wp.static(jc)):
-                    t -= M[i, k] * M[jc, k]
-                M[i, jc] = t * inv[jc]
-        return M, inv
-
-    @wp.func
-    def solve(L: MatN, inv: VecN, x: VecN):
-        """``(L L^T)^-1 x``."""
-        y = VecN()
-        for i in range(wp.static(N)):
-            t = x[i]
-            for k in range(wp.static(i)):
-                t -= L[i, k] * y[k]
-            y[i] = t * inv[i]
-        z = VecN()
-        for ii in range(wp.static(N)):
-            i = wp.static(N - 1 - ii)
-            t = y[i]
-            for k in range(wp.static(i + 1), wp.static(N)):
-                t -= L[k, i] * z[k]
-            z[i] = t * inv[i]
-        return z
+    factor, solve, inverse_block, inverse_diag = cholesky_funcs(n, ROWD)
 
     @wp.func
     def recover(L: MatN, dprev: VecR):
@@ -138,38 +90,6 @@ def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None, rows: tuple
         for r in range(wp.static(NR)):
             L[wp.static(ROWD[r]), wp.static(ROWD[r])] = L[wp.static(ROWD[r]), wp.static(ROWD[r])] - dprev[r]
         return L
-
-    @wp.func
-    def rows_block(H: MatN):
-        """``A = S H^-1 S^T`` (rows x rows) from H (lower triangle)."""
-        L, inv = factor(H)
-        A = MatR()
-        for c in range(wp.static(NR)):
-            e = VecN()
-            e[wp.static(ROWD[c])] = wp.float64(1.0)
-            z = solve(L, inv, e)
-            for r in range(wp.static(NR)):
-                A[r, c] = z[wp.static(ROWD[r])]
-        return A
-
-    @wp.func
-    def rows_diag(H: MatN):
-        """``diag(S H^-1 S^T)`` from H (lower triangle): ``|L^-1 e_d|^2`` per row."""
-        L, inv = factor(H)
-        out = VecR()
-        for r in range(wp.static(NR)):
-            y = VecN()
-            acc = wp.float64(0.0)
-            for i in range(wp.static(ROWD[r]), wp.static(N)):
-                t = wp.float64(0.0)
-                if wp.static(i == ROWD[r]):
-                    t = wp.float64(1.0)
-                for k in range(wp.static(ROWD[r]), wp.static(i)):
-                    t -= L[i, k] * y[k]
-                y[i] = t * inv[i]
-                acc += y[i] * y[i]
-            out[r] = acc
-        return out
 
     @wp.kernel(enable_backward=False, module="unique", module_options={"fast_math": bool(fast_math)})
     def _coupled_drive_kernel(
@@ -238,8 +158,9 @@ def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None, rows: tuple
             H = h_cache[env]
         resp = VecR()
         if wp.static(ANY_ACC):
-            resp = rows_diag(H)
+            Ad = inverse_diag(H)
             for r in range(wp.static(NR)):
+                resp[r] = Ad[r, r]
                 response_out[env, r] = float(resp[r])
         h = wp.float64(dt)
         b = VecR()  # unclamped PD force at the start-of-step prediction [N·m or N]
@@ -321,7 +242,7 @@ def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None, rows: tuple
                 settled = 1
         if settled == 0:
             # Not settled (cycling between active sets): projected Gauss–Seidel on the clamp equation, with A.
-            A = rows_block(recover(H, dprev))
+            A = inverse_block(recover(H, dprev))
             for r in range(wp.static(NR)):
                 if state[r] == 2:
                     tau[r] = wp.float64(0.0)

@@ -2,16 +2,18 @@
 :class:`wpctrl.kernels.inertia.FusedChain`).
 
 Private module. Same signature and result as the runtime-loop function of :func:`wpctrl.kernels.inertia.chain_funcs`
-(forward kinematics from ``joint_q``, H over the bodies plus armature, float64 Cholesky, the controlled block of
-``H^-1``), with the articulation's structure (joint types, parents, DOFs, ancestor masks, controlled rows) as
-compile-time constants. On CUDA its local matrices are then indexed by constants only and stay in registers.
+(forward kinematics from ``joint_q``, H over the bodies plus armature, float64 Cholesky (:mod:`.cholesky`), the
+controlled block of ``H^-1``), with the articulation's structure (joint types, parents, DOFs, ancestor masks,
+controlled rows) as compile-time constants. On CUDA its local matrices are then indexed by constants only and stay in
+registers.
 """
 
 from __future__ import annotations
 
 import warp as wp
 
-from .spatial import _FLOAT32_EPS, J_FIXED, J_REVOLUTE, _body_world_inertia
+from .cholesky import cholesky_funcs
+from .spatial import J_FIXED, J_REVOLUTE, _body_world_inertia
 
 wp.set_module_options({"enable_backward": False})
 
@@ -46,11 +48,8 @@ def unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool):
     MatN3 = wp.types.matrix(shape=(n, 3), dtype=wp.float64)
     MatJ3 = wp.types.matrix(shape=(nj, 3), dtype=float)
     MatJ4 = wp.types.matrix(shape=(nj, 4), dtype=float)
-    MatRN = wp.types.matrix(shape=(nr, n), dtype=wp.float64)
     MatR = wp.types.matrix(shape=(nr, nr), dtype=wp.float64)
     VecR = wp.types.vector(length=nr, dtype=wp.float64)
-    VecN = wp.types.vector(length=n, dtype=wp.float64)
-    eps32 = wp.float64(_FLOAT32_EPS)
     REV = [0] * n  # 1: the DOF is revolute
     for k in range(nj):
         if DOF[k] >= 0:
@@ -59,6 +58,7 @@ def unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool):
     # DOF pairs (i >= j) moving body k, with whether both are revolute (an angular term).
     PAIRS = [tuple((a, b, REV[a] and REV[b]) for a in MOV[k] for b in MOV[k] if b <= a) for k in range(nj)]
     FULL = bool(full)
+    _, _, inverse_block, inverse_diag = cholesky_funcs(n, ROWD)
     # The composite form of H: every DOF's subtree a contiguous run of bodies K_i .. LAST[i] (K_i: its own joint).
     KDOF = [0] * n
     for k in range(nj):
@@ -215,41 +215,8 @@ def unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool):
             num_dofs, jb, db, chain_type, chain_parent, chain_dof, chain_anc, row_dof, joint_q_start, joint_qd_start,
             joint_X_p, joint_X_c, joint_axis, joint_child, joint_armature, body_mass, body_com, body_inertia, joint_q,
         )  # fmt: skip
-        # Cholesky H = L L^T in place (lower triangle), pivots floored as in Newton's JointSpaceResponse; the
-        # reciprocals of the pivots are kept (n float64 divisions in all, none in the substitutions below).
-        inv = VecN()
-        for jc in range(wp.static(n)):
-            s = H[jc, jc]
-            for k in range(wp.static(jc)):
-                s -= H[jc, k] * H[jc, k]
-            s = wp.max(s, eps32 * wp.max(wp.abs(H[jc, jc]), wp.float64(1.0)))
-            dg = wp.sqrt(s)
-            H[jc, jc] = dg
-            inv[jc] = wp.float64(1.0) / dg
-            for i in range(wp.static(jc + 1), wp.static(n)):
-                tt = H[i, jc]
-                for k in range(wp.static(jc)):
-                    tt -= H[i, k] * H[jc, k]
-                H[i, jc] = tt * inv[jc]
-        # y_r = L^-1 e_{d_r}: forward substitution from row d_r (entries above it are 0).
-        Y = MatRN()
-        for rr in range(wp.static(nr)):
-            for i in range(wp.static(ROWD[rr]), wp.static(n)):
-                tt = wp.float64(0.0)
-                if wp.static(i == ROWD[rr]):
-                    tt = wp.float64(1.0)
-                for k in range(wp.static(ROWD[rr]), wp.static(i)):
-                    tt -= H[i, k] * Y[rr, k]
-                Y[rr, i] = tt * inv[i]
-        A = MatR()
-        for rr in range(wp.static(nr)):
-            for cc in range(wp.static(rr + 1 if FULL else 1)):
-                c2 = wp.static(cc if FULL else rr)
-                v = wp.float64(0.0)
-                for k in range(wp.static(max(ROWD[rr], ROWD[cc if FULL else rr])), wp.static(n)):
-                    v += Y[rr, k] * Y[c2, k]
-                A[rr, c2] = v
-                A[c2, rr] = v
-        return A
+        if wp.static(FULL):
+            return inverse_block(H)
+        return inverse_diag(H)
 
     return (chain_rows_factor, MatR, VecR), chain_h

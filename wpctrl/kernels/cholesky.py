@@ -1,0 +1,126 @@
+"""Unrolled float64 Cholesky factorisation of an articulation's n x n joint-space inertia, and the controlled rows'
+block of its inverse, for the fused kernels (:mod:`.inertia_unrolled`, :mod:`.drive`).
+
+Private module. :func:`cholesky_funcs` compiles them for a size and the rows' DOFs (compile-time constants, every loop
+unrolled, so the matrices stay in registers on CUDA). Pivots are floored as in Newton's ``JointSpaceResponse`` and
+come from a refined float32 reciprocal square root: no IEEE float64 division or square root, whose slow-path
+branches serialise a one-thread-per-env kernel.
+"""
+
+import warp as wp
+
+from .spatial import _FLOAT32_EPS
+
+wp.set_module_options({"enable_backward": False})
+
+
+@wp.func
+def _rsqrt(x: wp.float64):
+    """1 / sqrt(x) in float64 for a positive normal x without the IEEE square root's and division's slow paths: a
+    float32 estimate refined by two Newton steps (relative error ~1e-7, then ~1e-14, then rounding)."""
+    y = wp.float64(1.0 / wp.sqrt(wp.float32(x)))
+    h = wp.float64(0.5) * x
+    y = y * (wp.float64(1.5) - h * y * y)
+    return y * (wp.float64(1.5) - h * y * y)
+
+
+_cache: dict[tuple, tuple] = {}
+
+
+def cholesky_funcs(n: int, row_dof: tuple) -> tuple:
+    """``(factor, solve, inverse_block, inverse_diag)`` for n DOFs and the controlled rows at the DOFs ``row_dof``:
+
+    - ``factor(M)``: ``M = L L^T`` (lower triangle, in place); returns L and the pivots' reciprocals;
+    - ``solve(L, inv, x)``: ``(L L^T)^-1 x``;
+    - ``inverse_block(H)``: ``A = S H^-1 S^T`` (rows x rows), H's lower triangle read;
+    - ``inverse_diag(H)``: the same with only its diagonal filled.
+    """
+    ROWD = tuple(int(d) for d in row_dof)
+    key = (n, ROWD)
+    if key in _cache:
+        return _cache[key]
+    N, NR = n, len(ROWD)
+    MatN = wp.types.matrix(shape=(n, n), dtype=wp.float64)
+    VecN = wp.types.vector(length=n, dtype=wp.float64)
+    MatRN = wp.types.matrix(shape=(NR, n), dtype=wp.float64)
+    MatR = wp.types.matrix(shape=(NR, NR), dtype=wp.float64)
+    eps32 = wp.float64(_FLOAT32_EPS)
+
+    @wp.func
+    def factor(M: MatN):
+        inv = VecN()
+        for jc in range(wp.static(N)):
+            s = M[jc, jc]
+            for k in range(wp.static(jc)):
+                s -= M[jc, k] * M[jc, k]
+            s = wp.max(s, eps32 * wp.max(wp.abs(M[jc, jc]), wp.float64(1.0)))
+            y = _rsqrt(s)
+            M[jc, jc] = s * y
+            inv[jc] = y
+            for i in range(wp.static(jc + 1), wp.static(N)):
+                t = M[i, jc]
+                for k in range(wp.static(jc)):
+                    t -= M[i, k] * M[jc, k]
+                M[i, jc] = t * inv[jc]
+        return M, inv
+
+    @wp.func
+    def solve(L: MatN, inv: VecN, x: VecN):
+        y = VecN()
+        for i in range(wp.static(N)):
+            t = x[i]
+            for k in range(wp.static(i)):
+                t -= L[i, k] * y[k]
+            y[i] = t * inv[i]
+        z = VecN()
+        for ii in range(wp.static(N)):
+            i = wp.static(N - 1 - ii)
+            t = y[i]
+            for k in range(wp.static(i + 1), wp.static(N)):
+                t -= L[k, i] * z[k]
+            z[i] = t * inv[i]
+        return z
+
+    @wp.func
+    def rows_y(H: MatN):
+        """``Y`` with row r = ``L^-1 e_{d_r}`` (forward substitution from row d_r; the entries above it are 0), so
+        that ``A_rc = y_r . y_c``."""
+        L, inv = factor(H)
+        Y = MatRN()
+        for r in range(wp.static(NR)):
+            for i in range(wp.static(ROWD[r]), wp.static(N)):
+                t = wp.float64(0.0)
+                if wp.static(i == ROWD[r]):
+                    t = wp.float64(1.0)
+                for k in range(wp.static(ROWD[r]), wp.static(i)):
+                    t -= L[i, k] * Y[r, k]
+                Y[r, i] = t * inv[i]
+        return Y
+
+    @wp.func
+    def inverse_block(H: MatN):
+        Y = rows_y(H)
+        A = MatR()
+        for r in range(wp.static(NR)):
+            for c in range(wp.static(r + 1)):
+                v = wp.float64(0.0)
+                for k in range(wp.static(max(ROWD[r], ROWD[c])), wp.static(N)):
+                    v += Y[r, k] * Y[c, k]
+                A[r, c] = v
+                A[c, r] = v
+        return A
+
+    @wp.func
+    def inverse_diag(H: MatN):
+        Y = rows_y(H)
+        A = MatR()
+        for r in range(wp.static(NR)):
+            v = wp.float64(0.0)
+            for k in range(wp.static(ROWD[r]), wp.static(N)):
+                v += Y[r, k] * Y[r, k]
+            A[r, r] = v
+        return A
+
+    out = (factor, solve, inverse_block, inverse_diag)
+    _cache[key] = out
+    return out

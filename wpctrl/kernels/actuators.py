@@ -32,19 +32,18 @@ def dc_motor_clamp(u: float, qd: float, sat: float, vlim: float, lim: float):
 
 
 def table_constants(positions, efforts) -> tuple:
-    """A position table as the substep kernel's compile-time constants: ``(x, y, segments, slopes, intercepts)``,
-    float32 values as Python floats; ``segments`` the indices ``k`` of the pieces with ``x[k + 1] > x[k]`` (a repeated
-    position is a step, never interpolated across), on piece ``k`` the table is ``slopes[k] * q + intercepts[k]``
-    (both rounded once to float32 from float64; 0 for a step): one multiply-add per piece, whose rounding is that of
-    ``|slope * q|``, a few 1e-4 N·m for a 1,000 N·m/rad slope at 3 rad."""
-    x = np.asarray(positions, np.float32).reshape(-1)
-    y = np.asarray(efforts, np.float32).reshape(-1)
-    seg = tuple(int(k) for k in range(x.size - 1) if x[k + 1] > x[k])
-    slope = np.zeros(max(x.size - 1, 1), np.float64)
-    icpt = np.zeros(max(x.size - 1, 1), np.float64)
-    x64, y64 = x.astype(np.float64), y.astype(np.float64)
-    for k in seg:
-        slope[k] = (y64[k + 1] - y64[k]) / (x64[k + 1] - x64[k])
-        icpt[k] = y64[k] - slope[k] * x64[k]
-    f = [tuple(float(v) for v in a.astype(np.float32)) for a in (x, y, slope, icpt)]
-    return (f[0], f[1], seg, f[2], f[3])
+    """A position table as the substep kernel's compile-time constants ``(x0, y0, y_last, pieces)``, float32 values as
+    Python floats. ``pieces``: ``(right end, slope, intercept)`` of each piece with ``x[k + 1] > x[k]`` (a repeated
+    position is a step, never interpolated across), last piece first: the kernel starts from ``y_last`` (held past
+    the end), lets every piece whose right end is >= q overwrite it with ``slope * q + intercept``, so the first such
+    piece wins, and holds ``y0`` at and below ``x0``. Slope and intercept are rounded once to float32 from float64:
+    one multiply-add per piece, whose rounding is that of ``|slope * q|``, a few 1e-4 N·m for a 1,000 N·m/rad slope
+    at 3 rad."""
+    x = np.asarray(positions, np.float32).reshape(-1).astype(np.float64)
+    y = np.asarray(efforts, np.float32).reshape(-1).astype(np.float64)
+    pieces = []
+    for k in reversed(range(x.size - 1)):
+        if x[k + 1] > x[k]:
+            slope = (y[k + 1] - y[k]) / (x[k + 1] - x[k])
+            pieces.append(tuple(float(np.float32(v)) for v in (x[k + 1], slope, y[k] - slope * x[k])))
+    return (float(x[0]), float(y[0]), float(y[-1]), tuple(pieces))

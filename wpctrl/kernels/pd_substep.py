@@ -24,13 +24,8 @@ def _make_substep_kernel(L: StepLayout) -> wp.Kernel:
     # Effort rows carry their commanded effort in the target register (so a delay delays it too).
     IS_EFF = tuple(int(k == EFF) for k in KIND)
     ACT = L.act_model or (_ca.ACT_NONE,) * R
-    # Position tables as compile-time constants: (x, y, segments, slopes, intercepts) per row, () without one.
-    TAB = L.limit_table or ((),) * R
-    TX = tuple(t[0] if t else (0.0,) for t in TAB)
-    TY = tuple(t[1] if t else (0.0,) for t in TAB)
-    TSEG = tuple(tuple(reversed(t[2])) if t else () for t in TAB)  # tried last to first: the first match wins
-    TSLOPE = tuple(t[3] if t else (0.0,) for t in TAB)
-    TB = tuple(t[4] if t else (0.0,) for t in TAB)
+    # Position tables as compile-time constants (kernels.actuators.table_constants), a placeholder without one.
+    TAB = tuple(t or (0.0, 0.0, 0.0, ()) for t in (L.limit_table or ((),) * R))
     # Rows whose torque this kernel computes: PD rows with explicit actuation or the effort readout (not the rows of
     # an actuator network, whose own launch follows), and effort rows.
     TAU = tuple(int(IS_EFF[r] or ((EXPLICIT or EFFORT) and ACT[r] != _ca.ACT_NET)) for r in range(R))
@@ -209,14 +204,14 @@ def _make_substep_kernel(L: StepLayout) -> wp.Kernel:
                     elif wp.static(ACT[r] == _ca.ACT_POSITION_LIMIT):
                         # The table at q (end values held outside): the first piece whose right end is >= q, each
                         # piece one multiply-add of constants (slope, intercept) and a select.
-                        fl = wp.static(TY[r][-1])
-                        for kk in range(wp.static(len(TSEG[r]))):
+                        fl = wp.static(TAB[r][2])
+                        for kk in range(wp.static(len(TAB[r][3]))):
                             fl = wp.where(
-                                q[r] <= wp.static(TX[r][TSEG[r][kk] + 1]),
-                                q[r] * wp.static(TSLOPE[r][TSEG[r][kk]]) + wp.static(TB[r][TSEG[r][kk]]),
+                                q[r] <= wp.static(TAB[r][3][kk][0]),
+                                q[r] * wp.static(TAB[r][3][kk][1]) + wp.static(TAB[r][3][kk][2]),
                                 fl,
                             )
-                        fl = wp.where(q[r] <= wp.static(TX[r][0]), wp.static(TY[r][0]), fl)
+                        fl = wp.where(q[r] <= wp.static(TAB[r][0]), wp.static(TAB[r][1]), fl)
                         fl = wp.min(fl, lim[r])
                         f[r] = wp.clamp(u[r], -fl, fl)
                     else:

@@ -8,6 +8,7 @@ import sys
 COMMANDS = {
     "demo": ("wpctrl.demo", "run a ManiSkill control mode on Newton Pandas and report tracking (CPU or GPU)"),
     "train": ("wpctrl.train.cli", "train a PPO policy (rsl-rl) through wpctrl on a vectorised Newton task"),
+    "replay": ("wpctrl.tasks.replay", "replay ManiSkill's recorded PushCube / PickCube episodes on Newton"),
 }
 
 

@@ -1,0 +1,334 @@
+"""``TaskEnv``: a ManiSkill table-top task on Newton, with the vectorised gymnasium API of ManiSkill's GPU envs
+(``ManiSkillVectorEnv``): torch tensors on the env's device, partial resets, auto reset of finished envs inside the
+step, the state dict in ManiSkill's layout. Build it with :func:`wpctrl.tasks.make`.
+
+One step: the action is copied into a fixed device buffer; then wpctrl's ``set_action``, K = sim_freq / control_freq
+physics steps of ``before_simulation_step`` and MuJoCo-Warp (``TaskPhysics.substeps`` solver steps each; the contact
+forces of the last one go to Newton's contact sensor), then evaluation, observation, reward, the episode bookkeeping
+and the reset of finished envs as Warp kernels. On CUDA the whole step is one captured graph: no host sync.
+"""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import newton
+import numpy as np
+import warp as wp
+
+from . import kernels as K
+from .definitions import PANDA_REST_QPOS, ROBOT_INIT_QPOS_NOISE, TaskSpec
+from .physics import TaskPhysics
+from .scene import build_scene
+from .state_dict import StateDictMixin
+
+__all__ = ["REWARD_MODES", "TaskEnv"]
+
+REWARD_MODES = ("normalized_dense", "dense", "sparse", "none")
+_REWARD_CODE = {"dense": 0, "normalized_dense": 1, "sparse": 2, "none": 3}
+
+
+class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
+    """``num_envs`` copies of a ManiSkill task on Newton's MuJoCo-Warp, controlled by wpctrl (see the module docstring).
+
+    ``step(action)`` returns ``obs, reward, terminated, truncated, info`` as torch tensors on :attr:`device`:
+    ``info`` holds ``success``, ``fail`` (always False: the tasks define no failure), ``elapsed_steps`` and the
+    task's evaluation flags, and, for the envs reset inside the step (``info["_final_info"]``), the observation and
+    info they ended with (``final_observation``, ``final_info``), as ``ManiSkillVectorEnv`` returns them.
+    """
+
+    def __init__(
+        self,
+        spec: TaskSpec,
+        num_envs: int,
+        device,
+        control_mode: str,
+        obs_mode: str,
+        reward_mode: str,
+        seed: int,
+        auto_reset: bool,
+        ignore_terminations: bool,
+        physics: TaskPhysics,
+        controller_semantics: str,
+        asset_dir: str | None,
+        graph: bool | None,
+    ):
+        import torch
+
+        import wpctrl
+        from wpctrl.robots import panda_control_modes
+
+        self.spec = spec
+        self.physics = physics
+        self.control_mode = control_mode
+        self.obs_mode = obs_mode
+        self.reward_mode = reward_mode
+        self.auto_reset = bool(auto_reset)
+        self.ignore_terminations = bool(ignore_terminations)
+        self.controller_semantics = controller_semantics
+        self.max_episode_steps = spec.max_episode_steps
+        self.sim_freq, self.control_freq = 100, 20
+        self.num_envs = n = int(num_envs)
+        self._torch = torch
+        self.wp_device = dev = wp.get_device(device)
+        self.device = torch.device("cuda", dev.ordinal) if dev.is_cuda else torch.device("cpu")
+        if dev.is_cuda:  # one stream for torch and Warp: the graph is ordered with the caller's torch work
+            self._torch_stream = torch.cuda.Stream(device=self.device)
+            torch.cuda.set_stream(self._torch_stream)
+            wp.set_stream(wp.stream_from_torch(self._torch_stream), dev)
+
+        self.scene = sc = build_scene(spec, n, dev, physics, asset_dir)
+        self.model = model = sc.model
+        mode = panda_control_modes()[control_mode]
+        if controller_semantics == "physx_cpu":  # SAPIEN's CLIK, as ManiSkill's EE controllers on its CPU sim
+            for cfg in mode.values():
+                if hasattr(cfg, "delta_solver_config"):
+                    cfg.delta_solver_config = dict(cfg.delta_solver_config, solver_iterations=100)
+        self.ctrl = wpctrl.build_controller(mode, model, self.control_freq, self.sim_freq)
+        self.solver = newton.solvers.SolverMuJoCo(model, **physics.solver_kwargs())
+        self.dt = 1.0 / (self.sim_freq * physics.substeps)
+        self.state = model.state()
+        self._other = model.state()
+        self.control = model.control()
+        self._contacts = newton.CollisionPipeline(
+            model, rigid_contact_max=self.solver.get_max_contact_count(), soft_contact_max=0
+        ).contacts()
+        fingers = []
+        for e in range(n):
+            fingers += [b + e * sc.bodies_per_env for b in sc.finger_bodies0]
+        cubes = [sc.cube_body0 + e * sc.bodies_per_env for e in range(n)]
+        self._sensor = newton.sensors.SensorContact(
+            model, sensing_bodies=fingers, counterpart_bodies=cubes, measure_total=False,
+            request_contact_attributes=False,
+        )  # fmt: skip
+        self._observables = self.solver.observables(self._sensor.solver_observable_kinds, contacts=self._contacts)
+
+        self._layout = L = K.Layout()
+        L.nq, L.nqd, L.nb = sc.coords_per_env, sc.dofs_per_env, sc.bodies_per_env
+        L.robot_q0, L.robot_qd0 = sc.robot_coord0, sc.robot_dof0
+        L.cube_q0, L.cube_qd0 = sc.cube_coord0, sc.cube_dof0
+        L.cube_body0, L.tcp_body0 = sc.cube_body0, sc.tcp_body0
+        L.lfinger_body0, L.rfinger_body0 = sc.finger_bodies0
+        self._params = P = K.TaskParams()
+        P.kind = spec.kind
+        P.half_size = spec.cube_half_size
+        P.spawn_half = spec.cube_spawn_half_size
+        P.random_yaw = int(spec.random_cube_yaw)
+        P.goal_radius = spec.goal_radius
+        P.max_goal_height = spec.max_goal_height
+        P.push_goal_offset = spec.push_goal_offset
+        P.max_reward = spec.max_reward
+        P.static_threshold = spec.static_threshold
+        P.grasp_min_force = spec.grasp_min_force
+        P.grasp_cos_max_angle = math.cos(math.radians(spec.grasp_max_angle))
+        P.qpos_noise = ROBOT_INIT_QPOS_NOISE
+        P.goal_quat = wp.quat(*spec.goal_quat)
+
+        z = lambda dtype, *shape: wp.zeros(shape if len(shape) > 1 else shape[0], dtype=dtype, device=dev)  # noqa: E731
+        self.obs_buf = z(wp.float32, n, spec.obs_dim)
+        self.final_obs_buf = z(wp.float32, n, spec.obs_dim)
+        self.action_buf = z(wp.float32, n, self.ctrl.action_dim)
+        self.goal_pos = z(wp.vec3, n)
+        self.goal_quat = wp.array(np.tile(np.asarray(spec.goal_quat, np.float32), (n, 1)), dtype=wp.float32,
+                                  device=dev)  # fmt: skip
+        self.rest_qpos = wp.array(np.asarray(PANDA_REST_QPOS, np.float32), dtype=wp.float32, device=dev)
+        self.seed_buf = wp.array([int(seed)], dtype=wp.int32, device=dev)
+        self.reset_count = z(wp.int32, n)
+        self.elapsed = z(wp.int32, n)
+        self.final_elapsed = z(wp.int32, n)
+        self.flags = {k: z(wp.bool, n) for k in ("success", "is_grasped", "is_obj_placed", "is_robot_static")}
+        self.final_flags = {k: z(wp.bool, n) for k in self.flags}
+        self.reward_dense = z(wp.float32, n)
+        self.reward_buf = z(wp.float32, n)
+        self.terminated = z(wp.bool, n)
+        self.truncated = z(wp.bool, n)
+        self.done = z(wp.bool, n)
+        self.reset_mask = z(wp.bool, n)
+        self._all = wp.ones(n, dtype=wp.bool, device=dev)
+        self._fail = torch.zeros(n, dtype=torch.bool, device=self.device)
+        self._t = {name: wp.to_torch(a) for name, a in self._torch_views().items()}
+
+        self.single_action_space = self.ctrl.single_action_space
+        self.action_space = self.ctrl.action_space
+        self.single_observation_space = gym.spaces.Box(-np.inf, np.inf, (spec.obs_dim,), np.float32)
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (n, spec.obs_dim), np.float32)
+        self.metadata = {"autoreset_mode": gym.vector.AutoresetMode.SAME_STEP}
+
+        self._reset_envs(self._all)
+        self.graph = None
+        if graph is None:
+            graph = dev.is_cuda
+        if graph:
+            self._step_impl()  # compile every kernel outside the capture
+            self._reset_envs(self._all)
+            with wp.ScopedCapture(device=dev) as cap:
+                self._step_impl()
+            self.graph = cap.graph
+        self._reset_envs(self._all)
+
+    # -- device work ------------------------------------------------------------------------------------------------
+
+    def _torch_views(self) -> dict:
+        v = {"obs": self.obs_buf, "final_obs": self.final_obs_buf, "action": self.action_buf, "reward": self.reward_buf,
+             "terminated": self.terminated, "truncated": self.truncated, "elapsed": self.elapsed,
+             "final_elapsed": self.final_elapsed, "reset_count": self.reset_count}  # fmt: skip
+        v.update({k: a for k, a in self.flags.items()})
+        v.update({"final_" + k: a for k, a in self.final_flags.items()})
+        return v
+
+    def _observe(self) -> None:
+        newton.eval_fk(self.model, self.state.joint_q, self.state.joint_qd, self.state)
+        f = self.flags
+        wp.launch(
+            K.observe_kernel,
+            dim=self.num_envs,
+            inputs=[self._layout, self._params, self.state.joint_q, self.state.joint_qd, self.state.body_q,
+                    self._sensor.force_matrix, self.goal_pos],
+            outputs=[self.obs_buf, f["success"], f["is_grasped"], f["is_obj_placed"], f["is_robot_static"],
+                     self.reward_dense],
+            device=self.wp_device,
+        )  # fmt: skip
+
+    def _reset_envs(self, mask: wp.array) -> None:
+        """Initialise the episodes of ``mask``'s envs (device draws), their controller targets and observations."""
+        wp.launch(
+            K.reset_kernel,
+            dim=self.num_envs,
+            inputs=[self._layout, self._params, self.seed_buf, mask, self.rest_qpos, self.reset_count],
+            outputs=[self.state.joint_q, self.state.joint_qd, self.goal_pos, self.elapsed],
+            device=self.wp_device,
+        )
+        self._after_state_write(mask)
+
+    def _after_state_write(self, mask: wp.array) -> None:
+        """The envs of ``mask`` hold a new state: no contact force yet, drive targets at their qpos, fresh obs."""
+        wp.launch(_zero_forces, dim=self.num_envs, inputs=[mask, self._sensor.force_matrix], device=self.wp_device)
+        newton.eval_fk(self.model, self.state.joint_q, self.state.joint_qd, self.state)
+        self.ctrl.reset(self.state, mask, control=self.control)
+        self._observe()
+
+    def _simulate(self) -> None:
+        ctrl, solver = self.ctrl, self.solver
+        ctrl.set_action(self.action_buf, self.state)
+        src, dst = self.state, self._other
+        steps = ctrl.num_substeps * self.physics.substeps
+        i = 0
+        for _ in range(ctrl.num_substeps):
+            ctrl.before_simulation_step(src, self.control)
+            for _ in range(self.physics.substeps):
+                i += 1
+                obs = self._observables if i == steps else None
+                solver.step(src, dst, self.control, self._contacts if obs is not None else None, self.dt,
+                            observables=obs)  # fmt: skip
+                src, dst = dst, src
+        if src is not self.state:
+            self.state.assign(src)  # the env's state is always self.state (a captured graph binds its arrays)
+        self._sensor.update(None, self._contacts, observables=self._observables)
+
+    def _step_impl(self) -> None:
+        self._simulate()
+        self._observe()
+        wp.launch(
+            K.episode_kernel,
+            dim=self.num_envs,
+            inputs=[self.max_episode_steps, self.spec.max_reward, _REWARD_CODE[self.reward_mode],
+                    int(self.ignore_terminations), int(self.auto_reset), self.flags["success"], self.reward_dense],
+            outputs=[self.elapsed, self.reward_buf, self.terminated, self.truncated, self.done, self.reset_mask],
+            device=self.wp_device,
+        )  # fmt: skip
+        wp.copy(self.final_obs_buf, self.obs_buf)
+        wp.copy(self.final_elapsed, self.elapsed)
+        for k, a in self.flags.items():
+            wp.copy(self.final_flags[k], a)
+        if self.auto_reset:
+            self._reset_envs(self.reset_mask)
+
+    # -- the vectorised gymnasium API -------------------------------------------------------------------------------
+
+    @property
+    def unwrapped(self):
+        return self
+
+    @property
+    def elapsed_steps(self):
+        """(num_envs,) int32 torch view: control steps taken in each env's episode."""
+        return self._t["elapsed"]
+
+    def _info(self, final: bool) -> dict:
+        t = self._t
+        info = {"success": t["success"].clone(), "fail": self._fail.clone(), "elapsed_steps": t["elapsed"].clone()}
+        for k in self.spec.info_keys:
+            info[k] = t[k].clone()
+        if final and self.auto_reset:
+            done = t["terminated"] | t["truncated"]
+            fin = {"success": t["final_success"].clone(), "fail": self._fail.clone(),
+                   "elapsed_steps": t["final_elapsed"].clone()}  # fmt: skip
+            for k in self.spec.info_keys:
+                fin[k] = t["final_" + k].clone()
+            info.update(final_observation=self._format_obs(t["final_obs"].clone()), final_info=fin,
+                        _final_info=done, _final_observation=done.clone(), _elapsed_steps=done.clone())  # fmt: skip
+        return info
+
+    def _format_obs(self, flat):
+        if self.obs_mode == "state":
+            return flat
+        out = {}
+        for group, fields_ in self.spec.obs_slices().items():
+            out[group] = {name: flat[:, s] for name, s in fields_.items()}
+        if self.spec.kind == K.PICK and "extra" in out:
+            out["extra"]["is_grasped"] = out["extra"]["is_grasped"][:, 0] > 0.5
+        return out
+
+    def reset(self, *, seed=None, options: dict | None = None):
+        """Start new episodes: every env, or ``options["env_idx"]``'s (a partial reset). ``seed``: an int seeds the
+        draws of every env from now on (env e's episodes differ from env e'"s); returns ``obs, info`` of all envs."""
+        from ._validate import env_mask, seed_value
+
+        if seed is not None:
+            self.seed_buf.fill_(seed_value(seed))
+            self.reset_count.zero_()
+        mask = self._all
+        if options and options.get("env_idx") is not None:
+            mask = env_mask(options["env_idx"], self.num_envs, self.wp_device)
+        self._reset_envs(mask)
+        return self._format_obs(self._t["obs"].clone()), self._info(final=False)
+
+    def step(self, action):
+        """One control step of every env (finished envs are reset inside it when ``auto_reset``)."""
+        from ._validate import action_tensor
+
+        self._t["action"].copy_(action_tensor(action, self.num_envs, self.ctrl.action_dim, self.device))
+        if self.graph is not None:
+            wp.capture_launch(self.graph)
+        else:
+            self._step_impl()
+        t = self._t
+        reward = t["reward"].clone() if self.reward_mode != "none" else self._torch.zeros_like(t["reward"])
+        return (self._format_obs(t["obs"].clone()), reward, t["terminated"].clone(), t["truncated"].clone(),
+                self._info(final=True))  # fmt: skip
+
+    def get_obs(self):
+        """The observation of the current state (e.g. after :meth:`set_state_dict`)."""
+        self._observe()
+        return self._format_obs(self._t["obs"].clone())
+
+    def evaluate(self) -> dict:
+        """ManiSkill's ``evaluate()`` of the current state: ``success`` and the task's flags (torch bool)."""
+        self._observe()
+        out = {"success": self._t["success"].clone()}
+        for k in self.spec.info_keys:
+            out[k] = self._t[k].clone()
+        return out
+
+    def close(self) -> None:
+        self.graph = None
+
+
+@wp.kernel
+def _zero_forces(mask: wp.array[wp.bool], force: wp.array2d[wp.vec3]):
+    e = wp.tid()
+    if mask[e]:
+        for i in range(2):
+            for j in range(force.shape[1]):
+                force[2 * e + i, j] = wp.vec3(0.0)

@@ -1,0 +1,208 @@
+"""The tasks' scene on Newton: ManiSkill's Panda (its own ``panda_v2.urdf``: collision meshes, finger pads, SRDF
+pairs), the table box, the ground and the cube, ``num_envs`` times in separate worlds at the same place (as
+ManiSkill's GPU sim keeps its sub-scenes), with the contact, friction and joint-limit settings of
+:class:`~wpctrl.tasks.physics.TaskPhysics`.
+
+The Panda's asset is read from the installed mani-skill package (found without importing it) or from
+``asset_dir`` / the ``WPCTRL_MANISKILL_ASSETS`` variable (a copy of ``mani_skill/assets``). Only the collision
+geometry is loaded: the URDF's visual elements are dropped before Newton reads it.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import os
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+
+import newton
+import numpy as np
+import warp as wp
+
+from ..maniskill.collision import filter_srdf_pairs
+from .definitions import PANDA_DOF, PANDA_REST_QPOS, PANDA_ROOT_POSE, TABLE, TaskSpec
+from .physics import TaskPhysics, mujoco_friction
+
+__all__ = ["PANDA_FINGER_MATERIAL", "Scene", "build_scene", "panda_urdf_path"]
+
+PANDA_FINGER_MATERIAL = {"static_friction": 2.0, "dynamic_friction": 2.0, "restitution": 0.0}
+"""ManiSkill's ``Panda.urdf_config``: the ``gripper`` material of ``panda_leftfinger`` / ``panda_rightfinger``
+(``mani_skill/agents/robots/panda/panda.py``; PhysX's patch radius 0.1 has no MuJoCo counterpart)."""
+FINGER_LINKS = ("panda_leftfinger", "panda_rightfinger")
+TCP_LINK = "panda_hand_tcp"
+_URDF = os.path.join("robots", "panda", "panda_v2.urdf")
+
+
+def panda_urdf_path(asset_dir: str | None = None) -> str:
+    """ManiSkill's ``panda_v2.urdf``: under ``asset_dir``, else ``$WPCTRL_MANISKILL_ASSETS``, else the installed
+    mani-skill package's ``assets`` folder."""
+    root = asset_dir or os.environ.get("WPCTRL_MANISKILL_ASSETS")
+    if root is None:
+        spec = importlib.util.find_spec("mani_skill")
+        if spec is None or not spec.submodule_search_locations:
+            raise ImportError(
+                "wpctrl.tasks needs ManiSkill's Panda asset: install the maniskill extra "
+                '(pip install "wpctrl[maniskill]") or point asset_dir / WPCTRL_MANISKILL_ASSETS at a copy of '
+                "mani_skill/assets"
+            )
+        root = os.path.join(list(spec.submodule_search_locations)[0], "assets")
+    path = os.path.join(root, _URDF)
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"wpctrl.tasks: ManiSkill's Panda asset {path} does not exist")
+    return path
+
+
+def _collision_only_urdf(path: str) -> str:
+    """The URDF's text without its visual elements, mesh paths made absolute."""
+    tree = ET.parse(path)
+    folder = os.path.dirname(os.path.abspath(path))
+    for link in tree.getroot().iter("link"):
+        for visual in link.findall("visual"):
+            link.remove(visual)
+    for mesh in tree.getroot().iter("mesh"):
+        name = mesh.get("filename", "")
+        if name and not os.path.isabs(name) and "://" not in name:
+            mesh.set("filename", os.path.join(folder, name))
+    return ET.tostring(tree.getroot(), encoding="unicode")
+
+
+@dataclass
+class Scene:
+    """A built scene: the Newton model and where each task entity sits in its arrays (env 0's index + stride)."""
+
+    model: newton.Model
+    num_envs: int
+    coords_per_env: int
+    dofs_per_env: int
+    bodies_per_env: int
+    robot_coord0: int
+    """Env 0's first robot coordinate (the robot's 9 joint positions follow, ManiSkill's qpos order)."""
+    robot_dof0: int
+    cube_coord0: int
+    """Env 0's cube free joint: 7 coordinates (p, q xyzw)."""
+    cube_dof0: int
+    """Env 0's cube free joint: 6 DOFs (linear, angular velocity, world frame)."""
+    cube_body0: int
+    tcp_body0: int
+    finger_bodies0: tuple[int, int]
+    shape_mu: dict[str, float]
+    """MuJoCo friction coefficient by material (``default``, ``gripper``) after the combination rule."""
+
+
+def _panda_builder(urdf: str, physics: TaskPhysics) -> newton.ModelBuilder:
+    robot = newton.ModelBuilder()
+    newton.solvers.SolverMuJoCo.register_custom_attributes(robot)
+    p = PANDA_ROOT_POSE
+    robot.add_urdf(
+        _collision_only_urdf(urdf),
+        xform=wp.transform(wp.vec3(*p[:3]), wp.quat(p[4], p[5], p[6], p[3])),
+        floating=False,
+        enable_self_collisions=True,
+    )
+    filter_srdf_pairs(robot, urdf)
+    for name, q in zip([f"panda_joint{i}" for i in range(1, 8)] + ["panda_finger_joint1", "panda_finger_joint2"],
+                       PANDA_REST_QPOS):  # fmt: skip
+        j = next(i for i, lb in enumerate(robot.joint_label) if lb.rsplit("/", 1)[-1] == name)
+        robot.joint_q[robot.joint_q_start[j]] = q
+    return robot
+
+
+def build_scene(spec: TaskSpec, num_envs: int, device, physics: TaskPhysics, asset_dir: str | None = None) -> Scene:
+    """``num_envs`` worlds of ``spec``'s scene, finalized on ``device``."""
+    urdf = panda_urdf_path(asset_dir)
+    mu = mujoco_friction(
+        {"default": TABLE.static_friction, "gripper": PANDA_FINGER_MATERIAL["static_friction"]},
+        physics.friction_combine,
+    )
+    env = newton.ModelBuilder()
+    newton.solvers.SolverMuJoCo.register_custom_attributes(env)
+    env.add_builder(_panda_builder(urdf, physics))
+    bodies = [lb.rsplit("/", 1)[-1] for lb in env.body_label]
+    for s, b in enumerate(env.shape_body):
+        env.shape_material_mu[s] = mu["gripper"] if b >= 0 and bodies[b] in FINGER_LINKS else mu["default"]
+        env.shape_material_restitution[s] = 0.0
+    static = newton.ModelBuilder.ShapeConfig(mu=mu["default"], restitution=TABLE.restitution, density=0.0)
+    yaw = wp.quat_from_axis_angle(wp.vec3(0.0, 0.0, 1.0), TABLE.actor_yaw)
+    centre = wp.vec3(*TABLE.actor_position) + wp.quat_rotate(yaw, wp.vec3(*TABLE.box_offset))
+    env.add_shape_box(-1, xform=wp.transform(centre, yaw), hx=TABLE.half_size[0], hy=TABLE.half_size[1],
+                      hz=TABLE.half_size[2], cfg=static, label=TABLE.name)  # fmt: skip
+    env.add_shape_plane(-1, xform=wp.transform(wp.vec3(0.0, 0.0, -TABLE.height), wp.quat_identity()),
+                        width=0.0, length=0.0, cfg=static, label="ground")  # fmt: skip
+    h = spec.cube_half_size
+    cube = env.add_body(xform=wp.transform(wp.vec3(0.0, 0.0, h), wp.quat_identity()), label="cube")
+    cube_cfg = newton.ModelBuilder.ShapeConfig(mu=mu["default"], restitution=0.0, density=1000.0)
+    env.add_shape_box(cube, hx=h, hy=h, hz=h, label="cube", cfg=cube_cfg)
+    n_shapes = env.shape_count
+
+    builder = newton.ModelBuilder()
+    newton.solvers.SolverMuJoCo.register_custom_attributes(builder)
+    builder.replicate(env, int(num_envs))
+    model = builder.finalize(device=device)
+    _apply_mujoco_attributes(model, physics, n_shapes * int(num_envs))
+
+    labels = [lb.rsplit("/", 1)[-1] for lb in model.body_label]
+    bodies_per_env = model.body_count // num_envs
+    coords = model.joint_coord_count // num_envs
+    dofs = model.joint_dof_count // num_envs
+    jq = model.joint_q_start.numpy()
+    jqd = model.joint_qd_start.numpy()
+    jlabels = [lb.rsplit("/", 1)[-1] for lb in model.joint_label]
+    j1 = jlabels.index("panda_joint1")
+    jc = next(j for j, lb in enumerate(jlabels) if model.joint_type.numpy()[j] == newton.JointType.FREE)
+    scene = Scene(
+        model=model,
+        num_envs=int(num_envs),
+        coords_per_env=coords,
+        dofs_per_env=dofs,
+        bodies_per_env=bodies_per_env,
+        robot_coord0=int(jq[j1]),
+        robot_dof0=int(jqd[j1]),
+        cube_coord0=int(jq[jc]),
+        cube_dof0=int(jqd[jc]),
+        cube_body0=labels.index("cube"),
+        tcp_body0=labels.index(TCP_LINK),
+        finger_bodies0=(labels.index(FINGER_LINKS[0]), labels.index(FINGER_LINKS[1])),
+        shape_mu=mu,
+    )
+    _check_layout(scene, jlabels)
+    return scene
+
+
+def _apply_mujoco_attributes(model: newton.Model, physics: TaskPhysics, n_shapes: int) -> None:
+    """Raw MuJoCo contact and joint-limit parameters on every shape / DOF (SolverMuJoCo reads them at build)."""
+    from newton._src.solvers.mujoco.constants import SOLREF_MODE_RAW
+
+    ns = model.mujoco
+    if n_shapes != model.shape_count:
+        raise RuntimeError(f"scene: {model.shape_count} shapes, expected {n_shapes}")
+    ns.solref.assign(np.tile(np.asarray(physics.contact_solref, np.float32), (model.shape_count, 1)))
+    ns.solref_mode.assign(np.full(model.shape_count, SOLREF_MODE_RAW, np.int32))
+    solimp = np.tile(np.array([*physics.contact_solimp, 0.5, 2.0], np.float32), (model.shape_count, 1))
+    ns.geom_solimp.assign(solimp)
+    ndof = model.joint_dof_count
+    ns.solreflimit.assign(np.tile(np.asarray(physics.limit_solref, np.float32), (ndof, 1)))
+    ns.solreflimit_mode.assign(np.full(ndof, SOLREF_MODE_RAW, np.int32))
+    ns.solimplimit.assign(np.tile(np.array([*physics.limit_solimp, 0.5, 2.0], np.float32), (ndof, 1)))
+
+
+def _check_layout(scene: Scene, jlabels: list[str]) -> None:
+    """Every env's robot and cube sit at env 0's indices plus the per-env stride (replicate's layout)."""
+    m = scene.model
+    if m.joint_coord_count != scene.coords_per_env * scene.num_envs or m.body_count % scene.num_envs:
+        raise RuntimeError("scene: the model is not num_envs equal worlds")
+    if scene.cube_coord0 - scene.robot_coord0 < PANDA_DOF:
+        raise RuntimeError("scene: the robot's 9 coordinates are not contiguous before the cube")
+    last = scene.num_envs - 1
+    labels = [lb.rsplit("/", 1)[-1] for lb in m.body_label]
+    if labels[scene.cube_body0 + last * scene.bodies_per_env] != "cube":
+        raise RuntimeError("scene: the worlds' bodies are not laid out with a constant stride")
+    del jlabels
+
+
+def quat_wxyz_to_xyzw(q) -> tuple[float, float, float, float]:
+    return (q[1], q[2], q[3], q[0])
+
+
+def yaw_quat_wxyz(yaw: float) -> tuple[float, float, float, float]:
+    return (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))

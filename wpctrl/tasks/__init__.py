@@ -14,8 +14,20 @@ from __future__ import annotations
 from ..config import ConfigError
 from .definitions import PICK_CUBE, PUSH_CUBE, TASKS, TaskSpec
 from .physics import TaskPhysics
+from .replay import load_episodes, replay
 
-__all__ = ["CONTROL_MODES", "OBS_MODES", "TASKS", "TaskPhysics", "TaskSpec", "make", "PICK_CUBE", "PUSH_CUBE"]
+__all__ = [
+    "CONTROL_MODES",
+    "OBS_MODES",
+    "PICK_CUBE",
+    "PUSH_CUBE",
+    "TASKS",
+    "TaskPhysics",
+    "TaskSpec",
+    "load_episodes",
+    "make",
+    "replay",
+]
 
 OBS_MODES = ("state", "state_dict")
 SIM_BACKENDS = ("mujoco",)
@@ -67,7 +79,7 @@ def make(
             ``"physx_cpu"`` (SAPIEN's iterative CLIK, as ManiSkill on its CPU sim) or ``"physx_cuda"`` (one damped
             least-squares step, as ManiSkill's GPU sim). Joint modes are the same on both.
         asset_dir: A copy of ``mani_skill/assets`` to read the Panda from (default: the installed mani-skill).
-        graph: Capture the step in a CUDA graph (default: on CUDA devices).
+        graph: Capture the step in a graph and replay it (default: True, on CUDA and the CPU).
     """
     if env_id not in TASKS:
         raise ConfigError(f"make: unknown env_id {env_id!r}; expected one of {sorted(TASKS)}")

@@ -1,26 +1,29 @@
-"""How the tasks' contacts, friction and joint limits are set up on MuJoCo-Warp so that they behave as ManiSkill's
-PhysX scene does (host only).
+"""How the tasks' contacts, friction, joint limits and drives are set up on MuJoCo-Warp so that they behave as
+ManiSkill's PhysX scene does (host only).
 
-PhysX (ManiSkill 3.0.1: TGS, 15 position iterations, rigid contacts with zero rest offset, hard articulation joint
-limits, each pair's friction the *average* of its two materials) and MuJoCo (soft constraints, each pair's friction the
-*larger* of its two geoms') differ where a task touches them. What :class:`TaskPhysics` sets, and why:
+PhysX (ManiSkill 3.0.1: TGS with 15 position iterations per 10 ms step, rigid contacts with zero rest offset, hard
+articulation joint limits, implicit drives clamped at their force limit, each pair's friction the *average* of its
+two materials) and MuJoCo (soft constraints, implicit damping, each pair's friction the *larger* of its two geoms')
+differ where a task touches them. What :class:`TaskPhysics` sets, and why:
 
-- **Integrator** ``"discrete"``: MuJoCo-Warp's discrete step map solves the constraints for the end of the step, so a
-  contact that appears within one step is resolved without the spring overshoot of the continuous reference
-  acceleration: with ``implicitfast`` a cube struck by the closed fingers at 0.7 m/s leaves them at 1.2 m/s (an
-  elastic-looking bounce) and slides ~10 cm further than on PhysX.
-- **Friction cone** elliptic with ``impratio`` 10: a grasp holds as PhysX's does (pyramidal cones with impratio 1
-  let a lifted cube creep out of the fingers).
-- **Friction**: MuJoCo takes the larger of the two coefficients, PhysX their average. With the scene's two materials
-  (default 0.3, the Panda's finger pads 2.0) giving the finger shapes the average (1.15) reproduces every pair:
-  finger-cube and finger-table 1.15, everything else 0.3. :func:`mujoco_friction` computes it.
-- **Contact softness**: ``contact_solref`` / ``contact_solimp`` on every shape of the scene; MuJoCo's defaults.
+- **Substeps**: 8 MuJoCo steps of 1.25 ms per 100 Hz physics step. MuJoCo clamps a saturated drive's force but
+  keeps its damping implicit (``dt * kd`` in the mass matrix), so a saturated arm joint moves as if damped harder
+  than PhysX's, by an amount that grows with the step: at one 10 ms step the Panda's TCP lags and sags by 1-1.5 cm
+  in a fast ``pd_ee_delta_pos`` push. PhysX's TGS integrates in 15 sub-iterations; 8 MuJoCo steps bring the arm
+  within a few millimetres. The controller still runs at ManiSkill's rates (100 Hz drive targets, 20 Hz actions).
+- **Contacts**: ``contact_solref`` (5 ms, critically damped) and ``contact_solimp`` (0.99-0.999) make contacts
+  nearly rigid: with MuJoCo's defaults (20 ms, 0.9-0.95) the gripper's 30 N squeeze pushes the fingers centimetres
+  into the 64 g cube and the grasp fails.
+- **Friction cone** elliptic with ``impratio`` 10: a lifted cube stays in the fingers as on PhysX.
+- **Friction**: PhysX averages, MuJoCo takes the larger coefficient. With the scene's two materials (default 0.3,
+  the Panda's finger pads 2.0), giving the finger shapes the average (1.15) reproduces every pair: finger-cube and
+  finger-table 1.15, everything else 0.3 (:func:`mujoco_friction`).
 - **Joint limits**: Newton imports URDF limits as force-space gains (ke 1e4, kd 10) that MuJoCo turns into time
-  constants of 0.1-2.5 s with a damping ratio near 0.01: a driven Panda then overshoots joint 4's limit by tenths of a
-  radian. PhysX's limits are hard; ``limit_solref`` (raw MuJoCo ``solreflimit``, default (0.02, 1), a critically
-  damped limit) and ``limit_solimp`` hold them to a few milliradians.
-- **Substeps**: MuJoCo steps per 100 Hz physics step (ManiSkill's ``sim_freq``); 1 is ManiSkill's own step and the
-  cheapest.
+  constants of 0.1-2.5 s with a damping ratio near 0.01: a saturated drive carries joint 4 0.24 rad past its limit.
+  ``limit_solref`` (raw MuJoCo ``solreflimit``, 5 ms, critically damped) and ``limit_solimp`` hold it within 3 mrad,
+  as PhysX's hard limits do.
+
+``docs/tasks.md`` has the replay results of these settings and of the alternatives tried.
 """
 
 from __future__ import annotations
@@ -39,7 +42,7 @@ _CONES = ("elliptic", "pyramidal")
 class TaskPhysics:
     """MuJoCo-Warp settings of a task's scene (see the module docstring for what each one reproduces)."""
 
-    substeps: int = 4
+    substeps: int = 16
     """MuJoCo-Warp steps per physics step (the physics step is ManiSkill's 1 / ``sim_freq`` = 10 ms)."""
     integrator: str = "implicitfast"
     cone: str = "elliptic"
@@ -51,9 +54,10 @@ class TaskPhysics:
     """MuJoCo ``solref`` of every contact: (time constant [s], damping ratio)."""
     contact_solimp: tuple[float, float, float] = (0.99, 0.999, 0.001)
     """MuJoCo ``solimp`` (dmin, dmax, width [m]) of every contact."""
-    limit_solref: tuple[float, float] = (0.02, 1.0)
-    """MuJoCo ``solreflimit`` of every robot joint limit: (time constant [s], damping ratio)."""
-    limit_solimp: tuple[float, float, float] = (0.95, 0.99, 0.001)
+    limit_solref: tuple[float, float] | None = (0.005, 1.0)
+    """MuJoCo ``solreflimit`` of every robot joint limit: (time constant [s], damping ratio); None keeps Newton's
+    import (force-space gains ``joint_limit_ke/kd``, soft)."""
+    limit_solimp: tuple[float, float, float] = (0.99, 0.999, 0.001)
     friction_combine: str = "average"
     """``"average"`` (PhysX's rule, reproduced per shape: :func:`mujoco_friction`) or ``"max"`` (MuJoCo's own, the
     materials' coefficients unchanged)."""
@@ -69,6 +73,8 @@ class TaskPhysics:
             raise ConfigError(f"TaskPhysics.impratio: expected a number >= 1, got {self.impratio!r}")
         for name in ("contact_solref", "limit_solref"):
             v = getattr(self, name)
+            if v is None and name == "limit_solref":
+                continue
             if not _numbers(v, 2) or not (v[0] > 0.0 and v[1] > 0.0):
                 raise ConfigError(f"TaskPhysics.{name}: expected (time constant > 0 [s], damping ratio > 0), got {v!r}")
         for name in ("contact_solimp", "limit_solimp"):

@@ -35,6 +35,9 @@ class EpisodeResult:
     """||cube position on Newton - ManiSkill's|| after each step [m]."""
     success_at_end_recorded: bool
     success_at_end: bool
+    is_grasped_recorded: list[bool] | None = None
+    """PickCube: ManiSkill's ``info["is_grasped"]`` after each step."""
+    is_grasped: list[bool] | None = None
 
     @property
     def agrees(self) -> bool:
@@ -156,10 +159,13 @@ def replay(source, device="cpu", physics=None, asset_dir: str | None = None, env
     actions = np.asarray([ep["actions"] for ep in episodes], np.float32)  # (n, T, A)
     recorded_cube = np.asarray([[p[:3] for p in ep["cube_pose"]] for ep in episodes])  # (n, T + 1, 3)
     success = np.zeros((n, actions.shape[1]), bool)
+    grasped = np.zeros((n, actions.shape[1]), bool)
     error = np.zeros((n, actions.shape[1]))
     for t in range(actions.shape[1]):
         _, _, _, _, info = env.step(torch.from_numpy(actions[:, t]))
         success[:, t] = info["success"].cpu().numpy()
+        if "is_grasped" in info:
+            grasped[:, t] = info["is_grasped"].cpu().numpy()
         q = env.get_state_dict()["actors"]["cube"][:, :3].cpu().numpy()
         error[:, t] = np.linalg.norm(q - recorded_cube[:, t + 1], axis=1)
     report = ReplayReport(task=header["task"], control_mode=header["control_mode"])
@@ -173,6 +179,10 @@ def replay(source, device="cpu", physics=None, asset_dir: str | None = None, env
                 cube_error=error[i].tolist(),
                 success_at_end_recorded=bool(ep.get("success_at_end", rec[-1])),
                 success_at_end=bool(success[i, -1]),
+                is_grasped_recorded=[bool(g) for g in ep["info"]["is_grasped"][1:]]
+                if "is_grasped" in ep["info"]
+                else None,
+                is_grasped=grasped[i].tolist() if "is_grasped" in ep["info"] else None,
             )
         )
     return report

@@ -180,6 +180,8 @@ def _apply_mujoco_attributes(model: newton.Model, physics: TaskPhysics, n_shapes
     ns.solref_mode.assign(np.full(model.shape_count, SOLREF_MODE_RAW, np.int32))
     solimp = np.tile(np.array([*physics.contact_solimp, 0.5, 2.0], np.float32), (model.shape_count, 1))
     ns.geom_solimp.assign(solimp)
+    if physics.limit_solref is None:
+        return
     ndof = model.joint_dof_count
     ns.solreflimit.assign(np.tile(np.asarray(physics.limit_solref, np.float32), (ndof, 1)))
     ns.solreflimit_mode.assign(np.full(ndof, SOLREF_MODE_RAW, np.int32))

@@ -1,0 +1,84 @@
+"""The real ManiSkill 3.0.1 side of the task tests: ``PushCube-v1`` / ``PickCube-v1`` on PhysX CPU
+(``render_backend="none"``, one env), built while ManiSkill's visual side is stubbed out: no render materials or
+textures, no visual shapes (the actor builders' ``add_*_visual*`` calls and the URDF loader's link visuals are
+skipped), since they need a rendering device. Physics, collision shapes, materials, controllers, observations,
+rewards and evaluation are stock.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import warnings
+
+from maniskill_side import _Inert, no_visual_loaders
+
+_VISUAL_METHODS = ("add_plane_visual", "add_box_visual", "add_capsule_visual", "add_cylinder_visual",
+                   "add_sphere_visual", "add_visual_from_file")  # fmt: skip
+
+
+@contextlib.contextmanager
+def no_visuals():
+    """ManiSkill without visual shapes or render materials, for the duration."""
+    import sapien
+    from sapien.wrapper.actor_builder import ActorBuilder
+
+    originals = {n: getattr(ActorBuilder, n) for n in _VISUAL_METHODS}
+    render = {n: getattr(sapien.render, n) for n in ("RenderMaterial", "RenderTexture2D")}
+
+    def skip(self, *args, **kwargs):
+        return self
+
+    for n in _VISUAL_METHODS:
+        setattr(ActorBuilder, n, skip)
+    for n in render:
+        setattr(sapien.render, n, _Inert)
+    try:
+        with no_visual_loaders():
+            yield
+    finally:
+        for n, v in originals.items():
+            setattr(ActorBuilder, n, v)
+        for n, v in render.items():
+            setattr(sapien.render, n, v)
+
+
+def make_maniskill(env_id: str, control_mode: str, **kwargs):
+    """The real ManiSkill env (gym.make, PhysX CPU, one env, state observations)."""
+    import gymnasium as gym
+    import mani_skill.envs  # noqa: F401  (registers the tasks)
+
+    with warnings.catch_warnings(), no_visuals():
+        warnings.simplefilter("ignore")
+        env = gym.make(env_id, sim_backend="physx_cpu", render_backend="none", num_envs=1, obs_mode="state",
+                       control_mode=control_mode, **kwargs)  # fmt: skip
+        env.reset(seed=0)
+    return env
+
+
+def state_dict_lists(state: dict) -> dict:
+    """A ManiSkill state dict (torch, batch 1) as the recordings store it (plain lists, no batch)."""
+    return {g: {k: v[0].tolist() for k, v in d.items()} for g, d in state.items() if g in ("actors", "articulations")}
+
+
+def record_episode(env, policy, seed: int, steps: int = 50) -> dict:
+    """One episode of ``policy`` (a function of the flattened observation) on the real ManiSkill env, in the format
+    of ManiSkill's recordings that :func:`wpctrl.tasks.replay` reads."""
+    obs, info = env.reset(seed=seed)
+    base = env.unwrapped
+    ep = {"seed": seed, "init_state_dict": state_dict_lists(base.get_state_dict()), "actions": [],
+          "info": {"success": [bool(info["success"][0])]}, "cube_pose": [], "obs": [obs[0].tolist()]}  # fmt: skip
+    cube = base.obj if hasattr(base, "obj") else base.cube
+    ep["cube_pose"].append(cube.pose.raw_pose[0].tolist())
+    if "is_grasped" in info:
+        ep["info"]["is_grasped"] = [bool(info["is_grasped"][0])]
+    for _ in range(steps):
+        action = policy(obs)
+        obs, _, _, _, info = env.step(action)
+        ep["actions"].append(action[0].tolist())
+        ep["obs"].append(obs[0].tolist())
+        ep["info"]["success"].append(bool(info["success"][0]))
+        if "is_grasped" in info:
+            ep["info"]["is_grasped"].append(bool(info["is_grasped"][0]))
+        ep["cube_pose"].append(cube.pose.raw_pose[0].tolist())
+    ep["success_at_end"] = ep["info"]["success"][-1]
+    return ep

@@ -1,0 +1,396 @@
+"""wpctrl.tasks on Newton (CPU): the env API, ManiSkill's state dict, observations and rewards against numpy
+re-derivations of ManiSkill's definitions (tests/reference_tasks.py) and ManiSkill's recorded observations, reset
+draws, auto reset, bad input, joint limits on MuJoCo-Warp, and the open-loop replay of ManiSkill's recorded episodes
+(tests/data/tasks: real ManiSkill 3.0.1 / PhysX CPU episodes)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+import reference_tasks as R  # noqa: E402
+
+import wpctrl  # noqa: E402
+import wpctrl.tasks as T  # noqa: E402
+from wpctrl.tasks.definitions import PANDA_REST_QPOS  # noqa: E402
+
+DATA = Path(__file__).parent / "data" / "tasks"
+N = 4
+FAST = T.TaskPhysics(substeps=2)
+"""For the tests of the API (not of the physics' fidelity): 2 MuJoCo steps per physics step instead of 16."""
+
+
+def _episodes(name: str) -> dict:
+    return json.loads((DATA / name).read_text())
+
+
+@pytest.fixture(scope="module")
+def pick_env():
+    return T.make("PickCube-v1", num_envs=N, control_mode="pd_ee_delta_pos", physics=FAST)
+
+
+@pytest.fixture(scope="module")
+def push_env():
+    return T.make("PushCube-v1", num_envs=N, control_mode="pd_joint_delta_pos", physics=FAST)
+
+
+def _random_state(env, rng, n=N) -> dict:
+    """A valid ManiSkill state dict: the Panda near rest, the cube somewhere on the table (any yaw, small velocity)."""
+    spec = env.spec
+    qpos = np.asarray(PANDA_REST_QPOS) + rng.normal(0, 0.15, (n, 9))
+    qpos[:, 7:] = rng.uniform(0.0, 0.04, (n, 2))
+    qvel = rng.normal(0, 0.3, (n, 9))
+    yaw = rng.uniform(0, 2 * np.pi, n)
+    cube = np.column_stack([rng.uniform(-0.15, 0.15, (n, 2)), np.full(n, 0.02), np.cos(yaw / 2), np.zeros((n, 2)),
+                            np.sin(yaw / 2), rng.normal(0, 0.05, (n, 6))])  # fmt: skip
+    goal = np.column_stack([rng.uniform(-0.1, 0.1, (n, 2)), rng.uniform(0.0, 0.3, n), np.tile(spec.goal_quat, (n, 1)),
+                            np.zeros((n, 6))])  # fmt: skip
+    state = env.get_state_dict()
+    state["actors"]["cube"] = torch.tensor(cube, dtype=torch.float32)
+    state["actors"][spec.goal_name] = torch.tensor(goal, dtype=torch.float32)
+    state["articulations"]["panda"][:, 13:22] = torch.tensor(qpos, dtype=torch.float32)
+    state["articulations"]["panda"][:, 22:31] = torch.tensor(qvel, dtype=torch.float32)
+    return state
+
+
+# -- make() and the spaces ---------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "kwargs, field",
+    [
+        (dict(env_id="StackCube-v1"), "env_id"),
+        (dict(control_mode="pd_ee_pose_quat"), "control_mode"),
+        (dict(obs_mode="rgbd"), "obs_mode"),
+        (dict(reward_mode="shaped"), "reward_mode"),
+        (dict(sim_backend="physx_cuda"), "sim_backend"),
+        (dict(controller_semantics="gpu"), "controller_semantics"),
+        (dict(num_envs=0), "num_envs"),
+        (dict(num_envs=True), "num_envs"),
+        (dict(physics={"substeps": 2}), "physics"),
+        (dict(seed=[1, 2]), "seed"),
+    ],
+)
+def test_make_refuses_bad_input_naming_the_field(kwargs, field):
+    args = dict(env_id="PushCube-v1")
+    args.update(kwargs)
+    with pytest.raises(wpctrl.ConfigError, match=field):
+        T.make(args.pop("env_id"), **args)
+
+
+@pytest.mark.parametrize(
+    "field, value",
+    [("substeps", 0), ("substeps", 1.5), ("integrator", "rk5"), ("cone", "round"), ("impratio", 0.5),
+     ("contact_solref", (0.0, 1.0)), ("contact_solref", (0.01,)), ("contact_solimp", (0.9, 0.8, 0.001)),
+     ("contact_solimp", (0.9, 1.0, 0.001)), ("limit_solref", (0.02, -1.0)), ("limit_solimp", (0.9, 0.95, 0.0)),
+     ("friction_combine", "min"), ("iterations", 0)],
+)  # fmt: skip
+def test_task_physics_refuses_values_outside_their_range(field, value):
+    with pytest.raises(wpctrl.ConfigError, match=f"TaskPhysics.{field}"):
+        T.TaskPhysics(**{field: value})
+    T.TaskPhysics()  # the defaults are valid
+
+
+def test_friction_rule_reproduces_physx_average():
+    """MuJoCo takes the larger coefficient of a pair, PhysX the average: the per-material values returned give every
+    pair of the scene PhysX's coefficient under MuJoCo's rule."""
+    from wpctrl.tasks.physics import mujoco_friction
+
+    mats = {"default": 0.3, "gripper": 2.0}
+    mu = mujoco_friction(mats)
+    for a in mats:
+        for b in mats:
+            if a == b == "gripper":
+                continue  # no finger-finger pair in the scene (SRDF-filtered)
+            assert max(mu[a], mu[b]) == pytest.approx(0.5 * (mats[a] + mats[b]))
+    assert mujoco_friction(mats, "max") == mats
+    with pytest.raises(wpctrl.ConfigError, match="two distinct"):
+        mujoco_friction({"a": 0.1, "b": 0.2, "c": 0.3})
+
+
+def test_spaces_are_maniskills(pick_env, push_env):
+    for env, obs_dim in ((pick_env, 42), (push_env, 35)):
+        assert env.single_observation_space.shape == (obs_dim,)
+        assert env.observation_space.shape == (N, obs_dim)
+        assert env.single_action_space.shape == (env.ctrl.action_dim,)
+        assert env.action_space.shape == (N, env.ctrl.action_dim)
+        np.testing.assert_array_equal(env.single_action_space.low, -1.0)
+        np.testing.assert_array_equal(env.single_action_space.high, 1.0)
+    assert pick_env.ctrl.action_dim == 4 and push_env.ctrl.action_dim == 8
+
+
+# -- state dicts, observations, rewards --------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", ["PickCube-v1__pd_ee_delta_pos.json", "PushCube-v1__pd_joint_delta_pos.json"])
+def test_recorded_initial_states_give_maniskills_observation(name, pick_env, push_env):
+    """ManiSkill's own obs[0] of every recorded episode, from its initial state dict (TCP pose by Newton's FK of
+    ManiSkill's URDF, quaternions wxyz with ManiSkill's sign)."""
+    data = _episodes(name)
+    env = pick_env if name.startswith("Pick") else push_env
+    for ep in data["episodes"][:N]:
+        state = {g: {k: torch.tensor(v) for k, v in d.items()} for g, d in ep["init_state_dict"].items()}
+        env.set_state_dict(state, env_idx=[0])
+        obs = env.get_obs()[0].numpy()
+        np.testing.assert_allclose(obs, np.asarray(ep["obs"][0], np.float32), atol=1e-5)
+
+
+@pytest.mark.parametrize("task", ["PushCube-v1", "PickCube-v1"])
+def test_state_dict_round_trips_exactly_and_obs_reward_follow_maniskills_definitions(task, pick_env, push_env):
+    env = pick_env if task == "PickCube-v1" else push_env
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        state = _random_state(env, rng)
+        env.set_state_dict(state)
+        back = env.get_state_dict()
+        for group in ("actors", "articulations"):
+            for k, v in state[group].items():
+                torch.testing.assert_close(back[group][k], v, rtol=0, atol=0)
+        obs = env.get_obs().numpy()
+        parts = R.state_parts({g: {k: v.numpy() for k, v in d.items()} for g, d in state.items()}, env.spec.goal_name)
+        tcp_pose = obs[:, 19:26] if task == "PickCube-v1" else obs[:, 18:25]
+        grasped = np.zeros(N, bool)  # a state just set has no contact force yet
+        np.testing.assert_allclose(obs, R.flat_obs(task, parts, tcp_pose, grasped), atol=1e-6)
+        info = env.evaluate()
+        env_r = env.unwrapped  # noqa: F841  (the env is its own base env, as ManiSkill's vector env's unwrapped)
+        if task == "PushCube-v1":
+            ref = R.push_evaluate(parts["cube_p"], parts["goal_p"])
+            dense = R.push_dense(tcp_pose[:, :3], parts["cube_p"], parts["goal_p"], ref["success"])
+        else:
+            ref = R.pick_evaluate(parts["cube_p"], parts["goal_p"], parts["qvel"], grasped)
+            dense = R.pick_dense(tcp_pose[:, :3], parts["cube_p"], parts["goal_p"], parts["qvel"], ref)
+        for k, v in ref.items():
+            np.testing.assert_array_equal(info[k].numpy(), v, err_msg=k)
+        np.testing.assert_allclose(env.reward_dense.numpy(), dense, rtol=1e-5, atol=1e-6)
+
+
+def test_success_and_reward_on_known_cases(push_env):
+    """Cases whose answer is known: a cube in the goal region on the table succeeds (dense reward 4, normalised
+    1); lifted 6 mm above the table it does not; 10.5 cm from the goal's centre it does not."""
+    state = push_env.get_state_dict()
+    goal = torch.tensor([0.2, 0.0, 1e-3])
+    state["actors"]["goal_region"][:, :3] = goal
+    cube = state["actors"]["cube"]
+    cube[:, :3] = torch.tensor([[0.25, 0.03, 0.02], [0.2, 0.0, 0.026], [0.305, 0.0, 0.02], [0.12, 0.04, 0.02]])
+    cube[:, 3:] = torch.tensor([1.0, 0, 0, 0, 0, 0, 0, 0, 0, 0])
+    push_env.set_state_dict(state)
+    assert push_env.evaluate()["success"].tolist() == [True, False, False, True]
+    np.testing.assert_allclose(push_env.reward_dense.numpy()[[0, 3]], 4.0)
+    assert (push_env.reward_dense.numpy()[[1, 2]] < 4.0).all()
+
+
+def test_state_dict_obs_mode_is_the_flat_vector_split():
+    env = T.make("PickCube-v1", num_envs=2, obs_mode="state_dict", physics=FAST)
+    obs, _ = env.reset(seed=5)
+    flat = T.make("PickCube-v1", num_envs=2, physics=FAST)
+    flat_obs, _ = flat.reset(seed=5)
+    s = env.spec.obs_slices()
+    for group, fields in s.items():
+        for name, sl in fields.items():
+            got = obs[group][name]
+            want = flat_obs[:, sl]
+            if name == "is_grasped":
+                assert got.dtype == torch.bool
+                got = got[:, None].float()
+            torch.testing.assert_close(got, want)
+
+
+# -- bad input: refused before anything is written ---------------------------------------------------------------------
+
+
+def _bad_states(env):
+    good = env.get_state_dict()
+
+    def edit(fn):
+        s = {g: {k: v.clone() for k, v in d.items()} for g, d in good.items()}
+        fn(s)
+        return s
+
+    return [
+        (edit(lambda s: s["actors"].pop("cube")), "'cube'"),
+        (edit(lambda s: s["articulations"].pop("panda")), "'panda'"),
+        (edit(lambda s: s["actors"].__setitem__("cube", s["actors"]["cube"][:, :7])), r"expected shape \(4, 13\)"),
+        (edit(lambda s: s["articulations"]["panda"].__setitem__((0, 15), float("nan"))), "non-finite"),
+        (edit(lambda s: s["actors"]["table-workspace"].__setitem__((slice(None), 2), 0.1)), "table is fixed"),
+        (edit(lambda s: s["articulations"]["panda"].__setitem__((slice(None), 0), -0.5)), "root is fixed"),
+        ({"actors": {}}, "'actors' and 'articulations'"),
+        ([1, 2], "expected a dict"),
+    ]
+
+
+def test_bad_state_dicts_are_refused_and_nothing_is_written(push_env):
+    push_env.reset(seed=2)
+    before_q = push_env.state.joint_q.numpy().copy()
+    before_goal = push_env.goal_pos.numpy().copy()
+    for state, match in _bad_states(push_env):
+        with pytest.raises(wpctrl.ConfigError, match=match):
+            push_env.set_state_dict(state)
+        np.testing.assert_array_equal(push_env.state.joint_q.numpy(), before_q)
+        np.testing.assert_array_equal(push_env.goal_pos.numpy(), before_goal)
+    with pytest.raises(wpctrl.ConfigError, match="env_idx"):
+        push_env.set_state_dict(push_env.get_state_dict(), env_idx=[0, N])
+
+
+def test_bad_actions_are_refused_and_nan_actions_hold_the_targets(push_env):
+    push_env.reset(seed=4)
+    with pytest.raises(wpctrl.ConfigError, match=r"action expected shape \(4, 8\)"):
+        push_env.step(torch.zeros(N, 7))
+    with pytest.raises(wpctrl.ConfigError, match="dict"):
+        push_env.step({"action": torch.zeros(N, 8)})
+    zero = torch.zeros(N, 8)
+    push_env.step(zero)
+    targets = push_env.ctrl.target_qpos.numpy().copy()
+    bad_before = push_env.ctrl.bad_action_count.numpy().copy()
+    a = torch.full((N, 8), 0.7)
+    a[1, 3] = float("nan")
+    push_env.step(a)
+    after = push_env.ctrl.target_qpos.numpy()
+    np.testing.assert_array_equal(after[1], targets[1])  # env 1 held its targets (the controller's NaN policy)
+    assert not np.allclose(after[0], targets[0])
+    assert (push_env.ctrl.bad_action_count.numpy() - bad_before).tolist() == [0, 1, 0, 0]
+
+
+# -- resets and episodes -----------------------------------------------------------------------------------------------
+
+
+def test_reset_draws_follow_maniskills_distributions(pick_env, push_env):
+    """ManiSkill's _initialize_episode: qpos = rest + N(0, 0.02) (fingers 0.04), cube xy ~ U[-0.1, 0.1]^2 on the
+    table; PushCube's goal 0.2 m in +x at z = 1e-3, PickCube's anywhere in the box with z = 0.02 + U[0, 0.3] and a
+    uniform cube yaw. 40 resets of 4 envs each."""
+    for env in (push_env, pick_env):
+        draws = []
+        for seed in range(40):
+            env.reset(seed=seed)
+            s = env.get_state_dict()
+            draws.append((s["articulations"]["panda"][:, 13:22].numpy(), s["actors"]["cube"].numpy(),
+                          s["actors"][env.spec.goal_name][:, :3].numpy()))  # fmt: skip
+        qpos = np.concatenate([d[0] for d in draws])
+        cube = np.concatenate([d[1] for d in draws])
+        goal = np.concatenate([d[2] for d in draws])
+        noise = qpos[:, :7] - np.asarray(PANDA_REST_QPOS[:7])
+        assert 0.017 < noise.std() < 0.023 and abs(noise.mean()) < 0.004
+        np.testing.assert_allclose(qpos[:, 7:], 0.04, atol=1e-7)
+        assert (np.abs(cube[:, :2]) <= 0.1).all() and cube[:, :2].std() > 0.05
+        np.testing.assert_allclose(cube[:, 2], 0.02, atol=1e-7)
+        yaw = 2 * np.arctan2(cube[:, 6], cube[:, 3])
+        np.testing.assert_allclose(cube[:, 4:6], 0.0, atol=1e-7)
+        if env.spec.env_id == "PushCube-v1":
+            np.testing.assert_allclose(goal[:, :2], cube[:, :2] + [0.2, 0.0], atol=1e-6)
+            np.testing.assert_allclose(goal[:, 2], 1e-3, atol=1e-7)
+            np.testing.assert_allclose(yaw, 0.0, atol=1e-6)
+        else:
+            assert (np.abs(goal[:, :2]) <= 0.1).all() and (goal[:, 2] >= 0.02).all() and (goal[:, 2] <= 0.32).all()
+            assert np.histogram(np.mod(yaw, 2 * np.pi), bins=4, range=(0, 2 * np.pi))[0].min() > 25
+        # a seed gives the same draws again; another seed others
+        env.reset(seed=7)
+        a = env.get_state_dict()["actors"]["cube"].clone()
+        env.reset(seed=8)
+        env.reset(seed=7)
+        torch.testing.assert_close(env.get_state_dict()["actors"]["cube"], a)
+
+
+def test_partial_reset_touches_only_the_envs_named(push_env):
+    push_env.reset(seed=11)
+    for _ in range(2):
+        push_env.step(torch.full((N, 8), 0.5))
+    before = push_env.get_state_dict()
+    obs, info = push_env.reset(options={"env_idx": torch.tensor([2])})
+    after = push_env.get_state_dict()
+    for k in ("cube",):
+        torch.testing.assert_close(after["actors"][k][[0, 1, 3]], before["actors"][k][[0, 1, 3]])
+        assert not torch.allclose(after["actors"][k][2], before["actors"][k][2])
+    torch.testing.assert_close(after["articulations"]["panda"][[0, 1, 3]], before["articulations"]["panda"][[0, 1, 3]])
+    assert info["elapsed_steps"].tolist() == [2, 2, 0, 2]
+    assert obs.shape == (N, 35)
+
+
+def test_episodes_truncate_at_50_steps_and_auto_reset_inside_the_step():
+    env = T.make("PushCube-v1", num_envs=2, control_mode="pd_joint_delta_pos", reward_mode="dense", physics=FAST)
+    obs, info = env.reset(seed=1)
+    zero = torch.zeros(2, 8)
+    for t in range(1, 51):
+        prev = obs
+        obs, reward, terminated, truncated, info = env.step(zero)
+        if t < 50:
+            assert not truncated.any() and info["elapsed_steps"].tolist() == [t, t]
+            assert not info["_final_info"].any()
+    assert truncated.all() and not terminated.any()
+    assert info["_final_info"].all()
+    assert info["final_info"]["elapsed_steps"].tolist() == [50, 50]
+    assert info["elapsed_steps"].tolist() == [0, 0]  # the new episodes
+    # the final observation is the old episode's last state (the arm held still), the returned one a new episode's
+    torch.testing.assert_close(info["final_observation"][:, :9], prev[:, :9], atol=2e-3, rtol=0)
+    assert not torch.allclose(obs[:, 18 + 7 : 18 + 10], info["final_observation"][:, 18 + 7 : 18 + 10])
+
+
+def test_success_terminates_unless_terminations_are_ignored():
+    for ignore in (False, True):
+        env = T.make("PushCube-v1", num_envs=1, control_mode="pd_joint_delta_pos", ignore_terminations=ignore,
+                     auto_reset=False, physics=FAST)  # fmt: skip
+        env.reset(seed=0)
+        state = env.get_state_dict()
+        state["actors"]["cube"][:, :3] = state["actors"]["goal_region"][:, :3] + torch.tensor([0.0, 0.0, 0.019])
+        env.set_state_dict(state)
+        _, reward, terminated, truncated, info = env.step(torch.zeros(1, 8))
+        assert info["success"].item() and reward.item() == pytest.approx(1.0)
+        assert terminated.item() is (not ignore)
+
+
+# -- physics -----------------------------------------------------------------------------------------------------------
+
+
+def test_joint_limits_hold_as_physx_does():
+    """A saturated drive (100 N m) pushing joint 4 into its upper limit (-0.0698 rad) for a second: the stiff
+    critically damped limit of TaskPhysics holds it within 5 mrad; Newton's default limit (force-space gains ke 1e4,
+    kd 10, i.e. a time constant of ~0.5 s for this joint) lets it through by more than 0.1 rad."""
+    overshoot = {}
+    for name, physics in (("tasks", T.TaskPhysics()), ("newton", T.TaskPhysics(limit_solref=None))):
+        env = T.make("PushCube-v1", num_envs=1, control_mode="pd_joint_pos", physics=physics)
+        env.reset(seed=0)
+        target = torch.tensor([list(PANDA_REST_QPOS[:7]) + [0.04]])
+        target[0, 3] = 0.8  # far past the upper limit -0.0698: the drive saturates at 100 N m
+        worst = -math.inf
+        for _ in range(20):
+            env.step(target)
+            worst = max(worst, float(env.get_state_dict()["articulations"]["panda"][0, 13 + 3]))
+        overshoot[name] = worst - (-0.0698)
+    assert overshoot["tasks"] < 0.005, overshoot
+    assert overshoot["newton"] > 0.1, overshoot
+
+
+# -- replay ------------------------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "name, max_median",
+    [("PushCube-v1__pd_joint_delta_pos.json", 0.01), ("PickCube-v1__pd_ee_delta_pos.json", 0.02)],
+)
+def test_recorded_episodes_replay_to_maniskills_outcome(name, max_median):
+    """ManiSkill's recorded episodes replayed open-loop on Newton: every successful episode succeeds, the cube's final
+    position within 1 cm (PushCube) / 2 cm (PickCube) in the median, and (PickCube) the grasp flag agrees with
+    ManiSkill's on most steps."""
+    report = T.replay(DATA / name)
+    assert report.success_agreement == 1.0, report.format()
+    assert report.median_final_cube_error <= max_median, report.format()
+    for e in report.episodes:
+        if e.is_grasped is not None:
+            agree = np.mean(np.asarray(e.is_grasped) == np.asarray(e.is_grasped_recorded))
+            assert agree >= 0.9, (e.seed, agree)
+
+
+def test_replay_refuses_bad_files(tmp_path):
+    with pytest.raises(FileNotFoundError):
+        T.replay(tmp_path / "missing.json")
+    data = _episodes("PushCube-v1__pd_joint_delta_pos.json")
+    with pytest.raises(wpctrl.ConfigError, match="header"):
+        T.replay({"episodes": data["episodes"]})
+    broken = {"header": data["header"], "episodes": [dict(data["episodes"][0])]}
+    broken["episodes"][0].pop("actions")
+    with pytest.raises(wpctrl.ConfigError, match="'actions'"):
+        T.replay(broken)

@@ -1,0 +1,80 @@
+"""Scripted solutions of the tasks in ManiSkill's ``pd_ee_delta_pos`` mode, as functions of the flattened
+``obs_mode="state"`` observation: the same function drives ManiSkill's env and wpctrl's (their observations are the
+same), so it generates episodes on one simulator to replay on the other, and solves the tasks in the demo.
+
+Both are stateless (each action follows from the current observation alone) and work on a batch ``(num_envs,
+obs_dim)`` of torch observations. The action is ``[dx, dy, dz, gripper]`` normalised to [-1, 1]: ``0.1 * a`` metres
+of TCP motion in the robot's root frame (ManiSkill's frame ``root_translation``; the Panda's root is not rotated),
+gripper +1 open, -1 closed.
+"""
+
+from __future__ import annotations
+
+from .definitions import PICK_CUBE, PUSH_CUBE, TaskSpec
+
+__all__ = ["pick_cube_policy", "policy_for", "push_cube_policy"]
+
+_STEP = 0.1
+"""pd_ee_delta_pos: metres of TCP motion per unit action."""
+
+
+def _fields(spec: TaskSpec, obs):
+    s = spec.obs_slices()["extra"]
+    return obs[:, s["tcp_pose"]][:, :3], obs[:, s["obj_pose"]][:, :3], obs[:, s["goal_pos"]]
+
+
+def _towards(target, tcp, gain: float = 1.0):
+    return ((target - tcp) * (gain / _STEP)).clamp(-1.0, 1.0)
+
+
+def push_cube_policy(obs):
+    """PushCube-v1: close the gripper, hover behind the cube, go down to the cube's centre height, push it along +x
+    (at most 6 cm per control step) until its centre is 4 cm past the goal's (well inside the 10 cm goal radius)."""
+    import torch
+
+    tcp, cube, goal = _fields(PUSH_CUBE, obs)
+    behind = cube.clone()
+    behind[:, 0] = cube[:, 0] - (PUSH_CUBE.cube_half_size + 0.025)
+    aligned = ((tcp[:, 1] - cube[:, 1]).abs() < 0.01) & (tcp[:, 0] < behind[:, 0] + 0.01)
+    low = tcp[:, 2] < cube[:, 2] + 0.01
+    hover = behind.clone()
+    hover[:, 2] = cube[:, 2] + 0.05
+    push = behind.clone()
+    push[:, 0] = goal[:, 0] + 0.04 - (PUSH_CUBE.cube_half_size + 0.025)
+    push[:, 1] = goal[:, 1]
+    target = torch.where(aligned[:, None], torch.where(low[:, None], push, behind), hover)
+    # rise before moving sideways when not aligned and low
+    target[:, 2] = torch.where(~aligned & low, cube[:, 2] + 0.05, target[:, 2])
+    pushing = aligned & low
+    gain = torch.where(pushing, 0.5, 0.8)[:, None]
+    limit = torch.where(pushing, 0.6, 1.0)[:, None]  # push at up to 6 cm per control step (1.2 m/s peaks otherwise)
+    arm = torch.maximum(torch.minimum((target - tcp) * (gain / _STEP), limit), -limit)
+    return torch.cat([arm, -torch.ones_like(arm[:, :1])], dim=1)
+
+
+def pick_cube_policy(obs):
+    """PickCube-v1: open, move above the cube, descend to its centre, close until grasped, carry the cube to the
+    goal and hold it there."""
+    import torch
+
+    tcp, cube, goal = _fields(PICK_CUBE, obs)
+    grasped = obs[:, PICK_CUBE.obs_slices()["extra"]["is_grasped"]][:, 0] > 0.5
+    dxy = (cube[:, :2] - tcp[:, :2]).norm(dim=1)
+    above = cube.clone()
+    above[:, 2] = cube[:, 2] + 0.06
+    over = dxy < 0.008
+    at = over & ((tcp[:, 2] - cube[:, 2]).abs() < 0.006)
+    carry = tcp + (goal - cube)
+    target = torch.where(over[:, None], cube, above)
+    target[:, 2] = torch.where(~over & (tcp[:, 2] < cube[:, 2] + 0.03), cube[:, 2] + 0.06, target[:, 2])
+    target = torch.where(grasped[:, None], carry, target)
+    target = torch.where((at & ~grasped)[:, None], tcp, target)
+    gain = torch.where(grasped, 0.6, 0.8)[:, None]
+    arm = ((target - tcp) * (gain / _STEP)).clamp(-1.0, 1.0)
+    grip = torch.where(grasped | at, -1.0, 1.0)[:, None]
+    return torch.cat([arm, grip], dim=1)
+
+
+def policy_for(env_id: str):
+    """The scripted policy of a task (for ``control_mode="pd_ee_delta_pos"``)."""
+    return {PUSH_CUBE.env_id: push_cube_policy, PICK_CUBE.env_id: pick_cube_policy}[env_id]

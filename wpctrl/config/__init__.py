@@ -1,12 +1,20 @@
 """Configs: host dataclasses that mirror ManiSkill 3's controller configs, and the per-joint rows they become.
 
-Never touches a device. :mod:`.joint` (joint controllers), :mod:`.ee` (end-effector controllers), :mod:`.rows`
-(validation and the flat per-joint tables one kernel launch handles).
+Never touches a device. :mod:`.joint` (joint controllers), :mod:`.ee` (end-effector controllers), :mod:`.impedance`
+(operational-space and joint-impedance controllers), :mod:`.rows` (validation and the flat per-joint tables one kernel
+launch handles).
 """
 
 from .actuators import ActuatorNet, DCMotor, PositionBasedEffortLimit
 from .base import PDBaseForwardVelControllerConfig, PDBaseVelControllerConfig
 from .ee import EE_CONFIGS, MAX_EE_DOF, EESpec, PDEEPosControllerConfig, PDEEPoseControllerConfig, ee_rows
+from .impedance import (
+    IMPEDANCE_CONFIGS,
+    ImpedanceSpec,
+    JointImpedanceControllerConfig,
+    OperationalSpaceControllerConfig,
+    impedance_rows,
+)
 from .joint import (
     ConfigError,
     ControllerConfig,
@@ -43,6 +51,11 @@ __all__ = [
     "FLAG_BINARY",
     "FLAG_EMA",
     "JointEffortControllerConfig",
+    "IMPEDANCE_CONFIGS",
+    "ImpedanceSpec",
+    "JointImpedanceControllerConfig",
+    "OperationalSpaceControllerConfig",
+    "impedance_rows",
     "PositionBasedEffortLimit",
     "ROW_EFFORT",
     "FLAG_DELTA",

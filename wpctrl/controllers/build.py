@@ -13,6 +13,7 @@ import newton
 
 from ..config import base as cfg_base
 from ..config import ee as cfg_ee
+from ..config import impedance as cfg_imp
 from ..config import rows as cfg
 from .base import (
     BaseController,
@@ -27,6 +28,7 @@ from .base import (
     PDJointVelController,
 )
 from .ee import PDEEPosController, PDEEPoseController
+from .impedance import JointImpedanceController, OperationalSpaceController
 
 cfg.PDJointPosControllerConfig.controller_cls = PDJointPosController
 cfg.PDJointPosMimicControllerConfig.controller_cls = PDJointPosMimicController
@@ -40,6 +42,8 @@ cfg_base.PDBaseVelControllerConfig.controller_cls = PDBaseVelController
 cfg_base.PDBaseForwardVelControllerConfig.controller_cls = PDBaseForwardVelController
 cfg_ee.PDEEPosControllerConfig.controller_cls = PDEEPosController
 cfg_ee.PDEEPoseControllerConfig.controller_cls = PDEEPoseController
+cfg_imp.OperationalSpaceControllerConfig.controller_cls = OperationalSpaceController
+cfg_imp.JointImpedanceControllerConfig.controller_cls = JointImpedanceController
 
 
 def build_controller(

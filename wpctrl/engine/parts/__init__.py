@@ -51,6 +51,7 @@ def part_classes() -> dict[str, type[Part]]:
     from .ee import EndEffectors
     from .effort import EffortReadout
     from .gravity import BalancePassiveForce
+    from .impedance import Impedance
     from .response import CoupledDrive, JointSpaceResponse
 
     return {
@@ -62,5 +63,6 @@ def part_classes() -> dict[str, type[Part]]:
         "delay": Delay,
         "effort": EffortReadout,
         "ee": EndEffectors,
+        "impedance": Impedance,
         "gravity": BalancePassiveForce,
     }

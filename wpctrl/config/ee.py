@@ -139,7 +139,10 @@ def _vec3(c, fname: str, value, allow_none: bool) -> np.ndarray:
             return np.full(3, np.nan)
         raise ConfigError(f"{_name(c)}.{fname}: expected a number or 3 numbers, got None")
     try:
-        a = np.asarray(value, dtype=np.float64)
+        raw = np.asarray(value)
+        if raw.dtype.kind not in "iuf":  # strings ("0.1" would parse), bools, objects
+            raise TypeError(f"dtype {raw.dtype}")
+        a = raw.astype(np.float64)
     except (TypeError, ValueError) as e:
         raise ConfigError(f"{_name(c)}.{fname}: expected a number or 3 numbers, got {value!r}") from e
     if a.ndim > 1 or (a.ndim == 1 and a.shape[0] not in (1, 3)):

@@ -220,14 +220,14 @@ def _pos_rows(config, qlimits: np.ndarray, *, mimic: bool = False, posvel: bool 
             for role, jn in (("mimic joint", m_name), ("control joint", c_name)):
                 if jn not in names:
                     raise MimicJointError(f"{_name(config)}.mimic: {role} {jn!r} is not in joint_names {names}")
-            try:
-                m = float(entry.get("multiplier", 1.0))
-                o = float(entry.get("offset", 0.0))
-            except (TypeError, ValueError) as e:
+            raw = (entry.get("multiplier", 1.0), entry.get("offset", 0.0))
+            if any(isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, float, np.integer, np.floating))
+                   for x in raw):  # fmt: skip
                 raise ConfigError(
                     f"{_name(config)}.mimic[{m_name!r}]: expected numbers for multiplier and offset, got "
-                    f"{entry.get('multiplier', 1.0)!r}, {entry.get('offset', 0.0)!r}"
-                ) from e
+                    f"{raw[0]!r}, {raw[1]!r}"
+                )
+            m, o = float(raw[0]), float(raw[1])
             # Finite in float32, where they are used (1e39 would become inf).
             if not all(math.isfinite(x) and abs(x) <= float(np.finfo(np.float32).max) for x in (m, o)):
                 raise ConfigError(

@@ -65,6 +65,10 @@ def _per_joint(config, field_name: str, value, n: int, *, allow_none: bool = Fal
 
 def _drive_modes(config, n: int) -> np.ndarray:
     mode = getattr(config, "drive_mode", "force")
+    if not isinstance(mode, (str, Sequence)):
+        raise ConfigError(
+            f"{_name(config)}.drive_mode: expected 'force', 'acceleration' or a sequence of {n} of them, got {mode!r}"
+        )
     modes = [mode] * n if isinstance(mode, str) else list(mode)
     if len(modes) != n:
         raise ConfigError(

@@ -13,10 +13,11 @@ import newton
 import numpy as np
 import pytest
 import warp as wp
-from conftest import build_panda
+from conftest import PANDA_URDF, build_panda
 from harness import ARM
 
 import wpctrl
+from wpctrl.robots import panda_control_modes
 
 FETCH_ARM = ["shoulder_pan_joint", "shoulder_lift_joint", "upperarm_roll_joint", "elbow_flex_joint",
              "forearm_roll_joint", "wrist_flex_joint", "wrist_roll_joint"]  # fmt: skip
@@ -310,3 +311,295 @@ def test_fused_gravity_torque_matches_newtons_inverse_dynamics(unroll):
         ref = g.numpy()[ctrl._engine.binding.dof_index[:, ctrl["arm"]._rows]]
         assert np.abs(ref).max() > 5.0
         np.testing.assert_allclose(ours, ref, rtol=0, atol=1e-5 * np.abs(ref).max())
+
+
+# -- modes, options ------------------------------------------------------------------------------------------------
+
+
+def test_panda_impedance_modes():
+    """The Panda's torque-level modes: OSC (delta and absolute pose) and joint impedance, each with the mimic gripper;
+    gains per unit inertia, critically damped; their action layouts."""
+    from wpctrl.robots.impedance_modes import JOINT_STIFFNESS, OSC_NULLSPACE_STIFFNESS, OSC_STIFFNESS
+
+    modes = panda_control_modes()
+    delta, absolute, joint = (
+        modes[m]["arm"] for m in ("osc_ee_delta_pose", "osc_ee_pose", "joint_impedance_delta_pos")
+    )
+    assert delta == wpctrl.OperationalSpaceControllerConfig(
+        list(ARM), -0.1, 0.1, -0.1, 0.1, OSC_STIFFNESS, force_limit=100, ee_link="panda_hand_tcp",
+        nullspace_control="position", nullspace_stiffness=OSC_NULLSPACE_STIFFNESS,
+    )  # fmt: skip
+    assert not absolute.use_delta and not absolute.normalize_action and absolute.pos_lower is None
+    assert joint == wpctrl.JointImpedanceControllerConfig(
+        list(ARM), -0.1, 0.1, JOINT_STIFFNESS, use_delta=True, force_limit=100, inertial_compensation=True
+    )
+    for name in ("osc_ee_delta_pose", "osc_ee_pose", "joint_impedance_delta_pos"):
+        assert modes[name]["gripper"] == modes["pd_joint_delta_pos"]["gripper"]
+    model = build_panda(1)
+    dims = {m: wpctrl.build_controller(modes[m], model).action_dim for m in ("osc_ee_delta_pose", "osc_ee_pose")}
+    assert dims == {"osc_ee_delta_pose": 7, "osc_ee_pose": 7}
+    ctrl = wpctrl.build_controller(modes["osc_ee_delta_pose"], model)
+    arm = ctrl["arm"]
+    kd = arm.task_damping.numpy()
+    np.testing.assert_allclose(kd, 2.0 * np.sqrt(OSC_STIFFNESS), rtol=1e-6)  # critically damped
+    np.testing.assert_allclose(arm.damping.numpy(), 2.0 * np.sqrt(OSC_NULLSPACE_STIFFNESS), rtol=1e-6)
+    assert type(arm).__name__ == "OperationalSpaceController" and arm.target_effort.shape == (1, 7)
+
+
+def test_variable_impedance_gains_come_from_the_action():
+    """ "variable": 6 stiffness then 6 damping-ratio columns, normalised onto their limits; the torque is the fixed-gain
+    controller's with those gains. Joint impedance "variable_kp": the stiffness columns set ``ctrl.stiffness``."""
+    rb = robot("panda")
+    rng = np.random.default_rng(4)
+    cfg = osc_config(
+        rb, damping=None, impedance_mode="variable", stiffness_limits=(10.0, 310.0), damping_ratio_limits=(0.5, 1.5)
+    )
+    ctrl = build(rb, cfg, actuation="explicit")
+    assert ctrl.action_dim == 18
+    state = rb.random_state(ctrl, rng)
+    action = rng.uniform(-1.2, 1.2, (rb.num_envs, 18)).astype(np.float32)
+    ours = step_torques(ctrl, state, action)
+    a = np.clip(action, -1, 1)
+    kp = 160.0 + 150.0 * a[:, 6:12]
+    ratio = 1.0 + 0.5 * a[:, 12:]
+    arm = ctrl["arm"]
+    np.testing.assert_allclose(arm.processed_action.numpy()[:, 6:12], kp, rtol=1e-6)
+    np.testing.assert_allclose(arm.processed_action.numpy()[:, 12:], ratio, rtol=1e-6)
+    np.testing.assert_allclose(arm.task_stiffness.numpy(), kp, rtol=1e-6)
+    np.testing.assert_allclose(arm.task_damping.numpy(), 2 * ratio * np.sqrt(kp), rtol=1e-5)
+    fixed = build(rb, osc_config(rb), actuation="explicit")
+    fixed["arm"].task_stiffness.assign(kp.astype(np.float32))
+    fixed["arm"].task_damping.assign((2 * ratio * np.sqrt(kp)).astype(np.float32))
+    np.testing.assert_allclose(step_torques(fixed, state, action[:, :6]), ours, rtol=1e-5, atol=1e-4)
+    # joint impedance, variable_kp: n stiffness columns after the joint targets, the damping from the fixed ratio
+    ji = build(rb, wpctrl.JointImpedanceControllerConfig(list(ARM), -0.1, 0.1, 50.0, impedance_mode="variable_kp",
+                                                         damping_ratio=0.7, use_delta=True))  # fmt: skip
+    act = rng.uniform(-1, 1, (rb.num_envs, 14)).astype(np.float32)
+    ji.set_action(act, state)
+    kp = 500.0 + 500.0 * act[:, 7:]
+    np.testing.assert_allclose(ji["arm"].stiffness.numpy(), kp, rtol=1e-6)
+    np.testing.assert_allclose(ji["arm"].damping.numpy(), 1.4 * np.sqrt(kp), rtol=1e-5)
+
+
+@pytest.mark.parametrize(
+    "kw", [dict(), dict(use_delta=True), dict(use_delta=True, use_target=True), dict(normalize_action=False)]
+)
+def test_joint_impedance_targets(kw):
+    """Absolute, delta from the measured positions, delta on the last target, unnormalised; ``clip_targets``
+    clamps to the joint limits; ``target_qpos`` and the state round-trip."""
+    rb = robot("panda")
+    rng = np.random.default_rng(5)
+    cfg = wpctrl.JointImpedanceControllerConfig(list(ARM), -0.5, 0.5, 10.0, **kw)
+    ctrl = build(rb, cfg, clip_targets="joint_limits")
+    state = rb.random_state(ctrl, rng)
+    ctrl.reset(state)
+    q = state.joint_q.numpy()[ctrl._engine.binding.coord_index[:, :7]]
+    prev = ctrl["arm"].target_qpos.numpy().copy()
+    act = rng.uniform(-1.5, 1.5, (rb.num_envs, 7)).astype(np.float32)
+    ctrl.set_action(act, state)
+    x = act if not cfg.normalize_action else 0.5 * np.clip(act, -1, 1)
+    want = x if not cfg.use_delta else (prev if cfg.use_target else q) + x
+    lo, hi = ctrl._engine.binding.qlimits[:7].T
+    np.testing.assert_allclose(ctrl["arm"].target_qpos.numpy(), np.clip(want, lo, hi), atol=1e-6)
+    state_dict = ctrl.get_state()
+    if cfg.use_target:
+        np.testing.assert_array_equal(state_dict["arm"]["target_qpos"].numpy(), ctrl["arm"].target_qpos.numpy())
+        ctrl.set_state({"arm": {"target_qpos": np.zeros((rb.num_envs, 7), np.float32)}})
+        assert (ctrl["arm"].target_qpos.numpy() == 0).all()
+    else:
+        assert state_dict == {}
+
+
+def test_nan_action_holds_the_env_and_reset_takes_the_measured_pose():
+    """A NaN anywhere in an env's action leaves its target pose and gains alone (counted); a partial reset makes the
+    measured TCP pose the target of the reset env only, and zeroes its torque."""
+    rb = robot("panda")
+    rng = np.random.default_rng(6)
+    ctrl = build(rb, osc_config(rb, impedance_mode="variable_kp", damping=None), actuation="explicit")
+    state = rb.random_state(ctrl, rng)
+    ctrl.reset(state)
+    arm = ctrl["arm"]
+    before = arm.target_pose.numpy().copy(), arm.task_stiffness.numpy().copy()
+    action = rng.uniform(-1, 1, (rb.num_envs, 12)).astype(np.float32)
+    action[1, 9] = np.nan
+    ctrl.set_action(action, state)
+    after = arm.target_pose.numpy(), arm.task_stiffness.numpy()
+    assert ctrl.bad_action_count.numpy().tolist() == [0, 1, 0]
+    for b, a in zip(before, after):
+        np.testing.assert_array_equal(a[1], b[1])
+        assert not np.allclose(a[0], b[0])
+    control = rb.model.control()
+    ctrl.before_simulation_step(state, control)
+    moved = rb.random_state(ctrl, rng)
+    ctrl.reset(moved, env_ids=[2], control=control)
+    measured = arm.fk_jacobian(moved)[0].numpy()
+    np.testing.assert_allclose(arm.target_pose.numpy()[2], measured[2], atol=1e-6)
+    assert not np.allclose(arm.target_pose.numpy()[0], measured[0], atol=1e-3)
+    dof = ctrl._engine.binding.dof_index[:, :7]
+    f = control.joint_f.numpy()[dof]
+    assert (f[2] == 0).all() and (np.abs(f[0]) > 0).any()
+
+
+def test_force_limit_effort_readout_and_delay():
+    """The torque is an effort row's command: clamped to the per-env force limit, read out before / after the
+    clamp (``computed_effort`` / ``applied_effort``, saturations counted), and delayed by ``delay`` substeps."""
+    rb = robot("panda")
+    rng = np.random.default_rng(7)
+    cfg = osc_config(rb, force_limit=5.0)
+    ctrl = build(rb, cfg, actuation="explicit", track_effort=True, delay=2, sim_freq=100, control_freq=20)
+    state = rb.random_state(ctrl, rng)
+    ctrl.reset(state)
+    control = rb.model.control()
+    action = np.ones((rb.num_envs, 6), np.float32)
+    ctrl.set_action(action, state)
+    arm = ctrl["arm"]
+    dof = ctrl._engine.binding.dof_index[:, :7]
+    commanded, applied = [], []
+    for _ in range(4):
+        ctrl.before_simulation_step(state, control)
+        commanded.append(arm.target_effort.numpy().copy())
+        applied.append(control.joint_f.numpy()[dof].copy())
+        state.joint_qd.assign(state.joint_qd.numpy() * 0.5)  # a new state each substep: new torques
+    assert (np.abs(applied[0]) == 0).all() and (np.abs(applied[1]) == 0).all()  # the reset's zero, twice
+    np.testing.assert_allclose(applied[2], np.clip(commanded[0], -5, 5), rtol=1e-6)
+    np.testing.assert_allclose(applied[3], np.clip(commanded[1], -5, 5), rtol=1e-6)
+    assert not np.allclose(commanded[0], commanded[1])
+    np.testing.assert_allclose(arm.computed_effort.numpy(), commanded[1], rtol=1e-6)
+    np.testing.assert_allclose(arm.applied_effort.numpy(), applied[3], rtol=1e-6)
+    assert (arm.saturation_count.numpy() > 0).any() and (np.abs(commanded[1]) > 5).any()
+    # a per-env force limit (set like any row's)
+    ctrl2 = build(rb, osc_config(rb), actuation="explicit")
+    ctrl2["arm"].set_drive_properties(force_limit=np.array([[1.0] * 7, [2.0] * 7, [1e9] * 7]))
+    t = step_torques(ctrl2, state, action)
+    assert np.abs(t[0]).max() <= 1.0 and np.abs(t[1]).max() <= 2.0 and np.abs(t[2]).max() > 2.0
+
+
+def test_randomised_joint_gains_reach_the_torque():
+    """Joint impedance: ``randomize_drive_properties(stiffness=...)`` draws per-env joint stiffness on the device; the
+    torque is Kp (q* − q) − Kd q̇ with the drawn Kp."""
+    rb = robot("panda")
+    rng = np.random.default_rng(8)
+    cfg = wpctrl.JointImpedanceControllerConfig(list(ARM), -0.2, 0.2, 100.0, 0.0, gravity_compensation=False,
+                                                use_delta=True)  # fmt: skip
+    ctrl = build(rb, cfg, actuation="explicit")
+    ctrl["arm"].randomize_drive_properties(stiffness=(0.5, 2.0), seed=3)
+    kp = ctrl["arm"].stiffness.numpy()
+    assert kp.min() >= 50.0 and kp.max() <= 200.0 and kp.std() > 5.0
+    state = rb.random_state(ctrl, rng)
+    t = step_torques(ctrl, state, rng.uniform(-1, 1, (rb.num_envs, 7)).astype(np.float32))
+    q = state.joint_q.numpy()[ctrl._engine.binding.coord_index[:, :7]]
+    np.testing.assert_allclose(t, kp * (ctrl["arm"].target_qpos.numpy() - q), rtol=1e-5, atol=1e-5)
+
+
+def test_cpu_graph_capture_replays_bitwise():
+    """set_action and K substeps of an OSC mode captured in a CPU graph: replaying it gives the eager torques and
+    targets bitwise."""
+    rb = robot("panda")
+    mode = panda_control_modes()["osc_ee_delta_pose"]
+    runs = []
+    for graph in (False, True):
+        ctrl = wpctrl.build_controller(mode, rb.model)
+        state = rb.random_state(ctrl, np.random.default_rng(9))
+        control = rb.model.control()
+        ctrl.reset(state, control=control)
+        action = wp.array(np.random.default_rng(10).uniform(-1, 1, (rb.num_envs, 7)).astype(np.float32))
+
+        def step(ctrl=ctrl, state=state, control=control, action=action):
+            ctrl.set_action(action, state)
+            for _ in range(ctrl.num_substeps):
+                ctrl.before_simulation_step(state, control)
+
+        if graph:
+            with wp.ScopedCapture(device="cpu") as cap:
+                step()
+            ctrl.reset(state, control=control)
+            wp.capture_launch(cap.graph)
+        else:
+            step()
+        runs.append((control.joint_f.numpy().copy(), ctrl["arm"].target_pose.numpy().copy()))
+    for a, b in zip(*runs):
+        np.testing.assert_array_equal(a, b)
+    assert np.abs(runs[0][0]).max() > 1.0
+
+
+def test_singular_configuration_is_finite_and_damped():
+    """Towards the Panda straight up (the rest pose scaled by d → 0: J loses rank, the TCP cannot move vertically):
+    the task torque stays finite with or without damping; undamped (only Newton's pivot floor) it peaks several
+    times over its regular size near the singularity, damped (the default ε = 1e-3) it stays within 20 % of its size
+    at d = 0.01; at regular states the default damping changes nothing (bitwise)."""
+    from wpctrl.robots import PANDA_INITIAL_Q
+
+    rb = robot("panda")
+    rest = np.asarray(PANDA_INITIAL_Q[:7])
+    action = np.random.default_rng(11).uniform(-1, 1, (rb.num_envs, 6)).astype(np.float32)
+    peaks = {}
+    for sd in (0.0, 1e-3):
+        ctrl = build(rb, osc_config(rb, singularity_damping=sd, gravity_compensation=False), actuation="explicit")
+        coord = ctrl._engine.binding.coord_index[:, :7]
+        peak = {}
+        for d in (0.0, 1e-5, 1e-4, 3e-4, 1e-3, 1e-2):
+            state = rb.model.state()
+            q = state.joint_q.numpy()
+            q[coord] = d * rest
+            state.joint_q.assign(q)
+            ctrl.reset(state)
+            t = step_torques(ctrl, state, action)
+            assert np.isfinite(t).all(), (sd, d)
+            peak[d] = np.abs(t).max()
+        regular = rb.random_state(ctrl, np.random.default_rng(12))
+        peaks[sd] = peak, step_torques(ctrl, regular, action)
+    (undamped, reg0), (damped, reg1) = peaks[0.0], peaks[1e-3]
+    assert max(damped.values()) <= 1.2 * damped[1e-2], damped
+    assert max(undamped.values()) > 2.0 * max(damped.values()), (undamped, damped)
+    np.testing.assert_array_equal(reg1, reg0)
+
+
+@pytest.mark.parametrize(
+    "cls, kw, match",
+    [
+        ("osc", dict(stiffness=[1.0, 2.0]), r"Config\.stiffness: expected a scalar or 6 values"),
+        ("osc", dict(stiffness=-1.0), r"OperationalSpaceControllerConfig\.stiffness: expected values >= 0"),
+        ("osc", dict(damping=[1.0] * 7), r"\.damping: expected a scalar or 6 values \(one per task axis"),
+        ("osc", dict(nullspace_stiffness=[1.0] * 6, nullspace_control="position"),
+         r"\.nullspace_stiffness: expected a scalar or 7 values \(one per joint\)"),
+        ("osc", dict(impedance_mode="variable_kd"), r"\.impedance_mode: expected one of"),
+        ("osc", dict(impedance_mode="variable", damping=5.0), r"\.damping: with impedance_mode='variable'"),
+        ("osc", dict(stiffness_limits=(10.0, 1.0)), r"\.stiffness_limits: expected finite 0 <= low <= high"),
+        ("osc", dict(partial_inertial_dynamics_decoupling=True, inertial_dynamics_decoupling=False),
+         r"partial_inertial_dynamics_decoupling: needs inertial_dynamics_decoupling=True"),
+        ("osc", dict(singularity_damping=2.0), r"\.singularity_damping: expected a number in \[0, 1\)"),
+        ("joint", dict(stiffness=[1.0] * 3), r"JointImpedanceControllerConfig\.stiffness: expected a scalar or 7"),
+        ("joint", dict(damping=-2.0), r"JointImpedanceControllerConfig\.damping: expected values >= 0"),
+    ],
+)  # fmt: skip
+def test_config_errors_name_the_field(cls, kw, match):
+    rb = robot("panda")
+    if cls == "osc":
+        cfg = osc_config(rb, **kw)
+    else:
+        cfg = wpctrl.JointImpedanceControllerConfig(list(ARM), -0.1, 0.1, **{"stiffness": 10.0, **kw})
+    with pytest.raises(wpctrl.ConfigError, match=match):
+        build(rb, cfg)
+
+
+def test_build_errors():
+    """The coupled drive would overwrite the impedance torques (refused); a floating base (outside the fused inertia
+    pass) refuses the options that need the mass matrix or the gravity torque, and builds without them."""
+    rb = robot("panda")
+    mode = panda_control_modes()["osc_ee_delta_pose"]
+    with pytest.raises(wpctrl.ConfigError, match=r"explicit_pd: 'coupled' solves every row's drive torque"):
+        wpctrl.build_controller(mode, rb.model, actuation="explicit", explicit_pd="coupled")
+    robot_b = newton.ModelBuilder()
+    robot_b.add_urdf(str(PANDA_URDF), collapse_fixed_joints=True, floating=True)
+    b = newton.ModelBuilder()
+    b.replicate(robot_b, 2)
+    floating = b.finalize(device="cpu")
+    cfg = wpctrl.OperationalSpaceControllerConfig(list(ARM), ee_link="panda_hand_tcp", urdf_path=str(PANDA_URDF))
+    with pytest.raises(wpctrl.ConfigError, match=r"joint_names: inertial decoupling needs the mass matrix"):
+        wpctrl.build_controller({"arm": cfg, "balance_passive_force": False}, floating)
+    cfg.inertial_dynamics_decoupling = False
+    with pytest.raises(wpctrl.ConfigError, match=r"joint_names: gravity compensation needs the mass matrix"):
+        wpctrl.build_controller({"arm": cfg, "balance_passive_force": False}, floating)
+    cfg.gravity_compensation = False
+    ctrl = wpctrl.build_controller({"arm": cfg, "balance_passive_force": False}, floating, actuation="explicit")
+    assert np.isfinite(step_torques(ctrl, floating.state(), np.zeros((2, 6), np.float32))).all()

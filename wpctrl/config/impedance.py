@@ -239,7 +239,12 @@ def _axes(c, f: str, value, n: int, what: str, *, allow_none=False, positive=Fal
 def _limits(c, f: str) -> tuple[float, float]:
     v = getattr(c, f)
     try:
-        lo, hi = (float(x) for x in v)
+        items = list(v)
+        if len(items) != 2 or not all(isinstance(x, (int, float, np.integer, np.floating)) for x in items):
+            raise TypeError(v)
+        if any(isinstance(x, (bool, np.bool_)) for x in items):
+            raise TypeError(v)
+        lo, hi = (float(x) for x in items)
     except (TypeError, ValueError) as e:
         raise ConfigError(f"{_name(c)}.{f}: expected a (low, high) pair of numbers, got {v!r}") from e
     if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo <= hi):
@@ -253,6 +258,11 @@ def _gains(c, n: int, what: str, kp_field: str, kd_field: str, ratio_field: str)
     ratio = _axes(c, ratio_field, getattr(c, ratio_field), n, what, nonneg=True)
     kd_value = getattr(c, kd_field)
     kd = 2.0 * ratio * np.sqrt(kp) if kd_value is None else _axes(c, kd_field, kd_value, n, what, nonneg=True)
+    if not np.isfinite(kd.astype(np.float32)).all():
+        raise ConfigError(
+            f"{_name(c)}.{ratio_field}: the damping 2 {ratio_field} √{kp_field} overflows float32 "
+            f"({ratio_field}={getattr(c, ratio_field)!r}, {kp_field}={getattr(c, kp_field)!r})"
+        )
     return kp, kd, ratio
 
 

@@ -23,6 +23,9 @@ PANDA_MODES = (
     "pd_ee_pose",
     "pd_ee_target_delta_pos",
     "pd_ee_target_delta_pose",
+    "osc_ee_delta_pose",
+    "osc_ee_pose",
+    "joint_impedance_delta_pos",
 )
 """wpctrl.robots.PANDA_CONTROL_MODES' names, spelled out so that --help and argument errors need no heavy import
 (a test keeps the two equal)."""

@@ -24,10 +24,10 @@ and the fused inertia pass (:func:`wpctrl.kernels.inertia.chain_hg_func`: the ar
 Joint impedance: ``τ = [M] (Kp (q* − q) − Kd q̇) + g``. Option flags (decoupling, gravity, null space) are kernel
 arguments, uniform over all threads: one compiled kernel per robot serves every option.
 
-Task-space solves (``Λ⁻¹ x = b``, ``J Jᵀ x = b``) are Jacobi-scaled (``S = D A D``, unit diagonal) and factored;
-where the smallest pivot ``p`` of ``S`` is below ``ε`` (``singularity_damping``), ``ε (1 − p/ε)²`` is added to the
-diagonal of ``S`` and it is factored again: zero away from singularities, continuous, and bounded at a singularity
-(pivots are also floored as Newton's at 1.2e-7).
+Task-space solves (``Λ⁻¹ x = b``, ``J Jᵀ x = b``) are scaled (``S = D A D``, each 3×3 block of translation and
+rotation divided by its mean diagonal) and factored; where the smallest pivot ``p`` of ``S`` is below ``ε``
+(``singularity_damping``), ``ε (1 − p/ε)²`` is added to the diagonal of ``S`` and it is factored again: zero away
+from singularities, continuous, and bounded at a singularity (pivots are also floored as Newton's at 1.2e-7).
 """
 
 from __future__ import annotations
@@ -50,9 +50,12 @@ _factor6, _solve6, _, _ = cholesky_funcs(6, (0, 1, 2, 3, 4, 5))
 @wp.func
 def _task_solve(A: Mat6d, b: Vec6d, eps: wp.float64):
     """``A⁻¹ b`` for the SPD task matrix ``A`` (Jacobi-scaled, damped near a singularity: see the module docstring)."""
-    d = Vec6d()
-    for i in range(6):
-        d[i] = wp.float64(1.0) / wp.sqrt(wp.max(A[i, i], wp.float64(1.0e-300)))
+    # Each block (translation, rotation) scaled by its mean diagonal: unit-free, and a vanishing task direction (a
+    # row of J near zero) shows as a small pivot.
+    tiny = wp.float64(1.0e-300)
+    sv = wp.float64(1.0) / wp.sqrt(wp.max((A[0, 0] + A[1, 1] + A[2, 2]) / wp.float64(3.0), tiny))
+    sw = wp.float64(1.0) / wp.sqrt(wp.max((A[3, 3] + A[4, 4] + A[5, 5]) / wp.float64(3.0), tiny))
+    d = Vec6d(sv, sv, sv, sw, sw, sw)
     S = Mat6d()
     for i in range(6):
         for j in range(6):

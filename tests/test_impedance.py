@@ -603,3 +603,34 @@ def test_build_errors():
     cfg.gravity_compensation = False
     ctrl = wpctrl.build_controller({"arm": cfg, "balance_passive_force": False}, floating, actuation="explicit")
     assert np.isfinite(step_torques(ctrl, floating.state(), np.zeros((2, 6), np.float32))).all()
+
+
+def test_balance_passive_force_leaves_gravity_to_the_solver():
+    """With ``balance_passive_force`` on (ManiSkill's default), the solver takes gravity off the robot's links, so the
+    controllers add no gravity torque (zero gains: zero torque); off, the torque is g(q)."""
+    rb = robot("panda")
+    cfg = wpctrl.JointImpedanceControllerConfig(list(ARM), -0.1, 0.1, 0.0, 0.0, use_delta=True)
+    state = rb.random_state(build(rb, cfg), np.random.default_rng(13))
+    zero = np.zeros((rb.num_envs, 7), np.float32)
+    on = step_torques(wpctrl.build_controller({"arm": cfg}, rb.model, actuation="explicit"), state, zero)
+    off = step_torques(build(rb, cfg, actuation="explicit"), state, zero)
+    assert (on == 0).all() and np.abs(off).max() > 5.0
+
+
+def test_fixed_nullspace_target_is_the_posture():
+    """``nullspace_target`` fixes the posture (else each env's reset pose): the OSC torque equals the one of a
+    controller whose reset-pose posture is set to the same joint positions."""
+    rb = robot("panda")
+    rng = np.random.default_rng(14)
+    posture = rng.uniform(-0.2, 0.2, 7) + np.asarray(rb.model.joint_q.numpy()[:7])
+    fixed = build(rb, osc_config(rb, nullspace_control="position", nullspace_target=posture), actuation="explicit")
+    free = build(rb, osc_config(rb, nullspace_control="position"), actuation="explicit")
+    state = rb.random_state(fixed, rng)
+    fixed.reset(state)
+    free.reset(state)
+    free["arm"].target_qpos.assign(np.tile(posture, (rb.num_envs, 1)).astype(np.float32))
+    action = rng.uniform(-1, 1, (rb.num_envs, 6)).astype(np.float32)
+    a, b = step_torques(fixed, state, action), step_torques(free, state, action)
+    np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-5)
+    free["arm"].target_qpos.assign(np.tile(posture + 0.3, (rb.num_envs, 1)).astype(np.float32))
+    assert np.abs(step_torques(free, state, action) - a).max() > 0.1

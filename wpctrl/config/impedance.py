@@ -24,7 +24,8 @@ import numpy as np
 
 from . import rows as cfg
 from .ee import FRAME_BODY_ROT, FRAME_BODY_TRANS, MAX_EE_DOF, POSE_FRAMES
-from .joint import ConfigError, ControllerConfig
+from .errors import ConfigError
+from .joint import ControllerConfig
 
 IMPEDANCE_MODES = ("fixed", "variable_kp", "variable")
 NULLSPACE_MODES = ("none", "position")

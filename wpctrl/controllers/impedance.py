@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import warp as wp
 
-from .base import JointEffortController
 from .ee import PDEEPosController
+from .joint import JointEffortController
 
 
 class JointImpedanceController(JointEffortController):

@@ -70,10 +70,10 @@ def h_only(chain_hg_no_gravity):
 
 
 def unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool):
-    """The fused inertia function with the articulation's structure as compile-time constants (same signature and
-    result as :func:`chain_funcs`' runtime-loop version; the chain tables passed to it are not read), the function
-    of H alone it is built on (``chain_h``, same arguments: H with the armature, lower triangle), and ``chain_hg``
-    (the same arguments and the gravity vector [m/s^2] in the world frame, last: H and the gravity force
+    """The fused inertia function with the articulation's structure as compile-time constants (same signature and result
+    as :func:`~wpctrl.kernels.inertia.chain_funcs`' runtime-loop version; the chain tables passed to it are not read),
+    the function of H alone it is built on (``chain_h``, same arguments: H with the armature, lower triangle), and
+    ``chain_hg`` (the same arguments and the gravity vector [m/s^2] in the world frame, last: H and the gravity force
     ``g(q) = dU/dq`` [N·m or N] of every DOF, the generalized force that holds the articulation against gravity,
     accumulated in the same pass over the bodies).
 

@@ -22,8 +22,8 @@ from ...kernels import impedance as KI
 from ...kernels import inertia as KIN
 from ...kernels.dims import PER_ENV_BLOCK_DIM
 from ..launch import _Launch
-from . import Part
 from .ee import EEPart
+from .part import Part
 
 _FUSED_ARGS = (
     "chain_type", "chain_parent", "chain_dof", "chain_anc", "row_dof", "env_joint_base", "env_dof_base", "joint_child",

@@ -105,7 +105,7 @@ class _Unit:
 
     def gain_arrays(self) -> tuple[wp.array, wp.array, int]:
         """Where the variable gains go: ``(kp, kd, first column)``."""
-        drive = self.engine.part("drive")
+        drive = self.engine.part("drive_properties")
         return drive.kp, drive.kd, self.row0
 
     # -- stages ---------------------------------------------------------------------------------------------------
@@ -161,7 +161,7 @@ class _Unit:
     def torques(self, state) -> None:
         eng, s = self.engine, self.spec
         if self._torque is None:
-            drive = eng.part("drive")
+            drive = eng.part("drive_properties")
             fused = self.fused
             params = self.chain_params()
             if fused is not None:

@@ -114,7 +114,7 @@ MUTATIONS: list[Mutation] = [
     ),
     M(
         "accel_model_kd_from_kp",
-        "wpctrl/kernels/pd.py",
+        "wpctrl/engine/parts/response.py",
         "joint_target_kd_out[di] = kd[_bidx(kd.shape[0], env), r] / resp",
         "joint_target_kd_out[di] = kp[_bidx(kp.shape[0], env), r] / resp",
         "implicit acceleration drive writes Kp/r as the solver's damping",
@@ -131,7 +131,7 @@ MUTATIONS: list[Mutation] = [
     # -- the coupled drive ------------------------------------------------------------------------------------------
     M(
         "coupled_clamp_never_released",
-        "wpctrl/kernels/drive.py",
+        "wpctrl/kernels/coupled_drive.py",
         "if (s == 1 and w < lim[r]) or (s == -1 and w > -lim[r]):",
         "if (s == 3 and w < lim[r]) or (s == -3 and w > -lim[r]):",
         "the coupled solve never releases a clamped row",
@@ -139,7 +139,7 @@ MUTATIONS: list[Mutation] = [
     ),
     M(
         "coupled_d_without_dt2_kp",
-        "wpctrl/kernels/drive.py",
+        "wpctrl/kernels/coupled_drive.py",
         "d[r] = h * kde + h * h * kpe",
         "d[r] = h * kde",
         "the coupled drive's D = dt Kd + dt^2 Kp loses its Kp term",
@@ -147,7 +147,7 @@ MUTATIONS: list[Mutation] = [
     ),
     M(
         "coupled_h_recovery_keeps_d",
-        "wpctrl/kernels/drive.py",
+        "wpctrl/kernels/coupled_drive.py",
         "L[wp.static(ROWD[r]), wp.static(ROWD[r])] = L[wp.static(ROWD[r]), wp.static(ROWD[r])] - dprev[r]",
         "L[wp.static(ROWD[r]), wp.static(ROWD[r])] = L[wp.static(ROWD[r]), wp.static(ROWD[r])]",
         "a later active-set iteration of the coupled drive keeps the last free rows' D inside H",
@@ -155,7 +155,7 @@ MUTATIONS: list[Mutation] = [
     ),
     M(
         "coupled_fallback_on_the_factor",
-        "wpctrl/kernels/drive.py",
+        "wpctrl/kernels/coupled_drive.py",
         "A = inverse_block(recover(H, dprev))",
         "A = inverse_block(H)",
         "the coupled drive's fallback sweeps build A from the last factor instead of H",
@@ -374,15 +374,15 @@ MUTATIONS: list[Mutation] = [
     # -- randomness -------------------------------------------------------------------------------------------------
     M(
         "randomize_ignores_seed",
-        "wpctrl/controllers/actuation.py",
-        'eng.part("drive").randomize(eng, lo, hi, enabled, mode == "abs", int(seed),',
-        'eng.part("drive").randomize(eng, lo, hi, enabled, mode == "abs", 0,',
+        "wpctrl/controllers/drive_properties.py",
+        'drive.randomize(eng, lo, hi, enabled, mode == "abs", int(seed),',
+        'drive.randomize(eng, lo, hi, enabled, mode == "abs", 0,',
         "randomize_drive_properties ignores its seed",
         ("tests/test_actuation.py",),
     ),
     M(
         "randomize_same_draw_every_env",
-        "wpctrl/kernels/actuation.py",
+        "wpctrl/engine/parts/drive_properties.py",
         "state = wp.rand_init(key, env * kp_out.shape[1] + r)",
         "state = wp.rand_init(key, r)",
         "randomize_drive_properties draws the same values for every env",
@@ -415,7 +415,7 @@ MUTATIONS: list[Mutation] = [
     ),
     M(
         "set_state_keeps_control",
-        "wpctrl/controllers/base.py",
+        "wpctrl/controllers/base_controller.py",
         "        eng.forget_control()  # the Control's drive targets are now stale: the next substep rewrites them\n",
         "",
         "set_state leaves the known Control's stale drive targets",

@@ -12,19 +12,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .actuators import ACT_NET, actuator_rows
-from .base import PDBaseForwardVelControllerConfig, PDBaseVelControllerConfig
+from .actuator_models import ACT_NET, actuator_rows
+from .errors import ConfigError, MimicJointError
 from .joint import (
-    ConfigError,
     ControllerConfig,
     JointEffortControllerConfig,
-    MimicJointError,
     PassiveControllerConfig,
     PDJointPosControllerConfig,
     PDJointPosMimicControllerConfig,
     PDJointPosVelControllerConfig,
     PDJointVelControllerConfig,
 )
+from .mobile_base import PDBaseForwardVelControllerConfig, PDBaseVelControllerConfig
 from .validate import (  # noqa: F401  (_f32, _joint_names: used by the EE config and the controller layer)
     _bounds,
     _check_box,
@@ -95,7 +94,7 @@ class Rows:
     base_axis: np.ndarray | None = None  # int32: 0 x, 1 y, -1 none
     bx_col: np.ndarray | None = None  # int32 action column of vx (-1: 0)
     by_col: np.ndarray | None = None  # int32 action column of vy (-1: 0, the forward-only base)
-    # Actuator models and action smoothing (wpctrl.config.actuators): per-row model code and parameters, and the
+    # Actuator models and action smoothing (wpctrl.config.actuator_models): per-row model code and parameters, and the
     # models that carry more than numbers (position tables, networks) as (first row, rows, what).
     act_model: np.ndarray | None = None  # int32, ACT_* (0: the plain clamp to force_limit)
     sat_effort: np.ndarray | None = None  # float32 [N·m or N], DC-motor stall effort (inf: none)

@@ -1,16 +1,23 @@
 """Validation helpers of the config layer: per-joint broadcasting, bounds, joint names, drive modes, mimic maps.
 
-Every error is a :class:`~wpctrl.config.ConfigError` naming the config class, the field and the expected vs. received
-value. Host only.
+Every error is a :class:`~wpctrl.config.errors.ConfigError` naming the config class, the field and the expected vs.
+received value. Host only.
 """
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Mapping, Sequence
+from typing import Literal, get_args
 
 import numpy as np
 
-from .joint import _DRIVE_MODES, ConfigError, logger
+from .errors import ConfigError
+
+logger = logging.getLogger("wpctrl")
+
+DriveMode = Literal["force", "acceleration"]
+_DRIVE_MODES = get_args(DriveMode)
 
 
 def _name(config) -> str:

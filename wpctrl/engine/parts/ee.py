@@ -25,11 +25,11 @@ import warp as wp
 
 from ...config import ConfigError
 from ...config.ee import MAX_EE_DOF, EESpec
-from ...kernels import ee as KE
+from ...kernels import ee as ee_kernels
 from ...kernels.dims import PER_ENV_BLOCK_DIM
 from ..hostmath import qmul, rpy_quat
 from ..launch import _Launch
-from . import Part
+from .part import Part
 
 logger = logging.getLogger("wpctrl")
 
@@ -368,7 +368,7 @@ class EEPart:
                     "ik_success_out": self.ik_success,
                 }
             )
-            kernel = KE._ee_clik_kernel if s.iterations > 1 else KE._ee_set_action_kernel
+            kernel = ee_kernels._ee_clik_kernel if s.iterations > 1 else ee_kernels._ee_set_action_kernel
             self._launch = _Launch(kernel, eng.num_envs, params, eng.device, block_dim=PER_ENV_BLOCK_DIM)
         self._launch.bind("action_in", action)
         self._launch.bind("joint_q_in", state.joint_q)
@@ -381,7 +381,7 @@ class EEPart:
             return
         p = self._chain_params
         wp.launch(
-            KE._ee_reset_kernel,
+            ee_kernels._ee_reset_kernel,
             dim=dim,
             inputs=[
                 *p.values(),
@@ -405,7 +405,7 @@ class EEPart:
         pose = wp.zeros((eng.num_envs, 7), dtype=wp.float32, device=eng.device)
         jac = wp.zeros((eng.num_envs, 6, self.num_dof), dtype=wp.float32, device=eng.device)
         wp.launch(
-            KE._ee_fk_jacobian_kernel,
+            ee_kernels._ee_fk_jacobian_kernel,
             dim=eng.num_envs,
             inputs=[*self._chain_params.values(), self.row_q_off, eng.env_q_base, self.num_dof, joint_q, pose, jac],
             device=eng.device,

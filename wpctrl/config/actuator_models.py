@@ -20,6 +20,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Literal, Union
 
+import numpy as np
+
+from .errors import ConfigError
+from .validate import _name, _per_joint
+
 Number = Union[float, Sequence[float]]
 
 
@@ -97,11 +102,6 @@ def actuator_rows(config, n: int) -> dict:
     Returns ``{"act_model", "sat_effort", "vel_limit", "ema_alpha", "extras"}``: per-row int32 / float32 arrays, and
     ``extras`` as ``[(first row, rows, actuator)]`` for models that carry more than per-row numbers (tables, nets).
     """
-    import numpy as np
-
-    from .joint import ConfigError
-    from .validate import _name, _per_joint
-
     act = getattr(config, "actuator", None)
     out = {
         "act_model": np.zeros(n, np.int32),

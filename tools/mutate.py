@@ -440,7 +440,7 @@ MUTATIONS: list[Mutation] = [
     ),
     M(
         "dc_lower_bound_sign",
-        "wpctrl/kernels/actuators.py",
+        "wpctrl/kernels/actuator_models.py",
         "lo = wp.clamp(sat * (-1.0 - s), -lim, lim)",
         "lo = wp.clamp(sat * (-1.0 + s), -lim, lim)",
         "DCMotor: the lower envelope falls with the speed instead of rising",
@@ -448,7 +448,7 @@ MUTATIONS: list[Mutation] = [
     ),
     M(
         "dc_envelope_past_force_limit",
-        "wpctrl/kernels/actuators.py",
+        "wpctrl/kernels/actuator_models.py",
         "hi = wp.clamp(sat * (1.0 - s), -lim, lim)",
         "hi = sat * (1.0 - s)",
         "DCMotor: the upper envelope is not capped by force_limit",
@@ -480,7 +480,7 @@ MUTATIONS: list[Mutation] = [
     ),
     M(
         "ema_zero_accepted",
-        "wpctrl/config/actuators.py",
+        "wpctrl/config/actuator_models.py",
         "not (0.0 < float(ema) <= 1.0)",
         "not (0.0 <= float(ema) <= 1.0)",
         "ema=0 (targets that never move) is accepted",
@@ -488,7 +488,7 @@ MUTATIONS: list[Mutation] = [
     ),
     M(
         "ema_one_refused",
-        "wpctrl/config/actuators.py",
+        "wpctrl/config/actuator_models.py",
         "not (0.0 < float(ema) <= 1.0)",
         "not (0.0 < float(ema) < 1.0)",
         "ema=1 (no smoothing, the boundary inside the range) is refused",
@@ -504,7 +504,7 @@ MUTATIONS: list[Mutation] = [
     ),
     M(
         "table_decreasing_positions_accepted",
-        "wpctrl/config/actuators.py",
+        "wpctrl/config/actuator_models.py",
         "(np.diff(pos) < 0).any()",
         "(np.diff(pos) < -1e-3).any()",
         "PositionBasedEffortLimit: slightly decreasing positions are accepted",
@@ -512,7 +512,7 @@ MUTATIONS: list[Mutation] = [
     ),
     M(
         "dc_velocity_limit_zero_accepted",
-        "wpctrl/config/actuators.py",
+        "wpctrl/config/actuator_models.py",
         "if (v <= 0).any():",
         "if (v < 0).any():",
         "DCMotor / ActuatorNet: velocity_limit=0 (a division by zero) is accepted",
@@ -520,7 +520,7 @@ MUTATIONS: list[Mutation] = [
     ),
     M(
         "net_input_idx_64_accepted",
-        "wpctrl/config/actuators.py",
+        "wpctrl/config/actuator_models.py",
         "not 0 <= i <= 63",
         "not 0 <= i <= 64",
         "ActuatorNet: a history tap of 64 substeps (past the kernel's bound) is accepted",
@@ -561,7 +561,7 @@ MUTATIONS: list[Mutation] = [
     ),
     M(
         "net_input_order_ignored",
-        "wpctrl/engine/parts/actuators.py",
+        "wpctrl/engine/parts/actuator_models.py",
         'pos_first=spec.input_order == "pos_vel"',
         "pos_first=True",
         'ActuatorNet(input_order="vel_pos") feeds the position errors first',
@@ -594,7 +594,7 @@ MUTATIONS: list[Mutation] = [
     M(
         "net_without_dc_envelope",
         "wpctrl/kernels/actuator_net.py",
-        "f = _act.dc_motor_clamp(u, qd, sat, vl, lim)",
+        "f = dc_motor_clamp(u, qd, sat, vl, lim)",
         "f = wp.clamp(u, -lim, lim)",
         "an actuator network's output skips its DC-motor envelope (saturation_effort / velocity_limit)",
         ("tests/test_actuator_setups.py", "tests/test_actuator_net.py"),

@@ -7,6 +7,7 @@ then the options (variable impedance, targets, null-space posture, singular conf
 
 from __future__ import annotations
 
+import copy
 import itertools
 
 import newton
@@ -634,3 +635,42 @@ def test_fixed_nullspace_target_is_the_posture():
     np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-5)
     free["arm"].target_qpos.assign(np.tile(posture + 0.3, (rb.num_envs, 1)).astype(np.float32))
     assert np.abs(step_torques(free, state, action) - a).max() > 0.1
+
+
+@pytest.mark.parametrize("how", ["spacing", "turned"])
+def test_envs_placed_apart_and_turned_get_the_torques_of_envs_at_the_origin(how):
+    """Pandas replicated apart or placed and turned about z (gravity along the world's z, so the same in every base
+    frame): the OSC torques (decoupling, gravity, null space) of each env equal those of the same joint state at the
+    origin; every pose is in the env's own base frame."""
+    from wpctrl.robots import panda
+
+    E = 3
+    builder = newton.ModelBuilder()
+    if how == "spacing":
+        builder.replicate(panda(), E, spacing=(2.0, -1.0, 0.5))
+    else:
+        xf = [wp.transform(wp.vec3(1.5 * e, -2.0 * e, 0.25 * e), wp.quat_from_axis_angle(wp.vec3(0, 0, 1), 0.8 * e))
+              for e in range(E)]  # fmt: skip
+        builder.replicate(panda(), E, xforms=xf)
+    placed = builder.finalize(device="cpu")
+    origin = build_panda(E)
+    rng = np.random.default_rng(15)
+    mode = panda_control_modes()["osc_ee_delta_pose"]
+    mode["balance_passive_force"] = False
+    action = rng.uniform(-1, 1, (E, 7)).astype(np.float32)
+    dq = rng.uniform(-0.3, 0.3, (E, 7)).astype(np.float32)
+    dqd = rng.uniform(-0.5, 0.5, (E, 7)).astype(np.float32)
+    out = []
+    for model in (placed, origin):
+        ctrl = wpctrl.build_controller(copy.deepcopy(mode), model, actuation="explicit")
+        state = model.state()
+        b = ctrl._engine.binding
+        q, qd = state.joint_q.numpy(), state.joint_qd.numpy()
+        q[b.coord_index[:, :7]] += dq
+        qd[b.dof_index[:, :7]] = dqd
+        state.joint_q.assign(q)
+        state.joint_qd.assign(qd)
+        ctrl.reset(state)
+        out.append((step_torques(ctrl, state, action)[:, :7], ctrl["arm"].target_pose.numpy()))
+    np.testing.assert_allclose(out[0][0], out[1][0], rtol=0, atol=1e-4 * np.abs(out[1][0]).max())
+    np.testing.assert_allclose(out[0][1], out[1][1], atol=2e-6)

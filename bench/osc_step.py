@@ -282,7 +282,7 @@ def main(argv=None):
                 flush=True,
             )
         rows += got
-    finish_run(args, device, meta, rows, t_start, "osc_step", lambda: markdown(meta, rows))
+        finish_run(args, device, meta, rows, t_start, "osc_step", lambda r=rows: markdown(meta, r))  # every size
 
 
 if __name__ == "__main__":

@@ -395,7 +395,9 @@ def test_joint_impedance_targets(kw):
     state = rb.random_state(ctrl, rng)
     ctrl.reset(state)
     q = state.joint_q.numpy()[ctrl._engine.binding.coord_index[:, :7]]
+    ctrl.set_action(rng.uniform(-1, 1, (rb.num_envs, 7)).astype(np.float32), state)  # a first target, off q
     prev = ctrl["arm"].target_qpos.numpy().copy()
+    assert not np.allclose(prev, q)
     act = rng.uniform(-1.5, 1.5, (rb.num_envs, 7)).astype(np.float32)
     ctrl.set_action(act, state)
     x = act if not cfg.normalize_action else 0.5 * np.clip(act, -1, 1)

@@ -676,3 +676,35 @@ def test_envs_placed_apart_and_turned_get_the_torques_of_envs_at_the_origin(how)
         out.append((step_torques(ctrl, state, action)[:, :7], ctrl["arm"].target_pose.numpy()))
     np.testing.assert_allclose(out[0][0], out[1][0], rtol=0, atol=1e-4 * np.abs(out[1][0]).max())
     np.testing.assert_allclose(out[0][1], out[1][1], atol=2e-6)
+
+
+def test_randomised_task_gains():
+    """``randomize_task_impedance``: per env and axis inside the range ("abs") or the config's value times it
+    ("scale", (1, 1): bit-identical), only the selected envs, new values on every call and on every replay of a
+    captured graph, and the torque follows the drawn gains."""
+    rb = robot("panda")
+    ctrl = build(rb, osc_config(rb), actuation="explicit")
+    arm = ctrl["arm"]
+    arm.randomize_task_impedance(stiffness=(50.0, 150.0), damping=(5.0, 10.0), mode="abs", seed=1)
+    kp, kd = arm.task_stiffness.numpy().copy(), arm.task_damping.numpy().copy()
+    assert kp.min() >= 50 and kp.max() <= 150 and kd.min() >= 5 and kd.max() <= 10 and kp.std() > 5
+    arm.randomize_task_impedance(stiffness=(1.0, 1.0), mode="scale", env_ids=[1])
+    np.testing.assert_array_equal(arm.task_stiffness.numpy()[1], KP.astype(np.float32))
+    np.testing.assert_array_equal(arm.task_stiffness.numpy()[[0, 2]], kp[[0, 2]])
+    np.testing.assert_array_equal(arm.task_damping.numpy(), kd)
+    with wp.ScopedCapture(device="cpu") as cap:
+        arm.randomize_task_impedance(stiffness=(0.5, 2.0), seed=2)
+    draws = []
+    for _ in range(2):
+        wp.capture_launch(cap.graph)
+        draws.append(arm.task_stiffness.numpy().copy())
+    assert not np.allclose(draws[0], draws[1]) and (draws[1] >= 0.5 * KP - 1e-3).all()
+    state = rb.random_state(ctrl, np.random.default_rng(16))
+    action = np.zeros((rb.num_envs, 6), np.float32)
+    drawn = step_torques(ctrl, state, action)
+    fixed = build(rb, osc_config(rb), actuation="explicit")
+    fixed["arm"].task_stiffness.assign(arm.task_stiffness.numpy())
+    fixed["arm"].task_damping.assign(arm.task_damping.numpy())
+    np.testing.assert_allclose(step_torques(fixed, state, action), drawn, rtol=1e-6, atol=1e-5)
+    with pytest.raises(ValueError, match=r"randomize_task_impedance\.stiffness: expected finite 0 <= lo <= hi"):
+        arm.randomize_task_impedance(stiffness=(2.0, 1.0))

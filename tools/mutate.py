@@ -519,6 +519,14 @@ MUTATIONS: list[Mutation] = [
         ("tests/test_impedance.py",),
     ),
     M(
+        "osc_task_gain_scale_ignores_the_config",
+        "wpctrl/kernels/impedance.py",
+        "                x = nominal_in[p, k] * x\n",
+        "                x = x\n",
+        "randomize_task_impedance's 'scale' mode draws the factor itself, not the config's gain times it",
+        ("tests/test_impedance.py",),
+    ),
+    M(
         "fused_gravity_composite_sign",
         "wpctrl/kernels/inertia_unrolled.py",
         "G[i] = G[i] - wp.dot(gv, pl)",

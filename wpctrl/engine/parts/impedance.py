@@ -21,6 +21,7 @@ from ...config.impedance import DECOUPLE_NONE, MODE_FIXED, ImpedanceSpec
 from ...kernels import impedance as KI
 from ...kernels import inertia as KIN
 from ...kernels.dims import PER_ENV_BLOCK_DIM
+from ...kernels.env_selection import _bump_counter_kernel
 from ..launch import _Launch
 from .ee import EEPart
 from .part import Part
@@ -224,6 +225,33 @@ class _OSCUnit(_Unit, EEPart):
 
     def set_action(self, action: wp.array, state) -> None:
         _Unit.set_action(self, action, state)
+
+    def randomize_task(self, lo, hi, enabled, mode_abs: bool, seed: int, env_ids, env_mask) -> None:
+        """Draw the task gains of the selected envs on the device (two launches: the draw, the counter bump)."""
+        eng = self.engine
+        dim = (eng.num_envs if env_ids is None else env_ids.shape[0]) * 6
+        if dim == 0:
+            return
+        nominal = wp.array(np.stack([self.spec.stiffness, self.spec.damping]), dtype=wp.float32, device=eng.device)
+        wp.launch(
+            KI._randomize_task_gains_kernel,
+            dim=dim,
+            inputs=[
+                int(seed),
+                int(mode_abs),
+                wp.vec2i(*enabled),
+                wp.vec2(*lo),
+                wp.vec2(*hi),
+                env_ids,
+                env_mask,
+                nominal,
+                eng.core.rng_counter,
+                self.task_stiffness,
+                self.task_damping,
+            ],  # fmt: skip
+            device=eng.device,
+        )
+        wp.launch(_bump_counter_kernel, dim=1, inputs=[eng.core.rng_counter], device=eng.device)
 
     def reset(self, state, env_ids, env_mask) -> None:
         """The measured EE pose becomes the target pose of the reset envs."""

@@ -155,3 +155,21 @@ def test_collapsed_fixed_joints_under_ee_control_in_placed_envs(mode_name):
         out.append((pose0, ctrl["arm"].target_pose.numpy().copy(), ctrl["arm"].target_qpos.numpy().copy()))
     for got, want in zip(out[0], out[1]):
         np.testing.assert_allclose(got, want, atol=5e-5)
+
+
+def test_collapsing_merges_the_fixed_links():
+    """``collapse_fixed_joints=True`` merges the links hung on fixed joints into their parents (ManiSkill's Panda:
+    panda_link0 into the world, link8, the hand and the TCP into link7, the finger pads into the fingers); the
+    moving joints stay, and the merged robot keeps the mass of every link but the base's."""
+    full = load_robot("panda").builder
+    merged = load_robot("panda", collapse_fixed_joints=True).builder
+    names = {lb.rsplit("/", 1)[-1] for lb in merged.body_label}
+    assert {"panda_link0", "panda_hand", "panda_hand_tcp", "panda_link8"}.isdisjoint(names)
+    assert {f"panda_link{i}" for i in range(1, 8)} <= names
+    assert merged.body_count < full.body_count
+    moving = lambda b: sorted(  # noqa: E731
+        lb.rsplit("/", 1)[-1] for lb, t in zip(b.joint_label, b.joint_type) if t != newton.JointType.FIXED
+    )
+    assert moving(merged) == moving(full)
+    base = [m for lb, m in zip(full.body_label, full.body_mass) if lb.endswith("/panda_link0")]
+    assert sum(merged.body_mass) == pytest.approx(sum(full.body_mass) - sum(base), rel=1e-6)  # link0 went to the world

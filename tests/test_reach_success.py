@@ -79,3 +79,36 @@ def test_evaluation_of_scripted_policies(mask, rate):
     out = evaluate(env, _Scripted(env, mask), episodes=8)
     assert out["episodes"] == 8
     assert out["success_rate"] == pytest.approx(rate)
+
+
+def test_resets_draw_start_poses_and_goals_from_the_seed_over_their_whole_ranges():
+    """Each reset draws the arm's start pose within ``start_noise`` of the rest pose (spread over that range, the
+    fingers exact) and the goal uniformly in the goal box (spread over it); another seed draws other values, the same
+    seed the same ones; ``start_noise=0`` starts exactly at the rest pose."""
+    from wpctrl.train.reach import GOAL_HI, GOAL_LO
+
+    def draws(seed, noise, resets=6):
+        env = ReachEnv(16, device="cpu", seed=seed, start_noise=noise)
+        q, g = [], []
+        for _ in range(resets):
+            env.reset()
+            q.append(env.state.joint_q.numpy().reshape(16, -1)[:, : env.dofs].copy())
+            g.append(env.goal.numpy().copy())
+        return env, np.concatenate(q), np.concatenate(g)
+
+    env, q, g = draws(4, 0.2)
+    dev = q - env.start_q.numpy()
+    assert np.abs(dev[:, :7]).max() <= 0.2 + 1e-6 and np.abs(dev[:, :7]).max() > 0.18
+    assert dev[:, :7].min() < -0.18  # both signs: uniform in [-noise, noise]
+    np.testing.assert_array_equal(dev[:, 7:], 0.0)
+    lo, hi = np.array(GOAL_LO), np.array(GOAL_HI)
+    assert ((g >= lo - 1e-6) & (g <= hi + 1e-6)).all()
+    span = hi - lo
+    assert (g.min(axis=0) < lo + 0.1 * span).all() and (g.max(axis=0) > hi - 0.1 * span).all()
+    _, q_same, g_same = draws(4, 0.2)
+    np.testing.assert_array_equal(g_same, g)
+    np.testing.assert_array_equal(q_same, q)
+    _, q_other, g_other = draws(5, 0.2)
+    assert np.abs(g_other - g).max() > 0.05 and np.abs(q_other - q).max() > 0.05
+    env0, q0, _ = draws(4, 0.0, resets=1)
+    np.testing.assert_array_equal(q0, np.tile(env0.start_q.numpy(), (16, 1)))

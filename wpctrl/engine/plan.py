@@ -17,6 +17,7 @@ from ..config import ConfigError
 from ..config import rows as cfg
 from ..config.actuator_models import ACT_DC_MOTOR, ACT_NET, ACT_NONE, ACT_POSITION_LIMIT
 from ..config.ee import EESpec
+from ..config.impedance import ImpedanceSpec
 from ..config.options import Actuation, ControllerOptions, Delay, Diagnostics
 from ..kernels import actuator_models, pd_step
 from .launch import _index_table
@@ -193,7 +194,7 @@ def make_plan(rows: cfg.Rows, binding: JointBinding, options: Options, ee_specs:
         ConfigError: an option these rows would ignore or cannot honour (:func:`check_options`).
     """
     E, R = binding.num_envs, rows.count
-    check_options(rows, options)
+    check_options(rows, options, ee_specs)
     # Coordinate / DOF index of every (env, row): env 0's row plus env * stride for a replicated layout, else a flat
     # (num_envs, rows) table; either way no chain of table loads in the kernels.
     q_idx, q_stride = _index_table(binding.coord_index.reshape(E, R))
@@ -217,7 +218,7 @@ def make_plan(rows: cfg.Rows, binding: JointBinding, options: Options, ee_specs:
     return plan
 
 
-def check_options(rows: cfg.Rows, options: Options) -> None:
+def check_options(rows: cfg.Rows, options: Options, ee_specs: dict | None = None) -> None:
     """Refuse an option that the mode's rows would silently ignore, or cannot honour (host only).
 
     Each option group checked itself when it was made; what is left depends on the joints: an inertia update for a
@@ -241,7 +242,8 @@ def check_options(rows: cfg.Rows, options: Options) -> None:
             f"actuation.inertia_update: expected None: this mode computes no inertia (no joint has drive_mode "
             f"'acceleration' and the explicit law is {a.law!r}, not 'stable' or 'coupled'), got {a.inertia_update!r}"
         )
-    if d.clip_targets != "none" and not (rows.kind == cfg.ROW_POS).any():
+    joint_targets = any(isinstance(s, ImpedanceSpec) and not s.osc for _, _, s in (ee_specs or {}).values())
+    if d.clip_targets != "none" and not ((rows.kind == cfg.ROW_POS).any() or joint_targets):
         raise ConfigError(
             f"diagnostics.clip_targets: expected 'none': no joint of this mode has a position target (velocity, "
             f"effort and passive joints only), got {d.clip_targets!r}"

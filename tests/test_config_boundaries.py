@@ -216,6 +216,8 @@ BOUNDS: dict[str, dict[str, Bound]] = {
             ),
             wrong_type=(
                 [("panda_finger_joint2", "panda_finger_joint1")],
+                [("panda_finger_joint2", {"joint": "panda_finger_joint1"})],  # dict() of it would be a valid map
+                [],  # dict() of it would be the default map
                 "panda_finger_joint1",
                 {"panda_finger_joint2": "panda_finger_joint1"},
                 {"panda_finger_joint2": {"joint": "panda_finger_joint1", "multiplier": "2"}},

@@ -325,6 +325,27 @@ def test_two_networks_in_one_mode_keep_their_own_weights_scales_and_state():
         np.testing.assert_allclose(tau[:, 3:], ub.numpy().reshape(E, 4) * f32(-9.0), rtol=1e-4, atol=1e-4)
 
 
+def test_mlp_layers_without_bias_leaky_relu_and_dropout_equal_torch():
+    """A Linear layer without a bias, LeakyReLU's slope, a Sigmoid and (in eval) a Dropout, read from the module:
+    the network's torque equals torch's on the same inputs."""
+    mlp = init(
+        torch.nn.Sequential(
+            torch.nn.Linear(2, 6, bias=False), torch.nn.LeakyReLU(0.3), torch.nn.Dropout(0.5), torch.nn.Linear(6, 4),
+            torch.nn.Sigmoid(), torch.nn.Linear(4, 1),
+        ),
+        seed=4,
+    )  # fmt: skip
+    act = wpctrl.ActuatorNet(mlp, input_idx=(0,), pos_scale=2.0, vel_scale=0.5, torque_scale=30.0)
+    model = build_panda(E)
+    ctrl = wpctrl.build_controller(pos(PANDA_ARM_JOINTS, 0.0, 0.0, 1e9, actuator=act), model, 100, 100, "explicit")
+    rng = np.random.default_rng(9)
+    for q, qd, tq, tau in substeps(ctrl, model, PANDA_ARM_JOINTS, rng, 2):
+        x = np.stack([(tq - q) * f32(2.0), qd * f32(0.5)], axis=2).reshape(E * 7, 2)
+        with torch.no_grad():
+            u = mlp(torch.from_numpy(x)).numpy().reshape(E, 7) * f32(30.0)
+        np.testing.assert_allclose(tau, u, rtol=1e-4, atol=1e-4)
+
+
 # -- smoothing and binary commands on several controllers -----------------------------------------------------------
 
 

@@ -99,7 +99,7 @@ def _newton_dc(ctrl, device):
     """A launch of Newton's ClampingDCMotor over the controller's DOFs of ``joint_f``, in place."""
     from newton.actuators import ClampingDCMotor
 
-    dof = ctrl._engine.binding.dof_index.reshape(-1).astype(np.uint32)
+    dof = ctrl.dof_index.reshape(-1).astype(np.uint32)
     n = dof.size
     comp = ClampingDCMotor(
         wp.full(n, 87.0, dtype=wp.float32, device=device),

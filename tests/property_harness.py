@@ -273,7 +273,7 @@ class Harness:
                 **opts,
             )
         self.inertia_update = inertia_update
-        self.needs_response = self.ctrl._engine.needs_response
+        self.needs_response = self.ctrl.response is not None
         robot = RefRobot(PANDA_JOINTS, self.layout.limits)
         self.delay_range = _ranged(opts.get("delay"))
         self.ref = RefCombined(
@@ -617,7 +617,7 @@ class Harness:
                 self.put_state()
             self.ctrl.before_simulation_step(self.state, self.control)
             inverse = None
-            if self.coupled or (self.inertia_update == "substep" and self.ctrl._engine.per_substep):
+            if self.coupled or (self.inertia_update == "substep" and self.ctrl.substep_launch):
                 self.response_q = self.state.joint_q.numpy().copy()
             if self.coupled:
                 inverse = self.physics.inverse(self.response_q)

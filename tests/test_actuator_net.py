@@ -43,7 +43,7 @@ def _rollout(ctrl, model, steps, rng, reset_at=None):
     """Random states and targets per substep; yields (q, qd, target, tau, reset mask or None) for each substep."""
     s, c = model.state(), model.control()
     ctrl.reset(s, control=c)
-    b = ctrl._engine.binding
+    b = ctrl  # the controlled joints' coord_index / dof_index
     for k in range(steps):
         q = s.joint_q.numpy()
         q[b.coord_index] = rng.uniform(-1.0, 1.0, b.coord_index.shape).astype(f32)

@@ -7,13 +7,20 @@ One control step = ``set_action`` + K x ``before_simulation_step`` (K = 5), Mani
 * ``plain``: no model (ManiSkill's clamp to ``force_limit``);
 * ``dc_motor``: ``wpctrl.DCMotor(87, 2.6)``;
 * ``position_limit``: ``wpctrl.PositionBasedEffortLimit`` with an 8-entry table;
-* ``mlp``: ``wpctrl.ActuatorNet`` of a 6-32-32-1 softsign MLP over 3 history taps (random weights);
-* ``lstm``: ``wpctrl.ActuatorNet`` of a 2-layer, 8-unit LSTM with a linear head (random weights);
+* ``mlp``: ``wpctrl.ActuatorNet`` of a 6-32-32-1 softsign MLP over 3 history taps (random weights), its default
+  kernel (the weights compiled in);
+* ``lstm``: ``wpctrl.ActuatorNet`` of a 2-layer, 8-unit LSTM with a linear head (random weights), default kernel;
+* ``mlp_tiled`` / ``lstm_tiled``: the same networks with ``kernel="tiled"`` (weights staged in shared memory, rows in
+  64-row tiles, each layer a ``wp.tile_matmul``);
+* ``torch_mlp`` / ``torch_lstm`` (CUDA): the same control step with the network's substep written in torch on the same
+  rows (bench/torch_actuator_net.py: cuBLAS / cuDNN, Isaac Lab's ``ActuatorNetMLP`` / ``ActuatorNetLSTM`` code
+  path), wpctrl's launches and the torch ops captured in one CUDA graph;
 * ``newton_dc``: the plain step plus Newton 1.8's ``ClampingDCMotor`` applied to ``joint_f`` after every substep
   (its own launch over every DOF): what the same DC-motor envelope costs as Newton's component.
 
-Graph-captured replay (and eager with ``--eager``), round-robin. Run ``python bench/actuator_cost.py --help``;
-results go to ``<out>/actuator_cost_<device>.{json,md}``.
+Graph-captured replay (and eager with ``--eager``), round-robin. Before timing, on CUDA, each torch variant's first
+control step is checked against the matching wpctrl one (the ``check`` field: max |joint_f| difference). Run
+``python bench/actuator_cost.py --help``; results go to ``<out>/actuator_cost_<device>.{json,md}``.
 """
 
 from __future__ import annotations
@@ -47,19 +54,26 @@ from bench.common import (  # noqa: E402
     synthetic_setup,
 )
 
-VARIANTS = ("plain", "dc_motor", "position_limit", "mlp", "lstm", "newton_dc")
+VARIANTS = ("plain", "dc_motor", "position_limit", "mlp", "lstm", "mlp_tiled", "lstm_tiled", "torch_mlp", "torch_lstm",
+            "newton_dc")  # fmt: skip
 LABELS = {
     "plain": "plain explicit step",
     "dc_motor": "DCMotor",
     "position_limit": "PositionBasedEffortLimit",
     "mlp": "ActuatorNet (MLP 6-32-32-1)",
     "lstm": "ActuatorNet (LSTM 2x8)",
+    "mlp_tiled": "ActuatorNet (MLP, tiled kernel)",
+    "lstm_tiled": "ActuatorNet (LSTM, tiled kernel)",
+    "torch_mlp": "MLP in torch (CUDA graph)",
+    "torch_lstm": "LSTM in torch (CUDA graph)",
     "newton_dc": "plain + Newton ClampingDCMotor",
 }
 
 
 def _actuator(name: str):
     import wpctrl
+
+    name, _, kernel = name.removeprefix("torch_").partition("_")
 
     if name == "dc_motor":
         return wpctrl.DCMotor(87.0, 2.6)
@@ -83,7 +97,8 @@ def _actuator(name: str):
                     self.linear = torch.nn.Linear(8, 1)
 
             net = _LSTM()
-        return wpctrl.ActuatorNet(net, torque_scale=10.0, saturation_effort=87.0, velocity_limit=2.6)
+        return wpctrl.ActuatorNet(net, torque_scale=10.0, saturation_effort=87.0, velocity_limit=2.6,
+                                  kernel=kernel or "auto")  # fmt: skip
     return None
 
 
@@ -111,16 +126,32 @@ def _newton_dc(ctrl, device):
     return comp, idx, scratch
 
 
+def _torch_net(ctrl, state, control):
+    """Replace the controller's network launch by the torch baseline's substep (bench/torch_actuator_net.py)."""
+    from bench.torch_actuator_net import TorchActuatorNet
+
+    tnet = TorchActuatorNet(ctrl, state, control)
+    group = ctrl._engine.part("actuators").nets[0]
+    group.launch = lambda engine, state, control: tnet.substep()
+    return tnet
+
+
 def run_one(args, n_envs, model, small_model, sync, device) -> list[dict]:
     kw = {"actuation": "explicit", "control_freq": 20, "sim_freq": 100}
-    rng = np.random.default_rng(0)
     fns = {}
+    checks = {}
+    first_f = {}
     for name in args.variants:
+        if name.startswith("torch_") and not wp.get_device(device).is_cuda:
+            print(f"[{fmt_envs(n_envs)}] {name}: skipped (the torch baseline is a CUDA graph)", flush=True)
+            continue
         mode = _mode(name, args.mode)
         su = real_setup(mode, model, **kw) if model is not None else synthetic_setup(mode, small_model, n_envs, **kw)
         ctrl, state, control = su.ctrl, su.state, su.control
-        action = wp.array(rng.uniform(-1, 1, (n_envs, ctrl.action_dim)).astype(np.float32), device=device)
+        action = wp.array(np.random.default_rng(1).uniform(-1, 1, (n_envs, ctrl.action_dim)).astype(np.float32),
+                          device=device)  # fmt: skip
         ctrl.reset(state)
+        tnet = _torch_net(ctrl, state, control) if name.startswith("torch_") else None
         extra = _newton_dc(ctrl, device) if name == "newton_dc" else None
 
         def step(ctrl=ctrl, state=state, control=control, action=action, extra=extra):
@@ -131,12 +162,37 @@ def run_one(args, n_envs, model, small_model, sync, device) -> list[dict]:
                     comp, idx, scratch = extra
                     comp.modify_forces(control.joint_f, scratch, state.joint_q, state.joint_qd, idx, idx)
 
+        if tnet is not None:  # Warp's launches on torch's stream, so that the two stay in order outside the graph too
+            import torch
+
+            tdev = torch.device("cuda", wp.get_device(device).ordinal)
+
+            def step(inner=step, dev=tdev):
+                with wp.ScopedStream(wp.stream_from_torch(torch.cuda.current_stream(dev))):
+                    inner()
+
         step()
         sync()
-        with wp.ScopedCapture(device=device) as cap:
-            step()
-        # the graph replays into these arrays: keep them alive with it (a freed one would be reused or unmapped)
-        fns[name + ":graph"] = lambda g=cap.graph, keep=(su, action, extra): wp.capture_launch(g)
+        # the first control step's joint_f (same action, same start): the torch baseline against wpctrl's kernel
+        first_f[name] = control.joint_f.numpy().copy()
+        base = name.removeprefix("torch_")
+        if base != name and base in first_f:
+            checks[name] = float(np.abs(first_f[name] - first_f[base]).max())
+            print(f"[{fmt_envs(n_envs)}] {name}: max |joint_f - {base}'s| after one step = {checks[name]:.3g}")
+        if tnet is not None:
+            from bench.torch_actuator_net import capture
+
+            try:
+                graph = capture(step, device)
+            except Exception as e:  # noqa: BLE001 - report and go on with the other variants
+                print(f"[{fmt_envs(n_envs)}] {name}: not captured ({type(e).__name__}: {e}); skipped", flush=True)
+                continue
+            fns[name + ":graph"] = lambda g=graph, keep=(su, action, tnet): g.replay()
+        else:
+            with wp.ScopedCapture(device=device) as cap:
+                step()
+            # the graph replays into these arrays: keep them alive with it (a freed one would be reused or unmapped)
+            fns[name + ":graph"] = lambda g=cap.graph, keep=(su, action, extra): wp.capture_launch(g)
         if args.eager:
             fns[name + ":eager"] = step
     times = measure_interleaved(
@@ -157,6 +213,7 @@ def run_one(args, n_envs, model, small_model, sync, device) -> list[dict]:
                 "samples_us": [x * 1e6 for x in t["samples_s"]],
                 "iters": t["iters"],
                 "clock": args.clock,
+                "check_max_abs_joint_f": checks.get(name),
             }
         )
     return rows

@@ -126,18 +126,68 @@ def _newton_dc(ctrl, device):
     return comp, idx, scratch
 
 
-def _torch_net(ctrl, state, control):
+def _torch_net(ctrl, state, control, lstm_cells: bool = False):
     """Replace the controller's network launch by the torch baseline's substep (bench/torch_actuator_net.py)."""
     from bench.torch_actuator_net import TorchActuatorNet
 
-    tnet = TorchActuatorNet(ctrl, state, control)
+    tnet = TorchActuatorNet(ctrl, state, control, lstm_cells)
     group = ctrl._engine.part("actuators").nets[0]
     group.launch = lambda engine, state, control: tnet.substep()
     return tnet
 
 
-def run_one(args, n_envs, model, small_model, sync, device) -> list[dict]:
+def _setup_variant(args, name, n_envs, model, small_model, sync, device, first_f, checks, lstm_cells):
+    """Build variant ``name``, run its first control step (recorded in ``first_f``; a torch baseline's difference to
+    the matching network kernel's in ``checks``) and capture it: ``(replay function, eager step)``."""
     kw = {"actuation": "explicit", "control_freq": 20, "sim_freq": 100}
+    mode = _mode(name, args.mode)
+    su = real_setup(mode, model, **kw) if model is not None else synthetic_setup(mode, small_model, n_envs, **kw)
+    ctrl, state, control = su.ctrl, su.state, su.control
+    action = wp.array(np.random.default_rng(1).uniform(-1, 1, (n_envs, ctrl.action_dim)).astype(np.float32),
+                      device=device)  # fmt: skip
+    ctrl.reset(state)
+    tnet = _torch_net(ctrl, state, control, lstm_cells) if name.startswith("torch_") else None
+    extra = _newton_dc(ctrl, device) if name == "newton_dc" else None
+
+    def step(ctrl=ctrl, state=state, control=control, action=action, extra=extra):
+        ctrl.set_action(action, state)
+        for _ in range(ctrl.num_substeps):
+            ctrl.before_simulation_step(state, control)
+            if extra is not None:  # Newton's component: read joint_f at the DOFs, clamp, write back
+                comp, idx, scratch = extra
+                comp.modify_forces(control.joint_f, scratch, state.joint_q, state.joint_qd, idx, idx)
+
+    if tnet is not None:  # Warp's launches on torch's stream, so that the two stay in order outside the graph too
+        import torch
+
+        tdev = torch.device("cuda", wp.get_device(device).ordinal)
+
+        def step(inner=step, dev=tdev):
+            with wp.ScopedStream(wp.stream_from_torch(torch.cuda.current_stream(dev))):
+                inner()
+
+    sync()
+    step()
+    sync()
+    # the first control step's joint_f (same action, same start): the torch baseline against wpctrl's kernel
+    first_f[name] = control.joint_f.numpy().copy()
+    base = name.removeprefix("torch_")
+    if base != name and base in first_f:
+        checks[name] = float(np.abs(first_f[name] - first_f[base]).max())
+        print(f"[{fmt_envs(n_envs)}] {name}: max |joint_f - {base}'s| after one step = {checks[name]:.3g}")
+    if tnet is not None:
+        from bench.torch_actuator_net import capture
+
+        graph = capture(step, device)
+        return (lambda g=graph, keep=(su, action, tnet): g.replay()), step
+    else:
+        with wp.ScopedCapture(device=device) as cap:
+            step()
+        # the graph replays into these arrays: keep them alive with it (a freed one would be reused or unmapped)
+        return (lambda g=cap.graph, keep=(su, action, extra): wp.capture_launch(g)), step
+
+
+def run_one(args, n_envs, model, small_model, sync, device) -> list[dict]:
     fns = {}
     checks = {}
     first_f = {}
@@ -145,54 +195,20 @@ def run_one(args, n_envs, model, small_model, sync, device) -> list[dict]:
         if name.startswith("torch_") and not wp.get_device(device).is_cuda:
             print(f"[{fmt_envs(n_envs)}] {name}: skipped (the torch baseline is a CUDA graph)", flush=True)
             continue
-        mode = _mode(name, args.mode)
-        su = real_setup(mode, model, **kw) if model is not None else synthetic_setup(mode, small_model, n_envs, **kw)
-        ctrl, state, control = su.ctrl, su.state, su.control
-        action = wp.array(np.random.default_rng(1).uniform(-1, 1, (n_envs, ctrl.action_dim)).astype(np.float32),
-                          device=device)  # fmt: skip
-        ctrl.reset(state)
-        tnet = _torch_net(ctrl, state, control) if name.startswith("torch_") else None
-        extra = _newton_dc(ctrl, device) if name == "newton_dc" else None
-
-        def step(ctrl=ctrl, state=state, control=control, action=action, extra=extra):
-            ctrl.set_action(action, state)
-            for _ in range(ctrl.num_substeps):
-                ctrl.before_simulation_step(state, control)
-                if extra is not None:  # Newton's component: read joint_f at the DOFs, clamp, write back
-                    comp, idx, scratch = extra
-                    comp.modify_forces(control.joint_f, scratch, state.joint_q, state.joint_qd, idx, idx)
-
-        if tnet is not None:  # Warp's launches on torch's stream, so that the two stay in order outside the graph too
-            import torch
-
-            tdev = torch.device("cuda", wp.get_device(device).ordinal)
-
-            def step(inner=step, dev=tdev):
-                with wp.ScopedStream(wp.stream_from_torch(torch.cuda.current_stream(dev))):
-                    inner()
-
-        step()
-        sync()
-        # the first control step's joint_f (same action, same start): the torch baseline against wpctrl's kernel
-        first_f[name] = control.joint_f.numpy().copy()
-        base = name.removeprefix("torch_")
-        if base != name and base in first_f:
-            checks[name] = float(np.abs(first_f[name] - first_f[base]).max())
-            print(f"[{fmt_envs(n_envs)}] {name}: max |joint_f - {base}'s| after one step = {checks[name]:.3g}")
-        if tnet is not None:
-            from bench.torch_actuator_net import capture
-
+        tries = (False, True) if name == "torch_lstm" else (False,)
+        for cells in tries:  # the torch LSTM through cuDNN, else (a batch cuDNN refuses) as cell equations
             try:
-                graph = capture(step, device)
-            except Exception as e:  # noqa: BLE001 - report and go on with the other variants
-                print(f"[{fmt_envs(n_envs)}] {name}: not captured ({type(e).__name__}: {e}); skipped", flush=True)
-                continue
-            fns[name + ":graph"] = lambda g=graph, keep=(su, action, tnet): g.replay()
-        else:
-            with wp.ScopedCapture(device=device) as cap:
-                step()
-            # the graph replays into these arrays: keep them alive with it (a freed one would be reused or unmapped)
-            fns[name + ":graph"] = lambda g=cap.graph, keep=(su, action, extra): wp.capture_launch(g)
+                got = _setup_variant(args, name, n_envs, model, small_model, sync, device, first_f, checks, cells)
+                break
+            except Exception as e:  # noqa: BLE001 - a torch baseline that cannot run is reported, the rest goes on
+                if not name.startswith("torch_"):
+                    raise
+                print(f"[{fmt_envs(n_envs)}] {name} (lstm cells: {cells}): failed ({type(e).__name__}: {e})")
+                got = None
+        if got is None:
+            continue
+        graph_fn, step = got
+        fns[name + ":graph"] = graph_fn
         if args.eager:
             fns[name + ":eager"] = step
     times = measure_interleaved(
@@ -271,7 +287,8 @@ def main(argv=None):
             )
         rows += got
         del model
-    finish_run(args, device, meta, rows, t0, "actuator_cost", lambda: markdown(meta, rows, args))
+        # written after every size, so that a run stopped at its time limit keeps what it measured
+        finish_run(args, device, meta, rows, t0, "actuator_cost", lambda r=rows: markdown(meta, r, args))
 
 
 if __name__ == "__main__":

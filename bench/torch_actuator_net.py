@@ -23,7 +23,9 @@ import warp as wp
 class TorchActuatorNet:
     """The network rows of ``ctrl`` (its first ``ActuatorNet``) evaluated with torch each substep."""
 
-    def __init__(self, ctrl, state, control):
+    def __init__(self, ctrl, state, control, lstm_cells: bool = False):
+        """``lstm_cells``: run the LSTM as its cell equations with ``torch.addmm`` (cuBLAS) instead of ``nn.LSTM``
+        (cuDNN), for batches cuDNN refuses."""
         eng = ctrl._engine
         group = eng.part("actuators").nets[0]
         dev = torch.device("cuda", wp.get_device(eng.device).ordinal) if wp.get_device(eng.device).is_cuda else "cpu"
@@ -49,12 +51,20 @@ class TorchActuatorNet:
         rows_total = b.num_envs * n
         if self.lstm is None:
             self.net = module
-            self.taps = list(int(i) for i in s.input_idx)
-            h = max(self.taps) + 1
+            taps = [int(i) for i in s.input_idx]
+            self.taps = torch.tensor(taps, dtype=torch.int64, device=dev)  # on the device: no copy in the capture
+            h = max(taps) + 1
             self.he = torch.zeros(h, rows_total, device=dev)
             self.hv = torch.zeros(h, rows_total, device=dev)
         else:
             self.head = torch.nn.Sequential(*[m for m in module.children() if not isinstance(m, torch.nn.LSTM)])
+            self.cells = lstm_cells
+            p = dict(self.lstm.named_parameters())
+            self.cell_weights = [
+                (p[f"weight_ih_l{k}"].T.contiguous(), p[f"weight_hh_l{k}"].T.contiguous(),
+                 (p[f"bias_ih_l{k}"] + p[f"bias_hh_l{k}"]).detach())
+                for k in range(self.lstm.num_layers)
+            ]  # fmt: skip
             shape = (self.lstm.num_layers, rows_total, self.lstm.hidden_size)
             self.h = torch.zeros(shape, device=dev)
             self.c = torch.zeros(shape, device=dev)
@@ -76,16 +86,25 @@ class TorchActuatorNet:
             self.hv.copy_(self.hv.roll(1, 0))
             self.he[0] = err
             self.hv[0] = qd
-            pos = self.he[self.taps].T * self.ps
-            vel = self.hv[self.taps].T * self.vs
+            pos = self.he.index_select(0, self.taps).T * self.ps
+            vel = self.hv.index_select(0, self.taps).T * self.vs
             u = self.net(torch.cat([pos, vel] if self.pos_first else [vel, pos], dim=1))[:, 0]
         else:
             pv = [err * self.ps, qd * self.vs]
-            x = torch.stack(pv if self.pos_first else pv[::-1], dim=1)[:, None, :]
-            out, (h, c) = self.lstm(x, (self.h, self.c))
-            self.h.copy_(h)
-            self.c.copy_(c)
-            u = self.head(out[:, 0])[:, 0]
+            x = torch.stack(pv if self.pos_first else pv[::-1], dim=1)
+            if self.cells:
+                for k, (w_ih, w_hh, b) in enumerate(self.cell_weights):
+                    g = torch.addmm(torch.addmm(b, x, w_ih), self.h[k], w_hh)
+                    i, f, gg, o = g.chunk(4, dim=1)
+                    self.c[k].mul_(torch.sigmoid(f)).add_(torch.sigmoid(i) * torch.tanh(gg))
+                    self.h[k].copy_(torch.sigmoid(o) * torch.tanh(self.c[k]))
+                    x = self.h[k]
+                u = self.head(x)[:, 0]
+            else:
+                out, (h, c) = self.lstm(x[:, None, :], (self.h, self.c))
+                self.h.copy_(h)
+                self.c.copy_(c)
+                u = self.head(out[:, 0])[:, 0]
         u = u * self.ts
         s = qd / self.vlim
         hi = torch.clamp(self.sat * (1.0 - s), min=-self.lim, max=self.lim)
@@ -100,12 +119,17 @@ def capture(step, device):
     side = torch.cuda.Stream(device=dev)
     side.wait_stream(torch.cuda.current_stream(dev))
     ws = wp.stream_from_torch(side)
-    with torch.cuda.stream(side), wp.ScopedStream(ws):
+    # sync_enter=False: a captured stream may not wait on Warp's own (uncaptured) stream
+    torch.cuda.synchronize(dev)
+    with torch.cuda.stream(side), wp.ScopedStream(ws, sync_enter=False):
         for _ in range(2):  # warm-up: kernels loaded, cuBLAS / cuDNN workspaces allocated
             step()
     torch.cuda.synchronize(dev)
     graph = torch.cuda.CUDAGraph()
-    with torch.cuda.graph(graph, stream=side, capture_error_mode="thread_local"), wp.ScopedStream(ws):
+    with (
+        torch.cuda.graph(graph, stream=side, capture_error_mode="thread_local"),
+        wp.ScopedStream(ws, sync_enter=False),
+    ):
         wp.capture_begin(stream=ws, external=True, capture_mode=wp.CaptureMode.THREAD_LOCAL)
         try:
             step()

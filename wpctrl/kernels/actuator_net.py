@@ -15,8 +15,9 @@ kernels evaluate the network, both compiled for its shape:
   block in shared memory (``wp.tile_load``), each block evaluates tiles of rows as matrix products
   (``wp.tile_matmul``), one tile per block pass. Compiled per network shape; the weights are data.
 
-The state lives in ``(k, num_envs * rows)`` arrays (one row per history slot or hidden unit, the (env, joint) rows
-contiguous): the MLP's past samples, newest first, and the LSTM's ``h`` and ``c`` per layer and unit.
+The MLP's past samples are one ``(num_envs * rows, 2 * past)`` array, a row's position errors then velocities, newest
+first (the unrolled kernel reads and writes a row's as one vector); the LSTM's ``h`` and ``c`` are ``(layers * hidden,
+num_envs * rows)`` arrays, so that a warp's loads of one unit are one coalesced line.
 
 Activation codes: 0 identity, 1 ReLU, 2 ELU(a), 3 tanh, 4 sigmoid, 5 softsign, 6 LeakyReLU(a).
 """
@@ -75,11 +76,11 @@ class NetLayout(NamedTuple):
         return max(self.history - 1, 0)
 
     def state_shapes(self, num_envs: int) -> tuple[tuple[int, int], tuple[int, int]]:
-        """Shapes of the history (pos and vel) and of the LSTM state (h and c) arrays: ``(k, num_envs * rows)``, at
-        least one slot each (Warp needs a non-empty leading dimension to index)."""
+        """Shapes of the history array ``(num_envs * rows, 2 * past)`` and of the LSTM state arrays (h and c)
+        ``(layers * hidden, num_envs * rows)``, at least one slot each (Warp indexes no empty dimension)."""
         s = num_envs * self.rows
         units = sum(x[1] for x in self.lstm)
-        return (max(self.past, 1), s), (max(units, 1), s)
+        return (s, max(2 * self.past, 1)), (max(units, 1), s)
 
 
 def choose_kernel(layout: NetLayout, num_weights: int, kernel: str) -> str:
@@ -188,17 +189,18 @@ def write_effort(
     env: int,
     r: int,
     di: int,
-    force_limit: wp.array2d[float],
-    sat_effort: wp.array2d[float],
-    vel_limit: wp.array2d[float],
+    lim: float,
+    sat: float,
+    vl: float,
     joint_f_out: wp.array[float],
     computed_effort_out: wp.array2d[float],
     applied_effort_out: wp.array2d[float],
     saturation_count_out: wp.array2d[wp.int32],
 ):
-    """The computed effort ``u`` through the DC-motor envelope and the force limit into ``joint_f`` (and the effort
-    readout when it is on)."""
-    f = _act.dc_motor_clamp(u, qd, sat_effort[env, r], vel_limit[env, r], force_limit[env, r])
+    """The computed effort ``u`` through the DC-motor envelope (``sat``, ``vl``) and the force limit ``lim`` into
+    ``joint_f`` (and the effort readout when it is on). The kernels read the row's parameters with its other inputs,
+    before the network: a load here would put one more memory round trip after it."""
+    f = _act.dc_motor_clamp(u, qd, sat, vl, lim)
     joint_f_out[di] = f
     if computed_effort_out:
         computed_effort_out[env, r] = u
@@ -213,10 +215,9 @@ def _reset_state_kernel(
     n: int,  # the network's rows
     env_ids_in: wp.array[wp.int32],  # optional: thread row i resets env env_ids_in[i]
     env_mask_in: wp.array[wp.bool],  # optional
-    # Out: (k, num_envs * n) each
-    hist_pos_out: wp.array2d[float],
-    hist_vel_out: wp.array2d[float],
-    lstm_h_out: wp.array2d[float],
+    # Out:
+    hist_out: wp.array2d[float],  # (num_envs * n, k)
+    lstm_h_out: wp.array2d[float],  # (k, num_envs * n)
     lstm_c_out: wp.array2d[float],
 ):
     """Zero the reset envs' history and recurrent state (as Isaac Lab's actuator nets do). Launched over
@@ -231,9 +232,8 @@ def _reset_state_kernel(
         if not env_mask_in[env]:
             return
     s = env * n + j
-    for k in range(hist_pos_out.shape[0]):
-        hist_pos_out[k, s] = 0.0
-        hist_vel_out[k, s] = 0.0
+    for k in range(hist_out.shape[1]):
+        hist_out[s, k] = 0.0
     for k in range(lstm_h_out.shape[0]):
         lstm_h_out[k, s] = 0.0
         lstm_c_out[k, s] = 0.0

@@ -170,8 +170,7 @@ def _make(L: NetLayout, block_dim: int) -> wp.Kernel:
         joint_q_in: wp.array[float],
         joint_qd_in: wp.array[float],
         joint_target_q_in: wp.array[float],
-        hist_pos_out: wp.array2d[float],
-        hist_vel_out: wp.array2d[float],
+        hist_out: wp.array2d[float],
         lstm_h_out: wp.array2d[float],
         lstm_c_out: wp.array2d[float],
         joint_f_out: wp.array[float],
@@ -190,10 +189,16 @@ def _make(L: NetLayout, block_dim: int) -> wp.Kernel:
         di = int(0)
         err = float(0.0)
         qd = float(0.0)
+        lim = float(0.0)
+        sat = float(0.0)
+        vl = float(0.0)
         if live:
             di, err, qd = _net.row_input(q_idx, qd_idx, q_stride, qd_stride, wp.static(L.q_lin),
                                          wp.static(L.qd_lin), env, r, j, joint_q_in, joint_qd_in,
                                          joint_target_q_in)  # fmt: skip
+            lim = force_limit[env, r]
+            sat = sat_effort[env, r]
+            vl = vel_limit[env, r]
         x = vec_in()
         if wp.static(MLP):
             hp = vec_t()
@@ -202,11 +207,11 @@ def _make(L: NetLayout, block_dim: int) -> wp.Kernel:
             hv[0] = qd
             if live:
                 for k in range(wp.static(PAST)):
-                    hp[k + 1] = hist_pos_out[k, s]
-                    hv[k + 1] = hist_vel_out[k, s]
+                    hp[k + 1] = hist_out[s, k]
+                    hv[k + 1] = hist_out[s, wp.static(PAST) + k]
                 for k in range(wp.static(PAST)):
-                    hist_pos_out[k, s] = hp[k]
-                    hist_vel_out[k, s] = hv[k]
+                    hist_out[s, k] = hp[k]
+                    hist_out[s, wp.static(PAST) + k] = hv[k]
             for t in range(wp.static(T)):
                 x[wp.static(POS_AT[t])] = hp[wp.static(TAPS[t])] * pos_scale
                 x[wp.static(VEL_AT[t])] = hv[wp.static(TAPS[t])] * vel_scale
@@ -219,8 +224,8 @@ def _make(L: NetLayout, block_dim: int) -> wp.Kernel:
                 x[1] = err * pos_scale
         u = stage0(wts, bs, wp.tile(x), s, live, lstm_h_out, lstm_c_out)
         if live:
-            _net.write_effort(u * torque_scale, qd, env, r, di, force_limit, sat_effort, vel_limit, joint_f_out,
-                              computed_effort_out, applied_effort_out, saturation_count_out)  # fmt: skip
+            _net.write_effort(u * torque_scale, qd, env, r, di, lim, sat, vl, joint_f_out, computed_effort_out,
+                              applied_effort_out, saturation_count_out)  # fmt: skip
 
     def net(
         # Rows of the network (row0 .. row0 + n in the mode's tables):
@@ -245,9 +250,8 @@ def _make(L: NetLayout, block_dim: int) -> wp.Kernel:
         joint_q_in: wp.array[float],
         joint_qd_in: wp.array[float],
         joint_target_q_in: wp.array[float],
-        # In/out, (k, num_envs * n): MLP past samples (newest first), LSTM state (layer-major units):
-        hist_pos_out: wp.array2d[float],
-        hist_vel_out: wp.array2d[float],
+        # In/out: the MLP's past samples (num_envs * n, 2 * past), the LSTM state (layers * hidden, num_envs * n):
+        hist_out: wp.array2d[float],
         lstm_h_out: wp.array2d[float],
         lstm_c_out: wp.array2d[float],
         # Out:
@@ -262,7 +266,7 @@ def _make(L: NetLayout, block_dim: int) -> wp.Kernel:
         for tile in range(blk, num_tiles, num_blocks):
             rows(wts, bs, tile, lane, row0, q_idx, qd_idx, q_stride, qd_stride, pos_scale, vel_scale, torque_scale,
                  num_rows, force_limit, sat_effort, vel_limit, joint_q_in, joint_qd_in, joint_target_q_in,
-                 hist_pos_out, hist_vel_out, lstm_h_out, lstm_c_out, joint_f_out, computed_effort_out,
+                 hist_out, lstm_h_out, lstm_c_out, joint_f_out, computed_effort_out,
                  applied_effort_out, saturation_count_out)  # fmt: skip
 
     return wp.kernel(

@@ -150,14 +150,17 @@ class _NetGroup:
                 "num_blocks": self.blocks,
             }
             self.kernel = KT.tiled_kernel(self.layout, self.block_dim)
+        hist_shape, state_shape = self.layout.state_shapes(E)
+        self.hist = wp.zeros(hist_shape, dtype=wp.float32, device=dev)
+        self.lstm_h = wp.zeros(state_shape, dtype=wp.float32, device=dev)
+        self.lstm_c = wp.zeros(state_shape, dtype=wp.float32, device=dev)
+        if self.kernel_kind == "unrolled":
+            scales = (spec.pos_scale, spec.vel_scale, spec.torque_scale)
+            self.kernel = KU.unrolled_kernel(self.layout, net.weights, scales)
+            extra = {"hist_out": KU.history_vectors(self.hist)}
         else:
-            self.kernel = KU.unrolled_kernel(self.layout, net.weights)
+            extra["hist_out"] = self.hist
         self._extra = extra
-        (hk, hs), (sk, ss) = self.layout.state_shapes(E)
-        self.hist_pos = wp.zeros((hk, hs), dtype=wp.float32, device=dev)
-        self.hist_vel = wp.zeros((hk, hs), dtype=wp.float32, device=dev)
-        self.lstm_h = wp.zeros((sk, ss), dtype=wp.float32, device=dev)
-        self.lstm_c = wp.zeros((sk, ss), dtype=wp.float32, device=dev)
         self._launch: _Launch | None = None
 
     def launch(self, engine, state, control) -> None:
@@ -172,8 +175,6 @@ class _NetGroup:
                 "joint_q_in": state.joint_q,
                 "joint_qd_in": state.joint_qd,
                 "joint_target_q_in": control.joint_target_q,
-                "hist_pos_out": self.hist_pos,
-                "hist_vel_out": self.hist_vel,
                 "lstm_h_out": self.lstm_h,
                 "lstm_c_out": self.lstm_c,
                 "joint_f_out": control.joint_f,
@@ -201,7 +202,7 @@ class _NetGroup:
         wp.launch(
             KN._reset_state_kernel,
             dim=(dim, self.n),
-            inputs=[engine.num_envs, self.n, env_ids, env_mask, self.hist_pos, self.hist_vel, self.lstm_h, self.lstm_c],
+            inputs=[engine.num_envs, self.n, env_ids, env_mask, self.hist, self.lstm_h, self.lstm_c],
             device=engine.device,
         )
 

@@ -157,13 +157,14 @@ def _setup_variant(args, name, n_envs, model, small_model, sync, device, first_f
                 comp, idx, scratch = extra
                 comp.modify_forces(control.joint_f, scratch, state.joint_q, state.joint_qd, idx, idx)
 
-    if tnet is not None:  # Warp's launches on torch's stream, so that the two stay in order outside the graph too
+    inner = step
+    if tnet is not None:  # eager: Warp's launches on torch's current stream, so that the two stay in order
         import torch
 
-        tdev = torch.device("cuda", wp.get_device(device).ordinal)
+        wstream = wp.stream_from_torch(torch.cuda.current_stream(torch.device("cuda", wp.get_device(device).ordinal)))
 
-        def step(inner=step, dev=tdev):
-            with wp.ScopedStream(wp.stream_from_torch(torch.cuda.current_stream(dev))):
+        def step(inner=inner, wstream=wstream):
+            with wp.ScopedStream(wstream):
                 inner()
 
     sync()
@@ -176,10 +177,19 @@ def _setup_variant(args, name, n_envs, model, small_model, sync, device, first_f
         checks[name] = float(np.abs(first_f[name] - first_f[base]).max())
         print(f"[{fmt_envs(n_envs)}] {name}: max |joint_f - {base}'s| after one step = {checks[name]:.3g}")
     if tnet is not None:
-        from bench.torch_actuator_net import capture
+        from bench.torch_actuator_net import capture, capture_apart
 
-        graph = capture(step, device)
-        return (lambda g=graph, keep=(su, action, tnet): g.replay()), step
+        try:
+            graph = capture(inner, device)
+            checks[name + ":capture"] = "one graph"
+            return (lambda g=graph, keep=(su, action, tnet): g.replay()), step
+        except Exception as e:  # noqa: BLE001 - the two-graph fallback below
+            print(f"[{fmt_envs(n_envs)}] {name}: one graph failed ({type(e).__name__}: {e}); two graphs on one stream")
+        group = ctrl._engine.part("actuators").nets[0]
+        group.launch = lambda engine, state, control: None
+        replay = capture_apart(inner, tnet, ctrl.num_substeps, device)
+        checks[name + ":capture"] = "two graphs"
+        return (lambda r=replay, keep=(su, action, tnet): r()), step
     else:
         with wp.ScopedCapture(device=device) as cap:
             step()
@@ -230,6 +240,7 @@ def run_one(args, n_envs, model, small_model, sync, device) -> list[dict]:
                 "iters": t["iters"],
                 "clock": args.clock,
                 "check_max_abs_joint_f": checks.get(name),
+                "torch_capture": checks.get(name + ":capture"),
             }
         )
     return rows
@@ -245,7 +256,7 @@ def markdown(meta: dict, rows: list[dict], args) -> str:
     body = [
         [
             fmt_envs(r["envs"]) + ("*" if r["layout"] == "synthetic" else ""),
-            LABELS[r["variant"]],
+            LABELS[r["variant"]] + ("†" if r.get("torch_capture") == "two graphs" else ""),
             r["replay"],
             fmt_us(r["us"] * 1e-6),
             fmt_ratio(r["x_plain"]),
@@ -255,6 +266,14 @@ def markdown(meta: dict, rows: list[dict], args) -> str:
     out.append(md_table(["envs", "variant", "replay", "µs", "× plain"], body))
     if any(r["layout"] == "synthetic" for r in rows):
         out.append("\n\\* synthetic layout (bench/common.py): a small model's layout tiled to N envs.\n")
+    if any(r.get("torch_capture") == "two graphs" for r in rows):
+        out.append("\n† wpctrl's step and the torch network as two graphs replayed on one stream (one graph of both "
+                   "could not be captured).\n")  # fmt: skip
+    checks = [r for r in rows if r.get("check_max_abs_joint_f") is not None and r["replay"] == "graph"]
+    if checks:
+        each = [f"{fmt_envs(r['envs'])} {r['variant']} {r['check_max_abs_joint_f']:.2g} N·m" for r in checks]
+        out.append(f"\nTorch baseline against the network kernel, max |joint_f| difference after the first control "
+                   f"step: {'; '.join(each)}.\n")  # fmt: skip
     return "".join(out)
 
 

@@ -113,26 +113,50 @@ class TorchActuatorNet:
 
 
 def capture(step, device):
-    """A CUDA graph of ``step`` (wpctrl launches and torch ops together), captured on one stream that Warp and torch
-    share (torch opens the capture, Warp joins it as an external one). Returns the graph (``graph.replay()``)."""
+    """A CUDA graph of ``step`` (wpctrl launches and torch ops together), as Warp's own torch-interop tests capture
+    one: a torch stream that Warp also launches on (``wp.stream_from_torch``), entered before torch opens the capture,
+    and Warp told of that capture (``wp.capture_begin(external=True)``). Returns the graph (``graph.replay()``)."""
     dev = torch.device("cuda", wp.get_device(device).ordinal)
-    side = torch.cuda.Stream(device=dev)
-    side.wait_stream(torch.cuda.current_stream(dev))
-    ws = wp.stream_from_torch(side)
-    # sync_enter=False: a captured stream may not wait on Warp's own (uncaptured) stream
+    torch_stream = torch.cuda.Stream(device=dev)
+    warp_stream = wp.stream_from_torch(torch_stream)
     torch.cuda.synchronize(dev)
-    with torch.cuda.stream(side), wp.ScopedStream(ws, sync_enter=False):
+    with wp.ScopedStream(warp_stream), torch.cuda.stream(torch_stream):
         for _ in range(2):  # warm-up: kernels loaded, cuBLAS / cuDNN workspaces allocated
             step()
     torch.cuda.synchronize(dev)
     graph = torch.cuda.CUDAGraph()
-    with (
-        torch.cuda.graph(graph, stream=side, capture_error_mode="thread_local"),
-        wp.ScopedStream(ws, sync_enter=False),
-    ):
-        wp.capture_begin(stream=ws, external=True, capture_mode=wp.CaptureMode.THREAD_LOCAL)
+    with wp.ScopedStream(warp_stream), torch.cuda.graph(graph, stream=torch_stream):
+        wp.capture_begin(force_module_load=False, external=True)
         try:
             step()
         finally:
-            wp.capture_end(stream=ws)
+            wp.capture_end()
     return graph
+
+
+def capture_apart(ctrl_step, tnet, substeps: int, device):
+    """The fallback when one graph of both cannot be captured: wpctrl's step (its network launch a no-op) as a Warp
+    graph and the torch network's ``substeps`` substeps as a torch graph, replayed one after the other on Warp's
+    stream. The same work as the one-graph baseline (the network's substeps run after the step's instead of between
+    them); returns the replay function."""
+    dev = torch.device("cuda", wp.get_device(device).ordinal)
+    with wp.ScopedCapture(device=device) as cap:
+        ctrl_step()
+    torch_stream = torch.cuda.Stream(device=dev)
+    torch.cuda.synchronize(dev)
+    with torch.cuda.stream(torch_stream):
+        for _ in range(2):
+            tnet.substep()
+    torch.cuda.synchronize(dev)
+    graph = torch.cuda.CUDAGraph()
+    with torch.cuda.graph(graph, stream=torch_stream):
+        for _ in range(substeps):
+            tnet.substep()
+    on_warp = wp.stream_to_torch(wp.get_stream(device))
+
+    def replay(g=graph, wg=cap.graph):
+        wp.capture_launch(wg)
+        with torch.cuda.stream(on_warp):
+            g.replay()
+
+    return replay

@@ -131,7 +131,7 @@ def _torch_net(ctrl, state, control, lstm_cells: bool = False):
     from bench.torch_actuator_net import TorchActuatorNet
 
     tnet = TorchActuatorNet(ctrl, state, control, lstm_cells)
-    group = ctrl._engine.part("actuators").nets[0]
+    group = ctrl._engine.part("actuator_models").nets[0]
     group.launch = lambda engine, state, control: tnet.substep()
     return tnet
 
@@ -185,7 +185,7 @@ def _setup_variant(args, name, n_envs, model, small_model, sync, device, first_f
             return (lambda g=graph, keep=(su, action, tnet): g.replay()), step
         except Exception as e:  # noqa: BLE001 - the two-graph fallback below
             print(f"[{fmt_envs(n_envs)}] {name}: one graph failed ({type(e).__name__}: {e}); two graphs on one stream")
-        group = ctrl._engine.part("actuators").nets[0]
+        group = ctrl._engine.part("actuator_models").nets[0]
         group.launch = lambda engine, state, control: None
         replay = capture_apart(inner, tnet, ctrl.num_substeps, device)
         checks[name + ":capture"] = "two graphs"

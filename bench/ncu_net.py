@@ -49,7 +49,7 @@ def main(argv=None):
             su.ctrl.set_action(action, su.state)
             for _ in range(su.ctrl.num_substeps):
                 su.ctrl.before_simulation_step(su.state, su.control)
-        group = su.ctrl._engine.part("actuators").nets[0]
+        group = su.ctrl._engine.part("actuator_models").nets[0]
         print(f"{name}: {n} envs ({su.layout_kind}), kernel {group.kernel_kind}, {n * group.n} rows", flush=True)
         runs.append((su, action))
     sync()

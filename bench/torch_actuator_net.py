@@ -27,7 +27,7 @@ class TorchActuatorNet:
         """``lstm_cells``: run the LSTM as its cell equations with ``torch.addmm`` (cuBLAS) instead of ``nn.LSTM``
         (cuDNN), for batches cuDNN refuses."""
         eng = ctrl._engine
-        group = eng.part("actuators").nets[0]
+        group = eng.part("actuator_models").nets[0]
         dev = torch.device("cuda", wp.get_device(eng.device).ordinal) if wp.get_device(eng.device).is_cuda else "cpu"
         r0, n = group.row0, group.n
         b = eng.binding

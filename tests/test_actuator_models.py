@@ -218,7 +218,7 @@ def test_default_step_is_unchanged_by_the_actuator_fields():
     model = build_panda(E)
     rng = np.random.default_rng(5)
     ctrl, s, c, q, qd, target = _one_substep(_arm(None), model, rng, track_effort=False)
-    assert ctrl._engine.layout.act_model == () and ctrl._engine.part("actuators") is None
+    assert ctrl._engine.layout.act_model == () and ctrl._engine.part("actuator_models") is None
     pd = f32(400.0) * (target - q) + f32(20.0) * (f32(0.0) - qd)
     np.testing.assert_allclose(c.joint_f.numpy()[ctrl._engine.binding.dof_index], np.clip(pd, -60, 60), rtol=1e-6)
 

@@ -98,7 +98,7 @@ def test_unrolled_fused_kernel_matches_the_runtime_loop_kernel():
     # The coupled drive with the unrolled inertia: same torques as with the runtime loops.
     torques = []
     for fc in (loop, unrolled):
-        part = eng.part("coupled")
+        part = eng.part("coupled_drive")
         part._fused, part._launch = fc, None
         s, c, _, _, target = _setup(ctrl, model, np.random.default_rng(5))
         ctrl.set_action(target, s)
@@ -216,7 +216,7 @@ def test_coupled_without_active_limits_is_the_linear_implicit_solution():
     # Per-env gains, as (num_envs, rows) arrays (bound at the first substep).
     kp = np.array([[1e3] * 9, [400.0] * 9, [2e3] * 9], np.float32)
     kd = np.array([[1e2] * 9, [40.0] * 9, [50.0] * 9], np.float32)
-    drive = ctrl._engine.part("drive")  # per-env gain arrays (bound at the first substep)
+    drive = ctrl._engine.part("drive_properties")  # per-env gain arrays (bound at the first substep)
     drive.kp = wp.array(kp)
     drive.kd = wp.array(kd)
     s, c, q, qd, target = _setup(ctrl, model, np.random.default_rng(1))
@@ -341,12 +341,12 @@ def test_coupled_fallback_sweeps_match_numpy_when_the_active_set_does_not_settle
     count says so (1 + sweeps + 1)."""
     from newton.actuators import JointSpaceResponse
 
-    from wpctrl.kernels.drive import PGS_SWEEPS
+    from wpctrl.kernels.coupled_drive import PGS_SWEEPS
 
     model = build_panda(E)
     lim = 30.0
     ctrl = _coupled_ctrl(model, lim)
-    ctrl._engine.part("coupled").max_iterations = 1
+    ctrl._engine.part("coupled_drive").max_iterations = 1
     s, c, q, qd, target = _setup(ctrl, model, np.random.default_rng(2), spread=0.5)
     ctrl.set_action(target, s)
     ctrl.before_simulation_step(s, c)

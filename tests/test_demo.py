@@ -184,7 +184,7 @@ def test_demo_bad_arguments_exit_2(argv, message, capsys):
 
 
 def test_help_lists_every_control_mode_and_solver(capsys):
-    from wpctrl.controllers.base import _EXPLICIT_PD
+    from wpctrl.controllers.base_controller import _EXPLICIT_PD
     from wpctrl.robots import PANDA_CONTROL_MODES
 
     assert list(demo.PANDA_MODES) == list(PANDA_CONTROL_MODES)  # the light copy --help reads is the real list

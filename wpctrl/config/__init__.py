@@ -1,24 +1,24 @@
 """Configs: host dataclasses that mirror ManiSkill 3's controller configs, and the per-joint rows they become.
 
-Never touches a device. :mod:`.joint` (joint controllers), :mod:`.ee` (end-effector controllers), :mod:`.rows`
-(validation and the flat per-joint tables one kernel launch handles).
+Never touches a device. :mod:`.errors` (:class:`ConfigError`, :class:`MimicJointError`), :mod:`.joint` (joint
+controllers), :mod:`.mobile_base` (mobile-base controllers), :mod:`.ee` (end-effector controllers),
+:mod:`.actuator_models` (actuator models) and :mod:`.networks` (actuator network files), :mod:`.validate` (the
+per-field checks), :mod:`.rows` (the flat per-joint tables one kernel launch handles).
 """
 
-from .actuators import ActuatorNet, DCMotor, PositionBasedEffortLimit
-from .base import PDBaseForwardVelControllerConfig, PDBaseVelControllerConfig
+from .actuator_models import ActuatorNet, DCMotor, PositionBasedEffortLimit
 from .ee import EE_CONFIGS, MAX_EE_DOF, EESpec, PDEEPosControllerConfig, PDEEPoseControllerConfig, ee_rows
+from .errors import ConfigError, MimicJointError
 from .joint import (
-    ConfigError,
     ControllerConfig,
-    DriveMode,
     JointEffortControllerConfig,
-    MimicJointError,
     PassiveControllerConfig,
     PDJointPosControllerConfig,
     PDJointPosMimicControllerConfig,
     PDJointPosVelControllerConfig,
     PDJointVelControllerConfig,
 )
+from .mobile_base import PDBaseForwardVelControllerConfig, PDBaseVelControllerConfig
 from .rows import (
     FLAG_BINARY,
     FLAG_DELTA,
@@ -35,6 +35,7 @@ from .rows import (
     check_mode_dict,
     config_rows,
 )
+from .validate import DriveMode
 
 __all__ = [
     "ActuatorNet",

@@ -5,7 +5,8 @@ pd_ee_pose.py``), so a ManiSkill ``pd_ee_*`` control-mode dict ports by changing
 device: :func:`ee_rows` validates a config and returns the joint rows (position rows driven by the EE kernels) plus
 an :class:`EESpec` with the EE-specific parameters.
 
-Units: positions [m], rotations [rad] (Euler XYZ increments, as ManiSkill), joint quantities as in ``config.py``.
+Units: positions [m], rotations [rad] (Euler XYZ increments, as ManiSkill), joint quantities as in
+:mod:`wpctrl.config.joint`.
 """
 
 from __future__ import annotations
@@ -18,7 +19,9 @@ from typing import Literal, Union
 import numpy as np
 
 from . import rows as cfg
-from .joint import ConfigError, ControllerConfig, DriveMode, PDJointPosControllerConfig
+from .errors import ConfigError
+from .joint import ControllerConfig, PDJointPosControllerConfig
+from .validate import DriveMode
 
 POS_FRAMES = ("root_translation", "body_translation")
 POSE_FRAMES = (
@@ -139,7 +142,10 @@ def _vec3(c, fname: str, value, allow_none: bool) -> np.ndarray:
             return np.full(3, np.nan)
         raise ConfigError(f"{_name(c)}.{fname}: expected a number or 3 numbers, got None")
     try:
-        a = np.asarray(value, dtype=np.float64)
+        raw = np.asarray(value)
+        if raw.dtype.kind not in "iuf":  # strings ("0.1" would parse), bools, objects
+            raise TypeError(f"dtype {raw.dtype}")
+        a = raw.astype(np.float64)
     except (TypeError, ValueError) as e:
         raise ConfigError(f"{_name(c)}.{fname}: expected a number or 3 numbers, got {value!r}") from e
     if a.ndim > 1 or (a.ndim == 1 and a.shape[0] not in (1, 3)):

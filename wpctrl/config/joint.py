@@ -9,27 +9,14 @@ damping in N·m·s/rad (N·s/m), force limits in N·m (N).
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Literal, Union
+from typing import Union
 
-from .actuators import ActuatorNet, DCMotor, PositionBasedEffortLimit
+from .actuator_models import ActuatorNet, DCMotor, PositionBasedEffortLimit
+from .validate import DriveMode
 
 Actuator = Union[DCMotor, PositionBasedEffortLimit, ActuatorNet]
-
-logger = logging.getLogger("wpctrl")
-
-DriveMode = Literal["force", "acceleration"]
-_DRIVE_MODES = ("force", "acceleration")
-
-
-class ConfigError(ValueError):
-    """A controller config (or its binding to a model) is invalid. The message names the field."""
-
-
-class MimicJointError(ConfigError, TypeError):
-    """A mimic entry names a joint outside ``joint_names`` (ManiSkill raises ``TypeError`` here)."""
 
 
 @dataclass

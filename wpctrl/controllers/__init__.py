@@ -1,24 +1,23 @@
 """Controllers: the ManiSkill-shaped API over one control mode's device engine.
 
-:mod:`.base` (joint controllers, the combined controller), :mod:`.ee` (end-effector controllers), :mod:`.actuation`
-(per-env drive properties, delay and effort readout), :mod:`.inputs` (action and env-id conversion), :mod:`.build`
-(``build_controller``).
+:mod:`.base_controller` (:class:`BaseController`: the per-step API, the combined controller), :mod:`.joint` (joint
+controllers), :mod:`.mobile_base` (mobile-base controllers), :mod:`.ee` (end-effector controllers),
+:mod:`.drive_properties` (per-env drive properties, delay and effort readout), :mod:`.inputs` (action and env-id
+conversion), :mod:`.build` (``build_controller``).
 """
 
-from .base import (
-    BaseController,
-    CombinedController,
+from .base_controller import BaseController, CombinedController
+from .build import build_controller
+from .ee import PDEEPosController, PDEEPoseController
+from .joint import (
     JointEffortController,
     PassiveController,
-    PDBaseForwardVelController,
-    PDBaseVelController,
     PDJointPosController,
     PDJointPosMimicController,
     PDJointPosVelController,
     PDJointVelController,
 )
-from .build import build_controller
-from .ee import PDEEPosController, PDEEPoseController
+from .mobile_base import PDBaseForwardVelController, PDBaseVelController
 
 __all__ = [
     "BaseController",

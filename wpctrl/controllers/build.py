@@ -11,22 +11,20 @@ from typing import Any
 
 import newton
 
-from ..config import base as cfg_base
 from ..config import ee as cfg_ee
+from ..config import mobile_base as cfg_base
 from ..config import rows as cfg
-from .base import (
-    BaseController,
-    CombinedController,
+from .base_controller import BaseController, CombinedController
+from .ee import PDEEPosController, PDEEPoseController
+from .joint import (
     JointEffortController,
     PassiveController,
-    PDBaseForwardVelController,
-    PDBaseVelController,
     PDJointPosController,
     PDJointPosMimicController,
     PDJointPosVelController,
     PDJointVelController,
 )
-from .ee import PDEEPosController, PDEEPoseController
+from .mobile_base import PDBaseForwardVelController, PDBaseVelController
 
 cfg.PDJointPosControllerConfig.controller_cls = PDJointPosController
 cfg.PDJointPosMimicControllerConfig.controller_cls = PDJointPosMimicController
@@ -78,8 +76,8 @@ def build_controller(
             stable at implicit-drive gains), or ``"coupled"`` (PhysX's articulation drive: the same law solved
             jointly for all rows with the full inverse-inertia block ``A`` of the articulation, recomputed from
             ``joint_q`` every substep, and the force limits enforced inside the solve:
-            ``tau = clamp(b - diag(dt Kd + dt^2 Kp) A tau)``; one extra launch per substep; see the README section
-            "PhysX-faithful drive (coupled)").
+            ``tau = clamp(b - diag(dt Kd + dt^2 Kp) A tau)``; one extra launch per substep; see docs/actuation.md,
+            "The coupled drive").
         inertia_update: When the inertia is recomputed from ``joint_q``: ``"control"`` (once per control step) or
             ``"substep"`` (before every substep). Stable PD and acceleration drives refresh r = (H^-1)_ii (default
             ``"control"``, in ``set_action``); the coupled drive H (default ``"substep"``; ``"control"`` computes H

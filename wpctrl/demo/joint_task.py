@@ -1,6 +1,6 @@
 """What the demo does for a family of control modes: the scripted policy, the tracked quantities, the plotted trace.
 
-:func:`wpctrl.demo.make_task` picks the task for a mode; :class:`JointTask` covers ManiSkill's joint-space modes.
+:func:`wpctrl.demo.run.make_task` picks the task for a mode; :class:`JointTask` covers ManiSkill's joint-space modes.
 """
 
 from __future__ import annotations

@@ -15,10 +15,9 @@ import numpy as np
 from ..binding import JointBinding
 from ..config import ConfigError
 from ..config import rows as cfg
-from ..config.actuators import ACT_DC_MOTOR, ACT_NET, ACT_NONE, ACT_POSITION_LIMIT
+from ..config.actuator_models import ACT_DC_MOTOR, ACT_NET, ACT_NONE, ACT_POSITION_LIMIT
 from ..config.ee import EESpec
-from ..kernels import actuators as KA
-from ..kernels import pd_step as KS
+from ..kernels import actuator_models, pd_step
 from .launch import _index_table
 
 EXPLICIT_MODES = {"naive": 1, "stable": 2, "coupled": 3}
@@ -53,8 +52,8 @@ class Plan:
     qd_idx: np.ndarray = None
     q_stride: int = 0
     qd_stride: int = 0
-    row_f: np.ndarray = None  # (rows, 8) float32: bounds, mimic coupling, joint limits
-    layout: KS.StepLayout = None
+    row_f: np.ndarray = None  # (rows, ROW_F_WIDTH = 9) float32: bounds, mimic coupling, joint limits, EMA weight
+    layout: pd_step.StepLayout = None
     parts: tuple[str, ...] = ()
 
     # -- derived --------------------------------------------------------------------------------------------------
@@ -188,7 +187,7 @@ def make_plan(rows: cfg.Rows, binding: JointBinding, options: Options, ee_specs:
         qd_idx=qd_idx,
         q_stride=q_stride,
         qd_stride=qd_stride,
-        row_f=KS.row_float_table(rows, binding.qlimits.astype(np.float32).reshape(R, 2)),
+        row_f=pd_step.row_float_table(rows, binding.qlimits.astype(np.float32).reshape(R, 2)),
     )
     plan.parts = _active_parts(plan)
     plan.layout = _layout(plan)
@@ -202,8 +201,8 @@ def _active_parts(plan: Plan) -> tuple[str, ...]:
     return tuple(name for name, cls in part_classes().items() if cls.wanted(plan))
 
 
-def _layout(plan: Plan) -> KS.StepLayout:
-    """The step kernels' compile-time layout (one thread per env, rows unrolled: kernels/pd_step.py)."""
+def _layout(plan: Plan) -> pd_step.StepLayout:
+    """The step kernels' compile-time layout (one thread per env, rows unrolled: :mod:`wpctrl.kernels.pd_step`)."""
     rows = plan.rows
     o = plan.options
     base = bool((rows.base_axis >= 0).any())
@@ -212,7 +211,7 @@ def _layout(plan: Plan) -> KS.StepLayout:
         return tuple(int(x) for x in a)
 
     vel_rows = (rows.kind != cfg.ROW_POS) | ((rows.flags & cfg.FLAG_VEL_TARGET) != 0)
-    return KS.StepLayout(
+    return pd_step.StepLayout(
         kind=ints(rows.kind),
         flags=ints(rows.flags),
         act_col=ints(rows.act_col),
@@ -242,5 +241,5 @@ def _limit_tables(rows: cfg.Rows) -> tuple:
     for r0, count, what in rows.extras:
         if isinstance(what, tuple):  # (positions, efforts)
             for r in range(r0, r0 + count):
-                t[r] = KA.table_constants(*what)
+                t[r] = actuator_models.table_constants(*what)
     return tuple(t)

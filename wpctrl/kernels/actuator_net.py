@@ -29,7 +29,7 @@ from typing import NamedTuple
 import numpy as np
 import warp as wp
 
-from . import actuators as _act
+from .actuator_models import dc_motor_clamp
 from .pd import _at
 
 wp.set_module_options({"enable_backward": False})
@@ -200,7 +200,7 @@ def write_effort(
     """The computed effort ``u`` through the DC-motor envelope (``sat``, ``vl``) and the force limit ``lim`` into
     ``joint_f`` (and the effort readout when it is on). The kernels read the row's parameters with its other inputs,
     before the network: a load here would put one more memory round trip after it."""
-    f = _act.dc_motor_clamp(u, qd, sat, vl, lim)
+    f = dc_motor_clamp(u, qd, sat, vl, lim)
     joint_f_out[di] = f
     if computed_effort_out:
         computed_effort_out[env, r] = u

@@ -9,21 +9,21 @@ from __future__ import annotations
 import newton
 import warp as wp
 
-from ..config import ee as _ce
+from ..config import ee as ee_config
 
 wp.set_module_options({"enable_backward": False})
 
-MAX_DOF = wp.constant(_ce.MAX_EE_DOF)
-SOLVER_PINV = wp.constant(_ce.SOLVER_PINV)
-FRAME_BODY_TRANS = wp.constant(_ce.FRAME_BODY_TRANS)
-FRAME_BODY_ROT = wp.constant(_ce.FRAME_BODY_ROT)
+MAX_DOF = wp.constant(ee_config.MAX_EE_DOF)
+SOLVER_PINV = wp.constant(ee_config.SOLVER_PINV)
+FRAME_BODY_TRANS = wp.constant(ee_config.FRAME_BODY_TRANS)
+FRAME_BODY_ROT = wp.constant(ee_config.FRAME_BODY_ROT)
 JOINT_PRISMATIC = wp.constant(int(newton.JointType.PRISMATIC))
 JOINT_REVOLUTE = wp.constant(int(newton.JointType.REVOLUTE))
 
-vecD = wp.types.vector(length=_ce.MAX_EE_DOF, dtype=float)
-mat3D = wp.types.matrix(shape=(3, _ce.MAX_EE_DOF), dtype=float)
-mat6D = wp.types.matrix(shape=(6, _ce.MAX_EE_DOF), dtype=float)
-matDD = wp.types.matrix(shape=(_ce.MAX_EE_DOF, _ce.MAX_EE_DOF), dtype=float)
+vecD = wp.types.vector(length=ee_config.MAX_EE_DOF, dtype=float)
+mat3D = wp.types.matrix(shape=(3, ee_config.MAX_EE_DOF), dtype=float)
+mat6D = wp.types.matrix(shape=(6, ee_config.MAX_EE_DOF), dtype=float)
+matDD = wp.types.matrix(shape=(ee_config.MAX_EE_DOF, ee_config.MAX_EE_DOF), dtype=float)
 vec6 = wp.types.vector(length=6, dtype=float)
 mat66 = wp.types.matrix(shape=(6, 6), dtype=float)
 

@@ -10,7 +10,7 @@ Private module. Per env, one thread:
 3. its Cholesky factor ``H = L L^T`` (float64, pivots floored like Newton's ``JointSpaceResponse``), in registers;
 4. for the controlled rows (articulation-local DOFs ``d_r``): ``y_r = L^-1 e_{d_r}``, so that
    ``(H^-1)_{d_r d_c} = y_r . y_c``. The response kernel writes ``r = (H^-1)_{d_r d_r}``; the coupled drive
-   (:mod:`wpctrl.kernels.drive`) uses the whole block ``A = Y Y^T``.
+   (:mod:`wpctrl.kernels.coupled_drive`) uses the whole block ``A = Y Y^T``.
 
 Supported articulations (:func:`chain_layout` checks, else callers fall back to ``JointSpaceResponse``): fixed base
 (the root joint's parent is the world), revolute / prismatic / fixed joints only, at most :data:`MAX_CHAIN_DOFS`

@@ -34,9 +34,9 @@ def subtrees_contiguous(template: tuple, n: int) -> bool:
 
 
 def unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool):
-    """The fused inertia function with the articulation's structure as compile-time constants (same signature and
-    result as :func:`chain_funcs`' runtime-loop version; the chain tables passed to it are not read), and the function
-    of H alone it is built on (``chain_h``, same arguments: H with the armature, lower triangle).
+    """The fused inertia function with the articulation's structure as compile-time constants (same signature and result
+    as :func:`~wpctrl.kernels.inertia.chain_funcs`' runtime-loop version; the chain tables passed to it are not read),
+    and the function of H alone it is built on (``chain_h``, same arguments: H with the armature, lower triangle).
 
     Every loop is unrolled and every local matrix is indexed by constants, so on CUDA the matrices live in registers
     instead of per-thread local memory. H is built in composite form where :func:`subtrees_contiguous` allows it

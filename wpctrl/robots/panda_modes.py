@@ -34,9 +34,9 @@ def panda_control_modes() -> dict[str, dict[str, ControllerConfig]]:
     ``pd_ee_pose``, ``pd_ee_target_delta_pos``, ``pd_ee_target_delta_pose``.
     Each is ``{"arm": <arm config>, "gripper": <gripper config>}``, and every config object is a separate copy.
 
-    EE modes (``ee_link="panda_hand_tcp"``, the site :func:`panda` keeps; ``urdf_path=None``: a Panda loaded with
-    ``add_urdf(collapse_fixed_joints=True)`` needs ``urdf_path`` set to its URDF): delta position bounds ±0.1 [m],
-    delta rotation bounds ±0.1 [rad]; ``pd_ee_pose`` takes absolute poses (no bounds, not normalised).
+    EE modes (``ee_link="panda_hand_tcp"``, the site :func:`~wpctrl.robots.panda` keeps; ``urdf_path=None``: a Panda
+    loaded with ``add_urdf(collapse_fixed_joints=True)`` needs ``urdf_path`` set to its URDF): delta position bounds
+    ±0.1 [m], delta rotation bounds ±0.1 [rad]; ``pd_ee_pose`` takes absolute poses (no bounds, not normalised).
 
     Arm: stiffness 1e3 [N·m/rad], damping 1e2 [N·m·s/rad], force limit 100 [N·m]; delta bounds ±0.1 [rad], velocity
     bounds ±1 [rad/s]. Gripper (all modes): a mimic position controller on both fingers, bounds [-0.01, 0.04] [m]

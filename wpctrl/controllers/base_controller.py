@@ -21,7 +21,7 @@ from ..config import rows as cfg
 from ..engine.core import _Engine
 from ..engine.parts import gravity
 from ..engine.plan import Options, make_plan
-from .actuation import ActuationMixin, check_actuation_options
+from .drive_properties import DrivePropertiesMixin, check_actuation_options
 from .inputs import _action_array, _as_rows_array, _claim, _env_selection, _raise_on_nonfinite, _type_name
 
 _ACTUATIONS = ("implicit", "explicit")
@@ -30,7 +30,7 @@ _EXPLICIT_PD = ("naive", "stable", "coupled")
 _INERTIA_UPDATES = ("control", "substep")
 
 
-class BaseController(ActuationMixin):
+class BaseController(DrivePropertiesMixin):
     """A ManiSkill-style joint controller over all envs of a Newton model.
 
     Build it with :func:`wpctrl.build_controller` (or ``Config.controller_cls(config, model, ...)``). Per control
@@ -437,63 +437,6 @@ def _batched(space: gym.spaces.Box, num_envs: int) -> gym.spaces.Box:
     if num_envs > 1:
         return gym.vector.utils.batch_space(space, num_envs)
     return space
-
-
-class PDJointPosController(BaseController):
-    """Position targets: absolute, delta from the measured position, or delta on a virtual target."""
-
-    sets_target_qpos = True
-
-
-class PDJointPosMimicController(PDJointPosController):
-    """PDJointPos whose mimic joints follow ``target[control] * multiplier + offset``."""
-
-
-class PDJointVelController(BaseController):
-    """Velocity targets (stiffness 0): ``qd* = action`` once per control step."""
-
-    sets_target_qvel = True
-
-    @property
-    def target_qpos(self):
-        """A velocity controller has no position target (None)."""
-        return None
-
-
-class PDBaseVelController(PDJointVelController):
-    """Ego-centric base velocity (ManiSkill's PDBaseVelController): the action's ``[vx, vy]`` is rotated by the
-    measured yaw (the third joint's position at ``set_action``) into the world frame of the base's x / y joints."""
-
-
-class PDBaseForwardVelController(PDJointVelController):
-    """Forward-only ego-centric base velocity (ManiSkill's PDBaseForwardVelController): action ``[v, w]``, velocity
-    targets ``[v cos(yaw), v sin(yaw), w]`` with the measured yaw."""
-
-
-class PDJointPosVelController(PDJointPosController):
-    """Position targets as PDJointPos plus velocity targets from the second half of the action (never
-    interpolated)."""
-
-    sets_target_qvel = True
-
-
-class JointEffortController(BaseController):
-    """Direct effort control: the scaled action is the joint effort [N·m or N], written to ``Control.joint_f`` before
-    every substep (clamped to ``force_limit``); the built-in drive is off for these joints."""
-
-    @property
-    def target_qpos(self):
-        """An effort controller has no position target (None)."""
-        return None
-
-    @property
-    def target_effort(self) -> wp.array:
-        """(num_envs, n_joints) commanded effort [N·m or N] of the last accepted action (live view)."""
-        return self._view(self._engine.part("effort_command").target_effort)
-
-
-class PassiveController(BaseController):
-    """No action: damping toward zero velocity (stiffness 0) and joint friction."""
 
 
 class CombinedController(BaseController):

@@ -1,11 +1,10 @@
-"""Actuator models (explicit actuation) and commanded efforts, as engine parts.
+"""Actuator models (explicit actuation) as an engine part, with the kernels that set and randomise their per-env
+parameters.
 
-- :class:`EffortCommand`: the ``(num_envs, rows)`` commanded effort of effort rows (JointEffortController), written by
-  ``set_action``, read by the substep kernel (delayed like any target when a delay is on), zeroed by a reset.
-- :class:`ActuatorModels`: per-env DC-motor parameters (``saturation_effort`` / ``velocity_limit``, randomisable like
-  the drive properties) and the actuator networks: each network's rows get one launch after the substep kernel
-  (:mod:`wpctrl.kernels.actuator_net`), and a reset zeroes their history / hidden state. Position tables need no
-  part: they are compiled into the substep kernel.
+:class:`ActuatorModels` holds the per-env DC-motor parameters (``saturation_effort`` / ``velocity_limit``, randomisable
+like the drive properties) and the actuator networks: each network's rows get one launch after the substep kernel
+(:mod:`wpctrl.kernels.actuator_net`), and a reset zeroes their history / hidden state. Position tables need no part:
+they are compiled into the substep kernel (:mod:`wpctrl.kernels.actuator_models`).
 """
 
 from __future__ import annotations
@@ -14,36 +13,75 @@ import numpy as np
 import warp as wp
 
 from ...config import ConfigError
-from ...config.actuators import ActuatorNet
+from ...config.actuator_models import ActuatorNet
 from ...config.networks import read_network
-from ...kernels import actuation as KA
-from ...kernels import actuator_net as KN
-from ...kernels import actuator_net_tiled as KT
-from ...kernels import actuator_net_unrolled as KU
+from ...kernels import actuator_net, actuator_net_tiled, actuator_net_unrolled
+from ...kernels.env_selection import MODE_SCALE, _bump_counter_kernel, _select
 from ..launch import _Launch
-from . import Part
+from .part import Part
+
+wp.set_module_options({"enable_backward": False})
 
 ACTUATOR_FIELDS = ("saturation_effort", "velocity_limit")
 """The per-env actuator-model parameters, in the order of their RNG streams."""
 
 
-class EffortCommand(Part):
-    name = "effort_command"
-    OPTIONAL_ARGS = ("target_effort",)
+@wp.kernel
+def _set_rows_kernel(
+    row0: int,
+    num_rows: int,
+    env_ids_in: wp.array[wp.int32],  # optional
+    env_mask_in: wp.array[wp.bool],  # optional
+    values_in: wp.array2d[float],  # (1 | len(env_ids) | num_envs, num_rows): row 0 broadcasts
+    # Out:
+    param_out: wp.array2d[float],  # (num_envs, rows) a per-env parameter without a model mirror
+):
+    """Copy given values into a per-env parameter (an actuator model's) for the selected envs."""
+    tid = wp.tid()
+    env, rl, i = _select(tid, num_rows, env_ids_in, env_mask_in, param_out.shape[0])
+    if env < 0:
+        return
+    b = 0
+    if values_in.shape[0] > 1:
+        b = i
+        if env_mask_in:
+            b = env
+    param_out[env, row0 + rl] = values_in[b, rl]
 
-    @staticmethod
-    def wanted(plan) -> bool:
-        return plan.has_effort_rows
 
-    def __init__(self, plan, alloc):
-        self.target_effort = alloc.per_env(plan.num_rows)
-
-    def kernel_args(self) -> dict:
-        return {"target_effort": self.target_effort}
+@wp.kernel
+def _randomize_rows_kernel(
+    row0: int,
+    num_rows: int,
+    seed: int,
+    stream: int,  # a stream per parameter: its draws do not depend on which others are drawn
+    mode: int,
+    lo: float,
+    hi: float,
+    env_ids_in: wp.array[wp.int32],  # optional
+    env_mask_in: wp.array[wp.bool],  # optional
+    nominal_in: wp.array[float],  # (rows,) the config's values
+    rng_counter_in: wp.array[wp.int32],  # (1,)
+    # Out:
+    param_out: wp.array2d[float],  # (num_envs, rows)
+):
+    """value = nominal * U(lo, hi) ("scale") or U(lo, hi) ("abs"), as
+    :func:`wpctrl.engine.parts.drive_properties._randomize_drive_kernel`."""
+    tid = wp.tid()
+    env, rl, i = _select(tid, num_rows, env_ids_in, env_mask_in, param_out.shape[0])
+    if env < 0:
+        return
+    r = row0 + rl
+    key = wp.randi(wp.rand_init(seed, rng_counter_in[0]))
+    state = wp.rand_init(key + stream * 7919, env * param_out.shape[1] + r)
+    x = lo + (hi - lo) * wp.randf(state)
+    if mode == MODE_SCALE:
+        x = nominal_in[r] * x
+    param_out[env, r] = x
 
 
 class ActuatorModels(Part):
-    name = "actuators"
+    name = "actuator_models"
     OPTIONAL_ARGS = ("sat_effort", "vel_limit")
 
     @staticmethod
@@ -83,7 +121,7 @@ class ActuatorModels(Part):
         for p, arr in enumerate((self.sat_effort, self.vel_limit)):
             if enabled[p] and dim:
                 wp.launch(
-                    KA._set_rows_kernel,
+                    _set_rows_kernel,
                     dim=dim,
                     inputs=[row0, num_rows, env_ids, env_mask, dev_values[p], arr],
                     device=engine.device,
@@ -98,13 +136,13 @@ class ActuatorModels(Part):
         for p, arr in enumerate((self.sat_effort, self.vel_limit)):
             if enabled[p]:
                 wp.launch(
-                    KA._randomize_rows_kernel,
+                    _randomize_rows_kernel,
                     dim=dim,
                     inputs=[row0, num_rows, int(seed), 4 + p, int(mode_abs), float(lo[p]), float(hi[p]), env_ids,
                             env_mask, self.nominal[p], c.rng_counter, arr],
                     device=engine.device,
                 )  # fmt: skip
-        wp.launch(KA._bump_counter_kernel, dim=1, inputs=[c.rng_counter], device=engine.device)
+        wp.launch(_bump_counter_kernel, dim=1, inputs=[c.rng_counter], device=engine.device)
 
 
 class _NetGroup:
@@ -116,7 +154,7 @@ class _NetGroup:
         net = read_network(spec)
         E, dev = plan.num_envs, alloc.device
         taps = tuple(int(i) for i in spec.input_idx) if net.kind == "mlp" else ()
-        self.layout = KN.NetLayout(
+        self.layout = actuator_net.NetLayout(
             dense=net.dense,
             lstm=net.lstm,
             taps=taps,
@@ -126,19 +164,19 @@ class _NetGroup:
             q_lin=_consecutive(plan.q_idx, plan.strided, row0, n),
             qd_lin=_consecutive(plan.qd_idx, plan.strided, row0, n),
         )
-        self.kernel_kind = KN.choose_kernel(self.layout, net.weights.size, spec.kernel)
+        self.kernel_kind = actuator_net.choose_kernel(self.layout, net.weights.size, spec.kernel)
         extra = {}
         if self.kernel_kind == "tiled":
-            wmat, bias = KT.pack(self.layout, net.weights)
-            if wmat.size + bias.size > KN.TILED_MAX_WEIGHTS:
+            wmat, bias = actuator_net_tiled.pack(self.layout, net.weights)
+            if wmat.size + bias.size > actuator_net.TILED_MAX_WEIGHTS:
+                most = actuator_net.TILED_MAX_WEIGHTS
                 raise ConfigError(
-                    f"actuator.network: {net.weights.size} weights and biases; the tiled kernel holds at most "
-                    f"{KN.TILED_MAX_WEIGHTS} (as {wmat.shape[0]} x {wmat.shape[1]} matrices and {bias.size} biases) "
-                    f"in a block's shared memory"
+                    f"actuator.network: {net.weights.size} weights and biases; the tiled kernel holds at most {most} "
+                    f"(as {wmat.shape[0]} x {wmat.shape[1]} matrices and {bias.size} biases) in a block's shared memory"
                 )
             cpu = wp.get_device(dev).is_cpu
             # On the CPU a block is one thread (a tile one row), unless Warp's cooperative CPU blocks are on.
-            self.block_dim = 1 if cpu and not wp.config.enable_cpu_blocks else KT.BLOCK_DIM
+            self.block_dim = 1 if cpu and not wp.config.enable_cpu_blocks else actuator_net_tiled.BLOCK_DIM
             tiles = -(-E * n // self.block_dim)
             sms = 1 if cpu else wp.get_device(dev).sm_count
             self.blocks = max(1, min(tiles, 8 * sms))
@@ -149,15 +187,15 @@ class _NetGroup:
                 "num_tiles": tiles,
                 "num_blocks": self.blocks,
             }
-            self.kernel = KT.tiled_kernel(self.layout, self.block_dim)
+            self.kernel = actuator_net_tiled.tiled_kernel(self.layout, self.block_dim)
         hist_shape, state_shape = self.layout.state_shapes(E)
         self.hist = wp.zeros(hist_shape, dtype=wp.float32, device=dev)
         self.lstm_h = wp.zeros(state_shape, dtype=wp.float32, device=dev)
         self.lstm_c = wp.zeros(state_shape, dtype=wp.float32, device=dev)
         if self.kernel_kind == "unrolled":
             scales = (spec.pos_scale, spec.vel_scale, spec.torque_scale)
-            self.kernel = KU.unrolled_kernel(self.layout, net.weights, scales)
-            extra = {"hist_out": KU.history_vectors(self.hist)}
+            self.kernel = actuator_net_unrolled.unrolled_kernel(self.layout, net.weights, scales)
+            extra = {"hist_out": actuator_net_unrolled.history_vectors(self.hist)}
         else:
             extra["hist_out"] = self.hist
         self._extra = extra
@@ -166,7 +204,7 @@ class _NetGroup:
     def launch(self, engine, state, control) -> None:
         if self._launch is None:
             s = self.spec
-            effort = engine.part("effort")
+            effort = engine.part("effort_readout")
             per_call = {
                 "row0": self.row0,
                 "pos_scale": float(s.pos_scale),
@@ -186,7 +224,7 @@ class _NetGroup:
             if self.kernel_kind == "tiled":
                 dim, block_dim = (self.blocks, self.block_dim), self.block_dim
             else:
-                dim, block_dim = engine.num_envs * self.n, KU.BLOCK_DIM
+                dim, block_dim = engine.num_envs * self.n, actuator_net_unrolled.BLOCK_DIM
             self._launch = engine._launch(self.kernel, dim, per_call, block_dim)
         ln = self._launch
         ln.bind("joint_q_in", state.joint_q)
@@ -200,7 +238,7 @@ class _NetGroup:
         if dim == 0:
             return
         wp.launch(
-            KN._reset_state_kernel,
+            actuator_net._reset_state_kernel,
             dim=(dim, self.n),
             inputs=[engine.num_envs, self.n, env_ids, env_mask, self.hist, self.lstm_h, self.lstm_c],
             device=engine.device,

@@ -6,11 +6,11 @@ from __future__ import annotations
 
 import warp as wp
 
-from . import Part
+from .part import Part
 
 
 class EffortReadout(Part):
-    name = "effort"
+    name = "effort_readout"
     OPTIONAL_ARGS = ("computed_effort", "applied_effort", "saturation_count")
 
     @staticmethod

@@ -1,17 +1,19 @@
-"""RL-grade actuation on top of the ManiSkill controllers: per-env drive properties and their randomisation, command
-delay, effort readout (the device side lives in ``engine.py`` and ``kernels/``).
+"""Per-env drive properties on top of the ManiSkill controllers: set, randomise, read; and the per-env views of the
+command delay and the effort readout (the device side: :mod:`wpctrl.engine.parts.drive_properties`,
+:mod:`wpctrl.engine.parts.actuator_models`, :mod:`wpctrl.engine.parts.delay`,
+:mod:`wpctrl.engine.parts.effort_readout`).
 
-:class:`ActuationMixin` is a base of :class:`wpctrl.BaseController`; a child controller (``ctrl["arm"]``) works on
-its own joints (columns). Host-side checks only read host values (and the metadata of device inputs), so
-:meth:`ActuationMixin.randomize_drive_properties` with a device env selection is graph-capturable.
+:class:`DrivePropertiesMixin` is a base of :class:`wpctrl.BaseController`; a child controller (``ctrl["arm"]``) works
+on its own joints (columns). Host-side checks only read host values (and the metadata of device inputs), so
+:meth:`DrivePropertiesMixin.randomize_drive_properties` with a device env selection is graph-capturable.
 
 Solvers and the model mirror: with implicit actuation the solver's built-in drive uses Newton's per-DOF
 ``Model.joint_target_ke/kd`` (and ``joint_effort_limit``, ``joint_friction`` in both actuations), which the same kernel
 writes for the selected envs. ``SolverMuJoCo`` copies them into MuJoCo-Warp's per-world model
 (``actuator_gainprm/biasprm``, ``jnt_actfrcrange``, ``dof_frictionloss``: batched per world when the model has several
-worlds) only on ``notify_model_changed(ModelFlags.JOINT_DOF_FORCE_PROPERTIES)``, which wpctrl sends to the solver
-given as ``solver=`` or :meth:`attach_solver`. That notice is a handful of kernel launches with no host sync on
-MuJoCo-Warp (``tests/test_actuation.py`` captures it in a graph and checks per-world gains after replay); with
+worlds) only on ``notify_model_changed(ModelFlags.JOINT_DOF_FORCE_PROPERTIES)``, which wpctrl sends to the solver given
+as ``solver=`` or :meth:`~wpctrl.BaseController.attach_solver`. That notice is a handful of kernel launches with no host
+sync on MuJoCo-Warp (``tests/test_actuation.py`` captures it in a graph and checks per-world gains after replay); with
 ``use_mujoco_cpu=True`` it copies to the host and is eager only. XPBD, Featherstone and SemiImplicit read Newton's
 arrays every step and need no notice; Steel and Kamino are notified the same way.
 """
@@ -23,8 +25,8 @@ from collections.abc import Sequence
 import numpy as np
 import warp as wp
 
-from ..engine.parts.actuators import ACTUATOR_FIELDS
-from ..engine.parts.drive import DRIVE_FIELDS
+from ..engine.parts.actuator_models import ACTUATOR_FIELDS
+from ..engine.parts.drive_properties import DRIVE_FIELDS
 from .inputs import _env_selection, _is_torch
 
 _RAND_MODES = ("scale", "abs")
@@ -115,8 +117,8 @@ class _Shape:
         return tuple(shape) in ((self.n,), (self.rows, self.n))
 
 
-class ActuationMixin:
-    """Per-env drive properties, their randomisation, delay and effort readout (:mod:`wpctrl.controllers.actuation`)."""
+class DrivePropertiesMixin:
+    """Per-env drive properties, their randomisation, delay and effort readout (see the module docstring)."""
 
     # -- per-env drive properties ---------------------------------------------------------------------------------
 
@@ -145,14 +147,14 @@ class ActuationMixin:
     def saturation_effort(self) -> wp.array | None:
         """(num_envs, n_joints) DC-motor stall effort [N·m or N] per env (live; inf where no envelope), or None
         without actuator models."""
-        part = self._engine.part("actuators")
+        part = self._engine.part("actuator_models")
         return None if part is None else self._view(part.sat_effort)
 
     @property
     def velocity_limit(self) -> wp.array | None:
         """(num_envs, n_joints) DC-motor no-load speed [rad/s or m/s] per env (live), or None without actuator
         models."""
-        part = self._engine.part("actuators")
+        part = self._engine.part("actuator_models")
         return None if part is None else self._view(part.vel_limit)
 
     def _selection(self, env_ids):
@@ -197,10 +199,10 @@ class ActuationMixin:
                 values[p] = np.broadcast_to(arrays[k].astype(np.float32), (batch, n))
         enabled = [int(k in arrays) for k in DRIVE_FIELDS]
         dev_values = wp.array(values, dtype=wp.float32, device=eng.device)
-        eng.part("drive").set(eng, dev_values, enabled, ids, mask, self._rows.start, n)
+        eng.part("drive_properties").set(eng, dev_values, enabled, ids, mask, self._rows.start, n)
 
     def _actuators(self, what: str):
-        part = self._engine.part("actuators")
+        part = self._engine.part("actuator_models")
         if part is None:
             raise ValueError(f"{what}: this controller was built without actuator models (no DC-motor envelope)")
         return part
@@ -238,10 +240,11 @@ class ActuationMixin:
         Each of stiffness/damping/force_limit/friction: None (untouched) or ``(lo, hi)``; ``mode="scale"`` multiplies
         the config's nominal value by U(lo, hi) (``(1, 1)`` leaves it bit-identical), ``"abs"`` sets U(lo, hi) in the
         property's units. Each joint and env draws independently from Warp's RNG keyed by ``seed`` and a device-side
-        counter bumped after every call: a captured graph draws new values on each replay. Mirrored into the model
-        and notified to the attached solver like :meth:`set_drive_properties`. ``env_ids`` as in :meth:`reset`
-        (a device bool mask or int array keeps the call capturable). ``saturation_effort`` / ``velocity_limit``
-        draw the DC-motor envelope of controllers built with actuator models the same way (streams of their own).
+        counter bumped after every call: a captured graph draws new values on each replay. Mirrored into the model and
+        notified to the attached solver like :meth:`set_drive_properties`. ``env_ids`` as in
+        :meth:`~wpctrl.BaseController.reset` (a device bool mask or int array keeps the call capturable).
+        ``saturation_effort`` / ``velocity_limit`` draw the DC-motor envelope of controllers built with actuator models
+        the same way (streams of their own).
         """
         if mode not in _RAND_MODES:
             raise ValueError(f"randomize_drive_properties.mode: expected one of {_RAND_MODES}, got {mode!r}")
@@ -261,7 +264,8 @@ class ActuationMixin:
         if not any(enabled):
             return
         eng = self._engine
-        eng.part("drive").randomize(eng, lo, hi, enabled, mode == "abs", int(seed), ids, mask, self._rows.start, n)
+        drive = eng.part("drive_properties")
+        drive.randomize(eng, lo, hi, enabled, mode == "abs", int(seed), ids, mask, self._rows.start, n)
 
     # -- delay ----------------------------------------------------------------------------------------------------
 

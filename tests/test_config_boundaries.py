@@ -472,6 +472,7 @@ BOUNDS: dict[str, dict[str, Bound]] = {
             outside=("lstm", "gru"),
             wrong_type=(3, None),
         ),
+        "kernel": Bound(inside=("auto", "unrolled", "tiled"), outside=("fast", "Tiled"), wrong_type=(3, None)),
     },
 }
 

@@ -44,8 +44,6 @@ kernel."""
 TILED_MAX_WEIGHTS = 16384
 """The most weights and biases the tiled kernel stages in a block's shared memory (64 KB of float32)."""
 
-KERNELS = ("auto", "unrolled", "tiled")
-
 
 class NetLayout(NamedTuple):
     """What a network kernel is compiled for. ``dense``: ``(in, out, activation code, activation parameter, weight
@@ -83,7 +81,7 @@ class NetLayout(NamedTuple):
         return (s, max(2 * self.past, 1)), (max(units, 1), s)
 
 
-def choose_kernel(layout: NetLayout, num_weights: int, kernel: str) -> str:
+def choose_kernel(layout: NetLayout, kernel: str) -> str:
     """``"unrolled"`` or ``"tiled"`` for ``kernel`` (``"auto"``, ``"unrolled"`` or ``"tiled"``)."""
     if kernel == "auto":
         return "unrolled" if layout.macs <= UNROLLED_MAX_MACS else "tiled"

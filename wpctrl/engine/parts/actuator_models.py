@@ -164,7 +164,7 @@ class _NetGroup:
             q_lin=_consecutive(plan.q_idx, plan.strided, row0, n),
             qd_lin=_consecutive(plan.qd_idx, plan.strided, row0, n),
         )
-        self.kernel_kind = actuator_net.choose_kernel(self.layout, net.weights.size, spec.kernel)
+        self.kernel_kind = actuator_net.choose_kernel(self.layout, spec.kernel)
         extra = {}
         if self.kernel_kind == "tiled":
             wmat, bias = actuator_net_tiled.pack(self.layout, net.weights)

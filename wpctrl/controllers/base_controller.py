@@ -17,6 +17,7 @@ import warp as wp
 
 from ..binding import bind_joints
 from ..config import ee as cfg_ee
+from ..config import impedance as cfg_imp
 from ..config import rows as cfg
 from ..engine.core import _Engine
 from ..engine.parts import gravity
@@ -111,6 +112,9 @@ class BaseController(DrivePropertiesMixin):
             if isinstance(c, cfg_ee.EE_CONFIGS):  # end-effector controllers: position rows + an EE launch
                 rows, spec = cfg_ee.ee_rows(c, binding.qlimits[r0 : r0 + n])
                 ee_specs[r0] = (c0, rows.count, spec)
+            elif isinstance(c, cfg_imp.IMPEDANCE_CONFIGS):  # OSC / joint impedance: effort rows + their launches
+                rows, spec = cfg_imp.impedance_rows(c, binding.qlimits[r0 : r0 + n])
+                ee_specs[r0] = (c0, rows.count, spec)
             else:
                 rows = cfg.config_rows(c, binding.qlimits[r0 : r0 + n])
             parts.append((uid, c, rows))
@@ -138,7 +142,10 @@ class BaseController(DrivePropertiesMixin):
         self._cols = slice(0, all_rows.action_dim)
         self._owner = True
         ee = self._engine.part("ee")
-        ee_parts = {} if ee is None else ee.parts  # by first row
+        ee_parts = {} if ee is None else dict(ee.parts)  # by first row
+        imp = self._engine.part("impedance")
+        if imp is not None:
+            ee_parts.update(imp.units)
         self._ee = ee_parts.get(0) if not isinstance(config, Mapping) else None
         self.children: dict[str, BaseController] = {}
         if isinstance(config, Mapping):

@@ -12,10 +12,12 @@ from typing import Any
 import newton
 
 from ..config import ee as cfg_ee
+from ..config import impedance as cfg_imp
 from ..config import mobile_base as cfg_base
 from ..config import rows as cfg
 from .base_controller import BaseController, CombinedController
 from .ee import PDEEPosController, PDEEPoseController
+from .impedance import JointImpedanceController, OperationalSpaceController
 from .joint import (
     JointEffortController,
     PassiveController,
@@ -38,6 +40,8 @@ cfg_base.PDBaseVelControllerConfig.controller_cls = PDBaseVelController
 cfg_base.PDBaseForwardVelControllerConfig.controller_cls = PDBaseForwardVelController
 cfg_ee.PDEEPosControllerConfig.controller_cls = PDEEPosController
 cfg_ee.PDEEPoseControllerConfig.controller_cls = PDEEPoseController
+cfg_imp.OperationalSpaceControllerConfig.controller_cls = OperationalSpaceController
+cfg_imp.JointImpedanceControllerConfig.controller_cls = JointImpedanceController
 
 
 def build_controller(

@@ -374,8 +374,10 @@ class EEPart:
         self._launch.bind("joint_q_in", state.joint_q)
         self._launch.launch()
 
-    def reset(self, state, env_ids, env_mask) -> None:
+    def reset(self, state, env_ids, env_mask, use_target: bool | None = None) -> None:
+        """The measured EE pose of the reset envs; with ``use_target`` (default: the spec's) also their target."""
         eng = self.engine
+        use_target = self.spec.use_target if use_target is None else use_target
         dim = eng.num_envs if env_ids is None else env_ids.shape[0]
         if dim == 0:
             return
@@ -388,7 +390,7 @@ class EEPart:
                 self.row_q_off,
                 eng.env_q_base,
                 self.num_dof,
-                int(self.spec.use_target),
+                int(use_target),
                 env_ids,
                 env_mask,
                 state.joint_q,
@@ -421,10 +423,11 @@ class EndEffectors(Part):
 
     @staticmethod
     def wanted(plan) -> bool:
-        return bool(plan.ee_specs)
+        return any(isinstance(v[2], EESpec) for v in plan.ee_specs.values())
 
     def __init__(self, plan, alloc):
-        self.specs = plan.ee_specs  # {first row: (first action column, rows, spec)}
+        # {first row: (first action column, rows, spec)} (the impedance controllers' specs are another part's)
+        self.specs = {r0: v for r0, v in plan.ee_specs.items() if isinstance(v[2], EESpec)}
         self.parts: dict[int, EEPart] = {}
 
     def build(self, engine, model, solver) -> None:

@@ -85,7 +85,7 @@ def test_mlp_actuator_equals_torch_with_history_and_partial_reset(tmp_path, orde
     cfg = wpctrl.PDJointPosControllerConfig(PANDA_ARM_JOINTS, None, None, 0.0, 0.0, 40.0, normalize_action=False,
                                             actuator=act)  # fmt: skip
     model = build_panda(E)
-    ctrl = wpctrl.build_controller(cfg, model, 100, 100, "explicit", track_effort=True)
+    ctrl = wpctrl.build_controller(cfg, model, 100, 100, actuation="explicit", track_effort=True)
     assert ctrl._engine.part("actuator_models").nets[0].kernel_kind == kernel
     hist_e = np.zeros((E, 5, J), f32)
     hist_v = np.zeros((E, 5, J), f32)
@@ -117,7 +117,7 @@ def test_lstm_actuator_equals_torch_with_hidden_state_and_partial_reset(tmp_path
     cfg = wpctrl.PDJointPosControllerConfig(PANDA_ARM_JOINTS, None, None, 0.0, 0.0, 1e9, normalize_action=False,
                                             actuator=act)  # fmt: skip
     model = build_panda(E)
-    ctrl = wpctrl.build_controller(cfg, model, 100, 100, "explicit", track_effort=True)
+    ctrl = wpctrl.build_controller(cfg, model, 100, 100, actuation="explicit", track_effort=True)
     assert ctrl._engine.part("actuator_models").nets[0].kernel_kind == kernel
     h = torch.zeros(2, E * J, 8)
     c = torch.zeros(2, E * J, 8)
@@ -187,7 +187,7 @@ def _check_against_torch(act, net, lstm, envs: int = E, device: str = "cpu", ste
     cfg = wpctrl.PDJointPosControllerConfig(PANDA_ARM_JOINTS, None, None, 0.0, 0.0, 40.0, normalize_action=False,
                                             actuator=act)  # fmt: skip
     model = build_panda(envs, device)
-    ctrl = wpctrl.build_controller(cfg, model, 100, 100, "explicit", track_effort=True)
+    ctrl = wpctrl.build_controller(cfg, model, 100, 100, actuation="explicit", track_effort=True)
     if kernel is not None:
         assert ctrl._engine.part("actuator_models").nets[0].kernel_kind == kernel
     ref = _Reference(net, act, lstm, envs)

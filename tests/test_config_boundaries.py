@@ -622,6 +622,42 @@ BOUNDS: dict[str, dict[str, Bound]] = {
         ),
         "kernel": Bound(inside=("auto", "unrolled", "tiled"), outside=("fast", "Tiled"), wrong_type=(3, None)),
     },
+    # The option groups, passed to build_controller with the base arm config (a position controller, force drives).
+    "Actuation": {
+        # base: Actuation() (implicit)
+        "mode": Bound(inside=("implicit", "explicit"), outside=("Implicit", "physx"), wrong_type=(1, None)),
+        "explicit_pd": Bound(
+            inside=(None, V("naive", {"mode": "explicit"}), V("coupled", {"mode": "explicit"})),
+            outside=(V("stable", label="with implicit"), V("fast", {"mode": "explicit"})),
+            wrong_type=(V(1, {"mode": "explicit"}),),
+        ),
+        "inertia_update": Bound(
+            inside=(None, V("substep", {"mode": "explicit", "explicit_pd": "stable"})),
+            outside=(
+                V("control", label="no inertia computed"),
+                V("often", {"mode": "explicit", "explicit_pd": "stable"}),
+            ),
+            wrong_type=(V(2, {"mode": "explicit", "explicit_pd": "stable"}),),
+        ),
+    },
+    "Delay": {
+        # base: Delay(2)
+        "substeps": Bound(
+            inside=(0, 1024, (0, 1024), np.int64(3)),
+            outside=(-1, 1025, (3, 1), (0, 1, 2)),
+            wrong_type=(1.5, "1", True, None),
+        ),  # fmt: skip
+        "seed": Bound(
+            inside=(None, V(2**31 - 1, {"substeps": (0, 2)}), V(-(2**31), {"substeps": (0, 2)})),
+            outside=(V(2**31, {"substeps": (0, 2)}), V(3, label="fixed delay")),
+            wrong_type=(V("a", {"substeps": (0, 2)}), V(True, {"substeps": (0, 2)}), V(1.5, {"substeps": (0, 2)})),
+        ),
+    },
+    "Diagnostics": {
+        "track_effort": BOOL,
+        "nan_policy": Bound(inside=("hold", "raise"), outside=("ignore",), wrong_type=(1, None)),
+        "clip_targets": Bound(inside=("none", "joint_limits"), outside=("limits",), wrong_type=(True, None)),
+    },
 }
 
 
@@ -733,8 +769,12 @@ BASES = {
     "DCMotor": ("panda", lambda: wpctrl.DCMotor(50.0, 2.0)),
     "PositionBasedEffortLimit": ("panda", lambda: wpctrl.PositionBasedEffortLimit([0.0, 1.0], [1.0, 2.0])),
     "ActuatorNet": ("panda", lambda: wpctrl.ActuatorNet(_mlp().fn())),
+    "Actuation": ("panda", lambda: wpctrl.Actuation()),
+    "Delay": ("panda", lambda: wpctrl.Delay(2)),
+    "Diagnostics": ("panda", lambda: wpctrl.Diagnostics()),
 }
 ACTUATORS = ("DCMotor", "PositionBasedEffortLimit", "ActuatorNet")
+OPTION_GROUPS = {"Actuation": "actuation", "Delay": "delay", "Diagnostics": "diagnostics"}  # build_controller keyword
 
 
 def _copy_mode(name):
@@ -759,6 +799,9 @@ def _build(cls, name, v, models, torchscript):
         actuator = dataclasses.replace(base, **updates)
         config = _arm_pos(actuator=actuator)
         build.setdefault("actuation", "explicit")
+    elif key in OPTION_GROUPS:  # an option group: made (it checks itself), then checked against the arm's rows
+        build[OPTION_GROUPS[key]] = dataclasses.replace(base, **updates)
+        config = _arm_pos()
     else:
         config = dataclasses.replace(base, **updates)
     return wpctrl.build_controller(config, models[model_key], **build)

@@ -184,7 +184,7 @@ def _coupled_ctrl(model, force_limit, drive_mode="force", gripper_passive=False,
             PANDA_GRIPPER_JOINTS, None, None, kp, kd, force_limit, normalize_action=False, drive_mode=drive_mode
         )
     return wpctrl.build_controller(
-        {"arm": arm, "gripper": grip}, model, 100, 100, "explicit", explicit_pd="coupled", **kw
+        {"arm": arm, "gripper": grip}, model, 100, 100, actuation="explicit", explicit_pd="coupled", **kw
     )
 
 
@@ -405,7 +405,9 @@ def test_coupled_reduces_to_stable_on_one_dof(limit):
     cfg = wpctrl.PDJointPosControllerConfig(["hinge"], None, None, 1e3, 1e2, limit, normalize_action=False)
     out = {}
     for pd in ("stable", "coupled"):
-        ctrl = wpctrl.build_controller(cfg, model, 100, 100, "explicit", explicit_pd=pd, inertia_update="substep")
+        ctrl = wpctrl.build_controller(
+            cfg, model, 100, 100, actuation="explicit", explicit_pd=pd, inertia_update="substep"
+        )
         s, c = model.state(), model.control()
         ctrl.reset(s)
         s.joint_q.assign(np.array([0.3], np.float32))
@@ -467,7 +469,7 @@ def test_coupled_inertia_update_control_reuses_the_first_substeps_block(inertia_
     arm = wpctrl.PDJointPosControllerConfig(PANDA_ARM_JOINTS, None, None, 1e3, 1e2, 1e9, normalize_action=False)
     grip = wpctrl.PDJointPosControllerConfig(PANDA_GRIPPER_JOINTS, None, None, 1e3, 1e2, 1e9, normalize_action=False)
     ctrl = wpctrl.build_controller(
-        {"arm": arm, "gripper": grip}, model, 20, 100, "explicit", explicit_pd="coupled",
+        {"arm": arm, "gripper": grip}, model, 20, 100, actuation="explicit", explicit_pd="coupled",
         inertia_update=inertia_update, balance_passive_force=False,
     )  # fmt: skip
     assert ctrl.num_substeps == 5

@@ -6,10 +6,14 @@ Public import path: ``import wpctrl``.
 from typing import TYPE_CHECKING
 
 from .config import (
+    Actuation,
     ActuatorNet,
     ConfigError,
     ControllerConfig,
+    ControllerOptions,
     DCMotor,
+    Delay,
+    Diagnostics,
     JointEffortControllerConfig,
     JointImpedanceControllerConfig,
     MimicJointError,
@@ -84,12 +88,16 @@ def __dir__():
 __version__ = "0.1.0"
 
 __all__ = [
+    "Actuation",
     "ActuatorNet",
     "BaseController",
     "CombinedController",
     "ConfigError",
     "ControllerConfig",
+    "ControllerOptions",
     "DCMotor",
+    "Delay",
+    "Diagnostics",
     "JointEffortController",
     "JointEffortControllerConfig",
     "JointImpedanceController",

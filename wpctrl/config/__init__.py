@@ -3,8 +3,8 @@
 Never touches a device. :mod:`.errors` (:class:`ConfigError`, :class:`MimicJointError`), :mod:`.joint` (joint
 controllers), :mod:`.mobile_base` (mobile-base controllers), :mod:`.ee` (end-effector controllers),
 :mod:`.impedance` (operational-space and joint-impedance controllers), :mod:`.actuator_models` (actuator models)
-and :mod:`.networks` (actuator network files), :mod:`.validate` (the per-field checks), :mod:`.rows` (the flat
-per-joint tables one kernel launch handles).
+and :mod:`.networks` (actuator network files), :mod:`.options` (the option groups of a control mode),
+:mod:`.validate` (the per-field checks), :mod:`.rows` (the flat per-joint tables one kernel launch handles).
 """
 
 from .actuator_models import ActuatorNet, DCMotor, PositionBasedEffortLimit
@@ -27,6 +27,7 @@ from .joint import (
     PDJointVelControllerConfig,
 )
 from .mobile_base import PDBaseForwardVelControllerConfig, PDBaseVelControllerConfig
+from .options import Actuation, ControllerOptions, Delay, Diagnostics
 from .rows import (
     FLAG_BINARY,
     FLAG_DELTA,
@@ -46,6 +47,10 @@ from .rows import (
 from .validate import DriveMode
 
 __all__ = [
+    "Actuation",
+    "ControllerOptions",
+    "Delay",
+    "Diagnostics",
     "ActuatorNet",
     "DCMotor",
     "EE_CONFIGS",

@@ -25,7 +25,7 @@ import numpy as np
 from . import rows as cfg
 from .ee import FRAME_BODY_ROT, FRAME_BODY_TRANS, MAX_EE_DOF, POSE_FRAMES
 from .errors import ConfigError
-from .joint import ControllerConfig
+from .joint import ControllerClass, ControllerConfig
 
 IMPEDANCE_MODES = ("fixed", "variable_kp", "variable")
 NULLSPACE_MODES = ("none", "position")
@@ -46,6 +46,8 @@ class OperationalSpaceControllerConfig(ControllerConfig):
     inertia (``M``: the controlled joints' block of the articulation's mass matrix), ``N τ₀`` a joint posture term
     projected into the task's null space, ``g`` the gravity torque. The torques go to ``Control.joint_f`` before every
     solver substep, clamped to ``force_limit``."""
+
+    controller_cls = ControllerClass("wpctrl.controllers.impedance", "OperationalSpaceController")
 
     pos_lower: Union[float, Sequence[float]] = -0.1
     """Lower bound of the position action [m] (per axis or one value; a delta with ``use_delta``); None: -inf
@@ -127,6 +129,8 @@ class JointImpedanceControllerConfig(ControllerConfig):
     """Joint impedance: ``τ = [M] (Kp (q* − q) − Kd q̇) + g`` toward joint targets, written to ``Control.joint_f``
     before every solver substep and clamped to ``force_limit`` (``M``: the controlled joints' block of the
     articulation's mass matrix, with ``inertial_compensation``; ``g``: the gravity torque)."""
+
+    controller_cls = ControllerClass("wpctrl.controllers.impedance", "JointImpedanceController")
 
     lower: Union[None, float, Sequence[float]]
     """Lower action bound [rad or m] (a delta bound with ``use_delta``); None takes the joint's lower limit."""

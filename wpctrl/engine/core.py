@@ -124,11 +124,11 @@ class _Engine:
 
     @property
     def clip_targets(self) -> bool:
-        return self.plan.options.clip_targets
+        return self.plan.clip_targets
 
     @property
-    def inertia_update(self) -> str:
-        return self.plan.options.inertia_update
+    def inertia_update(self) -> str | None:
+        return self.plan.inertia_update
 
     @property
     def sim_dt(self) -> float:

@@ -18,8 +18,8 @@ import warp as wp
 
 from ...config import ConfigError
 from ...config.impedance import DECOUPLE_NONE, MODE_FIXED, ImpedanceSpec
-from ...kernels import impedance as KI
-from ...kernels import inertia as KIN
+from ...kernels import impedance as impedance_kernels
+from ...kernels import inertia
 from ...kernels.dims import PER_ENV_BLOCK_DIM
 from ...kernels.env_selection import _bump_counter_kernel
 from ..launch import _Launch
@@ -57,10 +57,10 @@ class _Unit:
         self.row_qd_off = up(b.qd_off[row0 : row0 + n])
         self.gravity_on = bool(spec.gravity and not plan.options.balance_passive_force)
         needs_h = spec.decoupling != DECOUPLE_NONE or self.gravity_on
-        layout, why = KIN.chain_layout(model, b.joint_index[:, row0 : row0 + n], b.dof_index[:, row0 : row0 + n])
+        layout, why = inertia.chain_layout(model, b.joint_index[:, row0 : row0 + n], b.dof_index[:, row0 : row0 + n])
         self.fused = None
         if layout is not None:
-            self.fused = KIN.FusedChain(layout, model)
+            self.fused = inertia.FusedChain(layout, model)
         elif needs_h:
             what = "inertial decoupling" if spec.decoupling != DECOUPLE_NONE else "gravity compensation"
             raise ConfigError(
@@ -150,7 +150,7 @@ class _Unit:
                 kp_out=kp,
                 kd_out=kd,
             )
-            kernel = KI.set_action_kernel(s.osc, self.num_dof)
+            kernel = impedance_kernels.set_action_kernel(s.osc, self.num_dof)
             names = [a.label for a in kernel.adj.args]
             self._set_action = _Launch(
                 kernel, eng.num_envs, {k: params[k] for k in names}, eng.device, block_dim=PER_ENV_BLOCK_DIM
@@ -169,11 +169,11 @@ class _Unit:
                 chain = fused.chain_args()
                 params.update({k: chain[k] for k in _FUSED_ARGS})
                 row_dof = tuple(int(d) for d in fused.layout.row_dof)
-                kernel = KI.torque_kernel(s.osc, self.num_dof, row_dof, fused.kernel_key())
+                kernel = impedance_kernels.torque_kernel(s.osc, self.num_dof, row_dof, fused.kernel_key())
             else:
                 params.update(dict.fromkeys(_FUSED_ARGS))
                 params["num_dofs"] = 0
-                kernel = KI.torque_kernel(s.osc, self.num_dof, None, None)
+                kernel = impedance_kernels.torque_kernel(s.osc, self.num_dof, None, None)
             params.update(
                 gravity_in=eng.model.gravity,
                 env_world=self.env_world,
@@ -234,7 +234,7 @@ class _OSCUnit(_Unit, EEPart):
             return
         nominal = wp.array(np.stack([self.spec.stiffness, self.spec.damping]), dtype=wp.float32, device=eng.device)
         wp.launch(
-            KI._randomize_task_gains_kernel,
+            impedance_kernels._randomize_task_gains_kernel,
             dim=dim,
             inputs=[
                 int(seed),

@@ -211,9 +211,38 @@ def _ranged(delay):
     return (delay, delay) if isinstance(delay, int) else tuple(delay)
 
 
+def _effective(children: dict, actuation, explicit_pd, nan_policy, inertia_update, opts: dict):
+    """The drawn options as build_controller takes them: those this mode would ignore are left out (it refuses them,
+    tests/test_options.py): an explicit law with implicit actuation, an inertia update where no inertia is computed
+    (no acceleration drive, neither stable nor coupled PD), a seed where no delay is drawn, target clipping without a
+    position target, a delay or the NaN check where no action is taken. What runs is the same either way."""
+
+    def drive_modes(c):
+        m = getattr(c, "drive_mode", "force")
+        return [m] if isinstance(m, str) else list(m)
+
+    opts = dict(opts)
+    law = explicit_pd if actuation == "explicit" else None
+    accel = any("acceleration" in drive_modes(c) for c in children.values())
+    inertia = inertia_update if (accel or law in ("stable", "coupled")) else None
+    rng = _ranged(opts.get("delay"))
+    if rng is None or rng[0] == rng[1]:
+        opts.pop("seed", None)
+    if not any(isinstance(c, (wpctrl.PDJointPosControllerConfig, *EE_CONFIGS)) for c in children.values()):
+        opts.pop("clip_targets", None)
+    if all(isinstance(c, wpctrl.PassiveControllerConfig) for c in children.values()):
+        opts.pop("delay", None)
+        opts.pop("seed", None)
+        nan_policy = "hold"
+    return law, nan_policy, inertia, opts
+
+
 class Harness:
     def __init__(self, mode, layout, num_substeps, actuation, explicit_pd, nan_policy, inertia_update, draw, opts=None):
-        opts = dict(opts or {})
+        children = {"": mode} if not isinstance(mode, dict) else mode
+        law, nan_policy, inertia, opts = _effective(
+            children, actuation, explicit_pd, nan_policy, inertia_update, opts or {}
+        )
         self.opts = opts
         self.draw = draw
         kind, num_envs = layout
@@ -225,7 +254,7 @@ class Harness:
         self.explicit = actuation == "explicit"
         self.coupled = self.explicit and explicit_pd == "coupled"
         if self.coupled:  # H every substep (its default): H once per control step has its own test in test_coupled.py
-            inertia_update = "substep"
+            inertia_update = inertia = "substep"
         children = {"": mode} if self.single else mode
         self.ee_cols = [
             PANDA_JOINTS.index(n) for c in children.values() if isinstance(c, EE_CONFIGS) for n in c.joint_names
@@ -239,12 +268,12 @@ class Harness:
                 sim_freq=20 * num_substeps,
                 actuation=actuation,
                 nan_policy=nan_policy,
-                explicit_pd=explicit_pd,
-                inertia_update=inertia_update,
+                explicit_pd=law,
+                inertia_update=inertia,
                 **opts,
             )
         self.inertia_update = inertia_update
-        self.needs_response = self.ctrl._engine.needs_response
+        self.needs_response = self.ctrl.response is not None
         robot = RefRobot(PANDA_JOINTS, self.layout.limits)
         self.delay_range = _ranged(opts.get("delay"))
         self.ref = RefCombined(
@@ -588,7 +617,7 @@ class Harness:
                 self.put_state()
             self.ctrl.before_simulation_step(self.state, self.control)
             inverse = None
-            if self.coupled or (self.inertia_update == "substep" and self.ctrl._engine.per_substep):
+            if self.coupled or (self.inertia_update == "substep" and self.ctrl.substep_launch):
                 self.response_q = self.state.joint_q.numpy().copy()
             if self.coupled:
                 inverse = self.physics.inverse(self.response_q)

@@ -65,7 +65,7 @@ def test_dc_motor_with_per_env_limits_on_a_later_controller_equals_newtons_compo
     model = build_panda(E)
     rng = np.random.default_rng(0)
     mode = {"gripper": gripper(), "arm": pos(PANDA_ARM_JOINTS, 300.0, 20.0, 90.0, actuator=wpctrl.DCMotor(60.0, 3.0))}
-    ctrl = wpctrl.build_controller(mode, model, 100, 100, "explicit", track_effort=True)
+    ctrl = wpctrl.build_controller(mode, model, 100, 100, actuation="explicit", track_effort=True)
     arm = ctrl["arm"]
     sat = rng.uniform(20.0, 80.0, (E, 7)).astype(f32)
     vmax = np.array([[0.5], [2.0], [6.0]], f32) * rng.uniform(0.8, 1.2, (E, 7)).astype(f32)  # very different per env
@@ -109,7 +109,7 @@ def test_randomised_dc_parameters_are_the_ones_applied_per_env():
     model = build_panda(E)
     rng = np.random.default_rng(1)
     mode = {"gripper": gripper(), "arm": pos(PANDA_ARM_JOINTS, 400.0, 10.0, 80.0, actuator=wpctrl.DCMotor(60.0, 3.0))}
-    ctrl = wpctrl.build_controller(mode, model, 100, 100, "explicit")
+    ctrl = wpctrl.build_controller(mode, model, 100, 100, actuation="explicit")
     arm = ctrl["arm"]
     arm.randomize_drive_properties(saturation_effort=(10.0, 70.0), velocity_limit=(0.3, 5.0), mode="abs", seed=5)
     sat, vmax = arm.saturation_effort.numpy(), arm.velocity_limit.numpy()
@@ -143,7 +143,7 @@ def test_position_tables_on_two_controllers_each_equal_newtons_component():
         "a": pos(ARM_A, 500.0, 5.0, 1e9, actuator=wpctrl.PositionBasedEffortLimit(*ta)),
         "b": pos(ARM_B, 500.0, 5.0, 25.0, actuator=wpctrl.PositionBasedEffortLimit(*tb)),
     }
-    ctrl = wpctrl.build_controller(mode, model, 100, 100, "explicit")
+    ctrl = wpctrl.build_controller(mode, model, 100, 100, actuation="explicit")
     s, q, qd = random_state(model, PANDA_ARM_JOINTS, rng, q_scale=1.5)
     c = model.control()
     ctrl.reset(model.state(), control=c)
@@ -213,7 +213,7 @@ def test_lstm_with_input_scales_on_a_later_controller_equals_torch(order):
                              saturation_effort=50.0, velocity_limit=8.0)  # fmt: skip
     model = build_panda(E)
     mode = {"a": pos(ARM_A, 200.0, 10.0, 45.0), "b": pos(ARM_B, 0.0, 0.0, 60.0, actuator=act)}
-    ctrl = wpctrl.build_controller(mode, model, 100, 100, "explicit", track_effort=True)
+    ctrl = wpctrl.build_controller(mode, model, 100, 100, actuation="explicit", track_effort=True)
     sat = np.array([[50.0], [20.0], [5.0]], f32) * np.ones((E, 4), f32)
     vmax = np.array([[8.0], [1.0], [3.0]], f32) * np.ones((E, 4), f32)
     lim = np.array([[2.0], [60.0], [60.0]], f32) * np.ones((E, 4), f32)  # env 0's force limit binds first
@@ -276,7 +276,7 @@ def test_mlp_on_a_later_controller_reads_the_delayed_target():
     act = wpctrl.ActuatorNet(mlp, input_idx=idx, pos_scale=ps, vel_scale=vs, torque_scale=ts)
     model = build_panda(E)
     mode = {"gripper": gripper(), "arm": pos(PANDA_ARM_JOINTS, 0.0, 0.0, 1e9, actuator=act)}
-    ctrl = wpctrl.build_controller(mode, model, 100, 100, "explicit", delay=2)
+    ctrl = wpctrl.build_controller(mode, model, 100, 100, actuation="explicit", delay=2)
     rng = np.random.default_rng(4)
     steps = 7
     commands = rng.uniform(-1.0, 1.0, (steps, E, 7)).astype(f32)
@@ -310,7 +310,7 @@ def test_two_networks_in_one_mode_keep_their_own_weights_scales_and_state():
                                                                       torque_scale=-9.0)),
     }  # fmt: skip
     model = build_panda(E)
-    ctrl = wpctrl.build_controller(mode, model, 100, 100, "explicit")
+    ctrl = wpctrl.build_controller(mode, model, 100, 100, actuation="explicit")
     h = torch.zeros(1, E * 4, 4)
     cs = torch.zeros(1, E * 4, 4)
     rng = np.random.default_rng(5)
@@ -392,7 +392,7 @@ def test_effort_readout_with_per_env_limits_on_a_later_controller(actuation):
     limit and the count of saturated substeps, against numpy, over two control steps of K = 2."""
     model = build_panda(E)
     mode = {"a": pos(ARM_A, 100.0, 5.0, 1e9), "b": pos(ARM_B, 800.0, 30.0, 50.0)}
-    ctrl = wpctrl.build_controller(mode, model, 50, 100, actuation, track_effort=True)
+    ctrl = wpctrl.build_controller(mode, model, 50, 100, actuation=actuation, track_effort=True)
     lim = np.array([[5.0], [50.0], [500.0]], f32) * np.ones((E, 4), f32)
     ctrl["b"].set_drive_properties(force_limit=lim)
     rng = np.random.default_rng(7)

@@ -418,6 +418,154 @@ BOUNDS: dict[str, dict[str, Bound]] = {
             wrong_type=("0.1",),
         ),
     },
+    # Impedance controllers: base osc_ee_delta_pose / joint_impedance_delta_pos of the Panda (gains per unit inertia)
+    "OperationalSpaceControllerConfig": {
+        "joint_names": Bound(
+            inside=(list(PANDA_ARM_JOINTS), tuple(PANDA_ARM_JOINTS)),
+            outside=(
+                list(PANDA_ARM_JOINTS) + [PANDA_ARM_JOINTS[0]],
+                ["no_such_joint"] + list(PANDA_ARM_JOINTS[1:]),
+                list(PANDA_ARM_JOINTS) + ["panda_finger_joint1"],  # not on the chain to the TCP
+                list(PANDA_ARM_JOINTS[:6]),  # a null-space posture needs more than 6 joints
+                V(list(PANDA_ARM_JOINTS[:5]), {"nullspace_control": "none"}),  # Λ of a 6-D task needs 6
+            ),
+            wrong_type=(PANDA_ARM_JOINTS[0], [1] * N_ARM, None),
+        ),
+        "pos_lower": Bound(
+            inside=(0.1, [0.1] * 3, [0.1], V(None, {"normalize_action": False})),
+            outside=(up(0.1), [0.0] * 2, [0.0] * 4, math.nan, None),
+            wrong_type=("0.1", True),
+        ),
+        "pos_upper": Bound(
+            inside=(-0.1, [-0.1] * 3, V(None, {"normalize_action": False})),
+            outside=(down(-0.1), [0.0] * 4, math.nan, None),
+            wrong_type=("0.1",),
+        ),
+        "rot_lower": Bound(
+            inside=(0.1, [0.1] * 3, V(None, {"normalize_action": False})),
+            outside=(up(0.1), [0.0] * 2, math.nan, None),
+            wrong_type=("0.1",),
+        ),
+        "rot_upper": Bound(
+            inside=(-0.1, [-0.1] * 3, V(None, {"normalize_action": False})),
+            outside=(down(-0.1), [0.0] * 4, math.nan, None),
+            wrong_type=("0.1",),
+        ),
+        "stiffness": nonneg(6),
+        "damping": Bound(nonneg(6).inside + (None,), nonneg(6).outside, ("1.0", True)),
+        "damping_ratio": Bound(
+            inside=(0.0, 1.0, [0.5] * 6, 1e30),
+            outside=(down(0.0), -1.0, math.nan, math.inf, 1e39, [1.0] * 7, F32_MAX),  # F32_MAX: the damping overflows
+            wrong_type=("1.0", True, None),
+        ),
+        "force_limit": nonneg(N_ARM, infinite_ok=True),
+        "friction": nonneg(N_ARM),
+        "ee_link": Bound(
+            inside=("panda_hand_tcp", "panda_link7", "panda_hand"),
+            outside=("", "no_such_link", "panda_link0"),
+            wrong_type=(3, None),
+        ),
+        "urdf_path": Bound(
+            inside=(None, str(PANDA_URDF), V(str(PANDA_URDF), {"ee_link": "panda_hand"})),
+            outside=(V("/no/such/robot.urdf", {"ee_link": "tool0"}), V(str(PANDA_URDF), {"ee_link": "tool0"})),
+            wrong_type=(3, ["a.urdf"]),
+        ),
+        "frame": Bound(
+            inside=(
+                "body_translation:root_aligned_body_rotation",
+                "root_translation:root_aligned_body_rotation",
+                "body_translation:body_aligned_body_rotation",
+                "root_translation:body_aligned_body_rotation",
+            ),
+            outside=("root_translation", "world"),
+            wrong_type=(3, None),
+        ),
+        "root_link_name": Bound(
+            inside=(
+                None,
+                "panda_link0",
+                V("panda_link1", {"joint_names": list(PANDA_ARM_JOINTS[1:]), "nullspace_control": "none"}),
+            ),
+            outside=("no_such_link", "panda_hand"),
+            wrong_type=(3,),
+        ),
+        "use_delta": BOOL,
+        "use_target": BOOL,
+        "normalize_action": BOOL,
+        "impedance_mode": Bound(
+            inside=("fixed", "variable_kp", "variable"),
+            outside=("Fixed", "variable_kd", V("variable_kp", {"damping": 10.0})),  # the ratio sets the damping
+            wrong_type=(3, None),
+        ),
+        "stiffness_limits": Bound(
+            inside=((0.0, 1000.0), (0.0, 0.0), [0, F32_MAX], V((5.0, 5.0), {"impedance_mode": "variable"})),
+            outside=((1.0, down(1.0)), (down(0.0), 1.0), (0.0, math.inf), (math.nan, 1.0)),
+            wrong_type=("0,1", None, (0.0,), (True, 1.0), ("0", "1")),
+        ),
+        "damping_ratio_limits": Bound(
+            inside=((0.0, 2.0), (1.0, 1.0)),
+            outside=((1.0, down(1.0)), (-1.0, 1.0), (0.0, math.inf)),
+            wrong_type=(None, (0.5,), (0.5, False)),
+        ),
+        "inertial_dynamics_decoupling": BOOL,
+        "partial_inertial_dynamics_decoupling": Bound(
+            inside=(True, False),
+            outside=(V(True, {"inertial_dynamics_decoupling": False}),),  # partial decoupling needs decoupling
+            wrong_type=(1, "True", None),
+        ),
+        "gravity_compensation": BOOL,
+        "nullspace_control": Bound(
+            inside=("none", "position"),
+            outside=("velocity", V("position", {"joint_names": list(PANDA_ARM_JOINTS[:6])})),
+            wrong_type=(3, None, True),
+        ),
+        "nullspace_stiffness": nonneg(N_ARM),
+        "nullspace_damping": Bound(nonneg(N_ARM).inside + (None,), nonneg(N_ARM).outside, ("1.0", True)),
+        "nullspace_damping_ratio": Bound(
+            inside=(0.0, 1.0, [0.5] * N_ARM, 1e30),
+            outside=(down(0.0), math.nan, math.inf, [1.0] * (N_ARM + 1), F32_MAX),  # F32_MAX: the damping overflows
+            wrong_type=("1.0", True, None),
+        ),
+        "nullspace_target": Bound(
+            inside=(None, [0.0] * N_ARM, 0.5, [1.0]),
+            outside=([0.0] * (N_ARM + 1), [[0.0] * N_ARM], math.nan, math.inf),
+            wrong_type=("0", True, [None] * N_ARM),
+        ),
+        "singularity_damping": Bound(
+            inside=(0.0, 1e-3, down(1.0)),
+            outside=(1.0, down(0.0), math.nan, math.inf),
+            wrong_type=("0.001", True, None),
+        ),
+    },
+    "JointImpedanceControllerConfig": {
+        "lower": ordered_pair("upper", True, N_ARM, 0.1, none_ok=True),
+        "upper": ordered_pair("lower", False, N_ARM, -0.1, none_ok=True),
+        "stiffness": nonneg(N_ARM),
+        "damping": Bound(nonneg(N_ARM).inside + (None,), nonneg(N_ARM).outside, ("1.0", True)),
+        "damping_ratio": Bound(
+            inside=(0.0, 1.0, [0.5] * N_ARM, 1e30),
+            outside=(down(0.0), math.nan, math.inf, [1.0] * (N_ARM + 1), F32_MAX),
+            wrong_type=("1.0", True, None),
+        ),
+        "force_limit": nonneg(N_ARM, infinite_ok=True),
+        "friction": nonneg(N_ARM),
+        "use_delta": BOOL,
+        "use_target": BOOL,
+        "normalize_action": Bound(
+            inside=(True, False, V(False, {"lower": -math.inf})),
+            outside=(V(True, {"lower": -math.inf}),),
+            wrong_type=(1, "True", None),
+        ),
+        "impedance_mode": Bound(
+            inside=("fixed", "variable_kp", "variable"),
+            outside=("variable_kd", V("variable", {"damping": 10.0})),
+            wrong_type=(3, None),
+        ),
+        "stiffness_limits": Bound(inside=((0.0, 1000.0),), outside=((2.0, 1.0),), wrong_type=(None, "01")),
+        "damping_ratio_limits": Bound(inside=((0.0, 2.0),), outside=((2.0, 1.0),), wrong_type=(None, 1.0)),
+        "inertial_compensation": BOOL,
+        "gravity_compensation": BOOL,
+    },
     # Actuator models (on the arm of a PDJointPos config, explicit actuation).
     "DCMotor": {
         "saturation_effort": Bound(
@@ -494,6 +642,43 @@ BOUNDS: dict[str, dict[str, Bound]] = {
             outside=("lstm", "gru"),
             wrong_type=(3, None),
         ),
+        "kernel": Bound(inside=("auto", "unrolled", "tiled"), outside=("fast", "Tiled"), wrong_type=(3, None)),
+    },
+    # The option groups, passed to build_controller with the base arm config (a position controller, force drives).
+    "Actuation": {
+        # base: Actuation() (implicit)
+        "mode": Bound(inside=("implicit", "explicit"), outside=("Implicit", "physx"), wrong_type=(1, None)),
+        "explicit_pd": Bound(
+            inside=(None, V("naive", {"mode": "explicit"}), V("coupled", {"mode": "explicit"})),
+            outside=(V("stable", label="with implicit"), V("fast", {"mode": "explicit"})),
+            wrong_type=(V(1, {"mode": "explicit"}),),
+        ),
+        "inertia_update": Bound(
+            inside=(None, V("substep", {"mode": "explicit", "explicit_pd": "stable"})),
+            outside=(
+                V("control", label="no inertia computed"),
+                V("often", {"mode": "explicit", "explicit_pd": "stable"}),
+            ),
+            wrong_type=(V(2, {"mode": "explicit", "explicit_pd": "stable"}),),
+        ),
+    },
+    "Delay": {
+        # base: Delay(2)
+        "substeps": Bound(
+            inside=(0, 1024, (0, 1024), np.int64(3)),
+            outside=(-1, 1025, (3, 1), (0, 1, 2)),
+            wrong_type=(1.5, "1", True, None),
+        ),  # fmt: skip
+        "seed": Bound(
+            inside=(None, V(2**31 - 1, {"substeps": (0, 2)}), V(-(2**31), {"substeps": (0, 2)})),
+            outside=(V(2**31, {"substeps": (0, 2)}), V(3, label="fixed delay")),
+            wrong_type=(V("a", {"substeps": (0, 2)}), V(True, {"substeps": (0, 2)}), V(1.5, {"substeps": (0, 2)})),
+        ),
+    },
+    "Diagnostics": {
+        "track_effort": BOOL,
+        "nan_policy": Bound(inside=("hold", "raise"), outside=("ignore",), wrong_type=(1, None)),
+        "clip_targets": Bound(inside=("none", "joint_limits"), outside=("limits",), wrong_type=(True, None)),
     },
 }
 
@@ -601,11 +786,17 @@ BASES = {
     "PassiveControllerConfig": ("panda", lambda: wpctrl.PassiveControllerConfig(list(PANDA_ARM_JOINTS), 10.0)),
     "PDEEPosControllerConfig": ("panda", lambda: _copy_mode("pd_ee_delta_pos")),
     "PDEEPoseControllerConfig": ("panda", lambda: _copy_mode("pd_ee_delta_pose")),
+    "OperationalSpaceControllerConfig": ("panda", lambda: _copy_mode("osc_ee_delta_pose")),
+    "JointImpedanceControllerConfig": ("panda", lambda: _copy_mode("joint_impedance_delta_pos")),
     "DCMotor": ("panda", lambda: wpctrl.DCMotor(50.0, 2.0)),
     "PositionBasedEffortLimit": ("panda", lambda: wpctrl.PositionBasedEffortLimit([0.0, 1.0], [1.0, 2.0])),
     "ActuatorNet": ("panda", lambda: wpctrl.ActuatorNet(_mlp().fn())),
+    "Actuation": ("panda", lambda: wpctrl.Actuation()),
+    "Delay": ("panda", lambda: wpctrl.Delay(2)),
+    "Diagnostics": ("panda", lambda: wpctrl.Diagnostics()),
 }
 ACTUATORS = ("DCMotor", "PositionBasedEffortLimit", "ActuatorNet")
+OPTION_GROUPS = {"Actuation": "actuation", "Delay": "delay", "Diagnostics": "diagnostics"}  # build_controller keyword
 
 
 def _copy_mode(name):
@@ -630,6 +821,9 @@ def _build(cls, name, v, models, torchscript):
         actuator = dataclasses.replace(base, **updates)
         config = _arm_pos(actuator=actuator)
         build.setdefault("actuation", "explicit")
+    elif key in OPTION_GROUPS:  # an option group: made (it checks itself), then checked against the arm's rows
+        build[OPTION_GROUPS[key]] = dataclasses.replace(base, **updates)
+        config = _arm_pos()
     else:
         config = dataclasses.replace(base, **updates)
     return wpctrl.build_controller(config, models[model_key], **build)

@@ -209,7 +209,7 @@ def test_floating_base_velocity_targets_land_on_each_envs_dofs(actuation):
             list(PANDA_GRIPPER_JOINTS), -0.01, 0.04, 1e3, 1e2, 1e9, vel_lower=-0.2, vel_upper=0.2
         ),  # fmt: skip
     }
-    ctrl = wpctrl.build_controller(mode, model, 20, 100, actuation, balance_passive_force=False)
+    ctrl = wpctrl.build_controller(mode, model, 20, 100, actuation=actuation, balance_passive_force=False)
     arm_q, arm_dof = indices(model, PANDA_ARM_JOINTS)
     g_q, g_dof = indices(model, PANDA_GRIPPER_JOINTS)
     rng = np.random.default_rng(1)
@@ -255,7 +255,9 @@ def test_floating_base_under_stable_explicit_pd_uses_the_whole_articulations_ine
     E = 2
     model = panda_envs(E, spacing=(1.0, 0.0, 0.0), floating=True)
     cfg = wpctrl.PDJointVelControllerConfig(list(PANDA_ARM_JOINTS), -1.0, 1.0, 80.0, 1e9)
-    ctrl = wpctrl.build_controller(cfg, model, 100, 100, "explicit", explicit_pd="stable", balance_passive_force=False)
+    ctrl = wpctrl.build_controller(
+        cfg, model, 100, 100, actuation="explicit", explicit_pd="stable", balance_passive_force=False
+    )
     rng = np.random.default_rng(2)
     s = model.state()
     put(s, model, PANDA_ARM_JOINTS, (np.asarray(PANDA_INITIAL_Q[:7], f32) + rng.uniform(-0.3, 0.3, (E, 7))))

@@ -37,7 +37,16 @@ def test_plan_needs_no_device_and_picks_the_parts():
     grip = wpctrl.JointEffortControllerConfig(names[3:], -5.0, 5.0)
     b = _binding(names)
     rows = Rows.concat([config_rows(arm, b.qlimits[:3]), config_rows(grip, b.qlimits[3:])])
-    plan = make_plan(rows, b, Options(num_substeps=5, actuation="explicit", delay=(0, 2), track_effort=True))
+    plan = make_plan(
+        rows,
+        b,
+        Options(
+            num_substeps=5,
+            actuation=wpctrl.Actuation("explicit"),
+            delay=wpctrl.Delay((0, 2)),
+            diagnostics=wpctrl.Diagnostics(track_effort=True),
+        ),
+    )
     assert plan.parts == ("drive_properties", "effort_command", "actuator_models", "delay", "effort_readout")
     assert plan.per_substep and plan.writes_joint_f and plan.strided and plan.q_stride == 9
     assert plan.layout.act_model == (1, 1, 1, 0) and plan.layout.kind[3] == wpctrl.config.ROW_EFFORT

@@ -20,7 +20,7 @@ import numpy as np
 
 from . import rows as cfg
 from .errors import ConfigError
-from .joint import ControllerConfig, PDJointPosControllerConfig
+from .joint import ControllerClass, ControllerConfig, PDJointPosControllerConfig
 from .validate import DriveMode
 
 POS_FRAMES = ("root_translation", "body_translation")
@@ -41,6 +41,8 @@ def _default_solver() -> dict:
 
 @dataclass
 class PDEEPosControllerConfig(ControllerConfig):
+    controller_cls = ControllerClass("wpctrl.controllers.ee", "PDEEPosController")
+
     pos_lower: Union[float, Sequence[float]]
     """Lower bound of the position action [m] (per axis or one value for x, y, z); None: unbounded (-inf)."""
     pos_upper: Union[float, Sequence[float]]
@@ -83,6 +85,8 @@ class PDEEPosControllerConfig(ControllerConfig):
 
 @dataclass
 class PDEEPoseControllerConfig(PDEEPosControllerConfig):
+    controller_cls = ControllerClass("wpctrl.controllers.ee", "PDEEPoseController")
+
     rot_lower: Union[float, Sequence[float]] = None
     """Lower bound of the rotation action [rad]; ManiSkill scales the clipped rotation by this value (see
     ``delta_solver_config["rotation_sign"]``)."""

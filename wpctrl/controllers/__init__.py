@@ -2,13 +2,16 @@
 
 :mod:`.base_controller` (:class:`BaseController`: the per-step API, the combined controller), :mod:`.joint` (joint
 controllers), :mod:`.mobile_base` (mobile-base controllers), :mod:`.ee` (end-effector controllers),
-:mod:`.drive_properties` (per-env drive properties, delay and effort readout), :mod:`.inputs` (action and env-id
-conversion), :mod:`.build` (``build_controller``).
+:mod:`.impedance` (operational-space and joint-impedance controllers), :mod:`.drive_properties` (per-env drive
+properties, delay and effort readout), :mod:`.introspection` (the options that run, the joints' indices, the plan),
+:mod:`.inputs` (action and env-id conversion), :mod:`.build`
+(``build_controller``).
 """
 
 from .base_controller import BaseController, CombinedController
 from .build import build_controller
 from .ee import PDEEPosController, PDEEPoseController
+from .impedance import JointImpedanceController, OperationalSpaceController
 from .joint import (
     JointEffortController,
     PassiveController,
@@ -23,6 +26,8 @@ __all__ = [
     "BaseController",
     "CombinedController",
     "JointEffortController",
+    "JointImpedanceController",
+    "OperationalSpaceController",
     "PDBaseForwardVelController",
     "PDBaseVelController",
     "PDEEPosController",

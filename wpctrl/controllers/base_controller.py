@@ -17,23 +17,22 @@ import warp as wp
 
 from ..binding import bind_joints
 from ..config import ee as cfg_ee
+from ..config import impedance as cfg_imp
 from ..config import rows as cfg
+from ..config.options import Actuation, Delay, Diagnostics
 from ..engine.core import _Engine
 from ..engine.parts import gravity
 from ..engine.plan import Options, make_plan
-from .drive_properties import DrivePropertiesMixin, check_actuation_options
+from .drive_properties import DrivePropertiesMixin
 from .inputs import _action_array, _as_rows_array, _claim, _env_selection, _raise_on_nonfinite, _type_name
-
-_ACTUATIONS = ("implicit", "explicit")
-_NAN_POLICIES = ("hold", "raise")
-_EXPLICIT_PD = ("naive", "stable", "coupled")
-_INERTIA_UPDATES = ("control", "substep")
+from .introspection import IntrospectionMixin
 
 
-class BaseController(DrivePropertiesMixin):
+class BaseController(IntrospectionMixin, DrivePropertiesMixin):
     """A ManiSkill-style joint controller over all envs of a Newton model.
 
-    Build it with :func:`wpctrl.build_controller` (or ``Config.controller_cls(config, model, ...)``). Per control
+    Build it with :func:`wpctrl.build_controller` (or ``Config.controller_cls(config, model, control_freq, sim_freq,
+    actuation=wpctrl.Actuation(...), ...)``, which takes the option groups as objects only). Per control
     step call :meth:`set_action` once, then :meth:`before_simulation_step` before every solver substep. Drive
     targets are written into the ``Control`` in :meth:`before_simulation_step` (implicit actuation:
     ``joint_target_q``/``joint_target_qd``, the solver's built-in PD acts); explicit actuation also writes
@@ -53,49 +52,31 @@ class BaseController(DrivePropertiesMixin):
         control_freq: int = 20,
         sim_freq: int = 100,
         *,
-        actuation: str = "implicit",
+        actuation: Actuation | None = None,
+        delay: Delay | None = None,
+        diagnostics: Diagnostics | None = None,
         solver: Any = None,
-        nan_policy: str = "hold",
-        explicit_pd: str = "naive",
-        inertia_update: str | None = None,
-        delay=None,
-        track_effort: bool = False,
-        clip_targets: str = "none",
-        seed: int = 0,
         balance_passive_force: bool | None = None,
     ):
         self.config = config
         self.control_freq = control_freq
         self.sim_freq = sim_freq
         num_substeps = _num_substeps(control_freq, sim_freq)
-        if actuation not in _ACTUATIONS:
-            raise ValueError(f"actuation: expected one of {_ACTUATIONS}, got {actuation!r}")
-        self.actuation = actuation
-        if nan_policy not in _NAN_POLICIES:
-            raise ValueError(f"nan_policy: expected one of {_NAN_POLICIES}, got {nan_policy!r}")
-        self.nan_policy = nan_policy
-        if explicit_pd not in _EXPLICIT_PD:
-            raise ValueError(f"explicit_pd: expected one of {_EXPLICIT_PD}, got {explicit_pd!r}")
-        if inertia_update is None:  # each drive's default: the coupled drive per substep, the others per control step
-            inertia_update = "substep" if (actuation == "explicit" and explicit_pd == "coupled") else "control"
-        if inertia_update not in _INERTIA_UPDATES:
-            raise ValueError(f"inertia_update: expected one of {_INERTIA_UPDATES}, got {inertia_update!r}")
-        self.explicit_pd = explicit_pd
-        actuation_options = check_actuation_options(delay, track_effort, clip_targets, seed)
-        self.clip_targets = clip_targets
-        balance = True  # ManiSkill's default: a single config counts as on
+        actuation = Actuation() if actuation is None else actuation
+        diagnostics = Diagnostics() if diagnostics is None else diagnostics
+        for name, value, kind in (("actuation", actuation, Actuation), ("diagnostics", diagnostics, Diagnostics)):
+            if not isinstance(value, kind):
+                raise cfg.ConfigError(f"{name}: expected a wpctrl.{kind.__name__}, got {value!r}")
+        if delay is not None and not isinstance(delay, Delay):
+            raise cfg.ConfigError(f"delay: expected a wpctrl.Delay or None, got {delay!r}")
         if isinstance(config, Mapping):
             configs = dict(config)
-            balance = configs.pop("balance_passive_force", True)  # an agent-level option, not a controller
+            balance = configs.pop("balance_passive_force", None)  # an agent-level option, not a controller
             cfg.check_mode_dict(configs)
         else:
-            configs = {"": config}
-        if balance_passive_force is not None:
-            balance = balance_passive_force
-        if not isinstance(balance, (bool, np.bool_)):
-            raise cfg.ConfigError(f"balance_passive_force: expected True or False, got {balance!r}")
-        self.balance_passive_force = bool(balance)
-        if self.balance_passive_force:
+            configs, balance = {"": config}, None
+        balance = _balance_passive_force(balance, balance_passive_force)
+        if balance:
             gravity.check_solver(solver)
         names: list[str] = []
         for c in configs.values():
@@ -111,6 +92,9 @@ class BaseController(DrivePropertiesMixin):
             if isinstance(c, cfg_ee.EE_CONFIGS):  # end-effector controllers: position rows + an EE launch
                 rows, spec = cfg_ee.ee_rows(c, binding.qlimits[r0 : r0 + n])
                 ee_specs[r0] = (c0, rows.count, spec)
+            elif isinstance(c, cfg_imp.IMPEDANCE_CONFIGS):  # OSC / joint impedance: effort rows + their launches
+                rows, spec = cfg_imp.impedance_rows(c, binding.qlimits[r0 : r0 + n])
+                ee_specs[r0] = (c0, rows.count, spec)
             else:
                 rows = cfg.config_rows(c, binding.qlimits[r0 : r0 + n])
             parts.append((uid, c, rows))
@@ -119,12 +103,11 @@ class BaseController(DrivePropertiesMixin):
         all_rows = cfg.Rows.concat([p[2] for p in parts])
         options = Options(
             num_substeps=num_substeps,
-            actuation=actuation,
-            explicit_pd=explicit_pd,
-            inertia_update=inertia_update,
             sim_dt=1.0 / sim_freq,
-            balance_passive_force=self.balance_passive_force,
-            **actuation_options,
+            actuation=actuation,
+            delay=delay,
+            diagnostics=diagnostics,
+            balance_passive_force=balance,
         )
         # The engine: plan (host) -> device state -> parts' model writes -> the first reset; nothing after it.
         self._engine = _Engine(make_plan(all_rows, binding, options, ee_specs), model, solver)
@@ -138,7 +121,10 @@ class BaseController(DrivePropertiesMixin):
         self._cols = slice(0, all_rows.action_dim)
         self._owner = True
         ee = self._engine.part("ee")
-        ee_parts = {} if ee is None else ee.parts  # by first row
+        ee_parts = {} if ee is None else dict(ee.parts)  # by first row
+        imp = self._engine.part("impedance")
+        if imp is not None:
+            ee_parts.update(imp.units)
         self._ee = ee_parts.get(0) if not isinstance(config, Mapping) else None
         self.children: dict[str, BaseController] = {}
         if isinstance(config, Mapping):
@@ -153,6 +139,7 @@ class BaseController(DrivePropertiesMixin):
                 c0 += rows.action_dim
             self.single_action_space = _flat_space([ch.single_action_space for ch in self.children.values()])
             self.action_mapping = {uid: (ch._cols.start, ch._cols.stop) for uid, ch in self.children.items()}
+            self.joint_mapping = {uid: (ch._rows.start, ch._rows.stop) for uid, ch in self.children.items()}
             self.sets_target_qpos = any(ch.sets_target_qpos for ch in self.children.values())
             self.sets_target_qvel = any(ch.sets_target_qvel for ch in self.children.values())
         else:
@@ -163,11 +150,6 @@ class BaseController(DrivePropertiesMixin):
         self.config = config
         self.control_freq = parent.control_freq
         self.sim_freq = parent.sim_freq
-        self.actuation = parent.actuation
-        self.nan_policy = parent.nan_policy
-        self.explicit_pd = parent.explicit_pd
-        self.clip_targets = parent.clip_targets
-        self.balance_passive_force = parent.balance_passive_force
         self._engine = parent._engine
         self._rows = rows_slice
         self._cols = cols_slice
@@ -229,22 +211,22 @@ class BaseController(DrivePropertiesMixin):
     @property
     def target_qpos(self) -> wp.array:
         """(num_envs, n_joints) position targets [rad or m] at the end of the control step (live view)."""
-        return self._view(self._engine.target_qpos)
+        return self._view(self._engine.core.target_qpos)
 
     @property
     def target_qvel(self) -> wp.array:
         """(num_envs, n_joints) velocity targets [rad/s or m/s] (live view)."""
-        return self._view(self._engine.target_qvel)
+        return self._view(self._engine.core.target_qvel)
 
     @property
     def start_qpos(self) -> wp.array:
         """(num_envs, n_joints) measured positions at the last set_action or reset [rad or m] (live view)."""
-        return self._view(self._engine.start_qpos)
+        return self._view(self._engine.core.start_qpos)
 
     @property
     def processed_action(self) -> wp.array:
         """(num_envs, action_dim) last action after clip and scale (raw units) (live view)."""
-        arr = self._engine.processed_action
+        arr = self._engine.core.processed_action
         if self._owner:
             return arr
         if self._cols.start == self._cols.stop:  # a child without action columns (passive)
@@ -268,7 +250,7 @@ class BaseController(DrivePropertiesMixin):
     @property
     def bad_action_count(self) -> wp.array:
         """(num_envs,) int32 count of actions rejected for NaN/Inf; those envs kept their previous targets."""
-        return self._engine.bad_action_count
+        return self._engine.core.bad_action_count
 
     def attach_solver(self, solver) -> None:
         """Notify ``solver`` of the drive properties now, and after every per-env gain update (implicit acceleration
@@ -405,14 +387,28 @@ class BaseController(DrivePropertiesMixin):
             return
         eng = self._engine
         new = _as_rows_array("target_qpos", state["target_qpos"], (eng.num_envs, self._rows.stop - self._rows.start))
-        full = eng.target_qpos.numpy()
+        full = eng.core.target_qpos.numpy()
         full[:, self._rows] = new
-        eng.target_qpos.assign(full)
+        eng.core.target_qpos.assign(full)
         eng.forget_control()  # the Control's drive targets are now stale: the next substep rewrites them
 
     def __repr__(self) -> str:
         inner = ", ".join(self.joint_names)
         return f"{type(self).__name__}(dof={self.action_dim}, num_envs={self.num_envs}, joints=({inner}))"
+
+
+def _balance_passive_force(in_mode_dict, keyword) -> bool:
+    """The one value of ``balance_passive_force``: the keyword or the mode dict's entry (given both ways they must
+    agree), else True (ManiSkill's default)."""
+    for v in (keyword, in_mode_dict):
+        if v is not None and not isinstance(v, (bool, np.bool_)):
+            raise cfg.ConfigError(f"balance_passive_force: expected True or False, got {v!r}")
+    if keyword is not None and in_mode_dict is not None and bool(keyword) != bool(in_mode_dict):
+        raise cfg.ConfigError(
+            f"balance_passive_force: expected None or the mode dict's 'balance_passive_force' entry "
+            f"({bool(in_mode_dict)}), got {keyword!r}"
+        )
+    return bool(True if keyword is None and in_mode_dict is None else (in_mode_dict if keyword is None else keyword))
 
 
 def _num_substeps(control_freq, sim_freq) -> int:
@@ -440,4 +436,5 @@ def _batched(space: gym.spaces.Box, num_envs: int) -> gym.spaces.Box:
 
 
 class CombinedController(BaseController):
-    """A control mode ``{uid: config}``: one flat action in dict insertion order, see :attr:`action_mapping`."""
+    """A control mode ``{uid: config}``: one flat action in dict insertion order, see :attr:`action_mapping`; the
+    children's joints in the same order, see :attr:`joint_mapping`."""

@@ -20,52 +20,16 @@ arrays every step and need no notice; Steel and Kamino are notified the same way
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-
 import numpy as np
 import warp as wp
 
+from ..config.errors import ConfigError
 from ..engine.parts.actuator_models import ACTUATOR_FIELDS
 from ..engine.parts.drive_properties import DRIVE_FIELDS
 from .inputs import _env_selection, _is_torch
 
 _RAND_MODES = ("scale", "abs")
-_CLIP_TARGETS = ("none", "joint_limits")
 _F32_MAX = float(np.finfo(np.float32).max)
-
-
-def check_delay(delay) -> tuple[int, int] | None:
-    """``None | int | (min, max)`` [substeps] -> (min, max) or None."""
-    if delay is None:
-        return None
-    vals = (delay, delay) if isinstance(delay, (int, np.integer)) and not isinstance(delay, bool) else delay
-    ok = isinstance(vals, Sequence) and len(vals) == 2
-    ok = ok and all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in vals)
-    if not ok:
-        raise ValueError(f"delay: expected None, an int or (min_substeps, max_substeps) ints, got {delay!r}")
-    lo, hi = int(vals[0]), int(vals[1])
-    if lo < 0 or hi < lo:
-        raise ValueError(f"delay: expected 0 <= min_substeps <= max_substeps, got ({lo}, {hi})")
-    if hi > 1024:
-        raise ValueError(f"delay: expected at most 1024 substeps (the history holds max + 1 targets), got {hi}")
-    return lo, hi
-
-
-def check_actuation_options(delay, track_effort, clip_targets, seed) -> dict:
-    """Validate ``build_controller``'s actuation options; return the engine's keywords."""
-    delay_range = check_delay(delay)
-    if not isinstance(track_effort, (bool, np.bool_)):
-        raise ValueError(f"track_effort: expected a bool, got {track_effort!r}")
-    if clip_targets not in _CLIP_TARGETS:
-        raise ValueError(f"clip_targets: expected one of {_CLIP_TARGETS}, got {clip_targets!r}")
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not -(2**31) <= int(seed) < 2**31:
-        raise ValueError(f"seed: expected an int32, got {seed!r}")
-    return {
-        "delay": delay_range,
-        "track_effort": bool(track_effort),
-        "clip_targets": clip_targets == "joint_limits",
-        "seed": int(seed),
-    }
 
 
 def _host_values(name: str, value, shape_ok, n: int) -> np.ndarray:
@@ -77,9 +41,9 @@ def _host_values(name: str, value, shape_ok, n: int) -> np.ndarray:
     try:
         a = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError) as e:
-        raise ValueError(f"{name}: expected numbers, got {value!r}") from e
+        raise ConfigError(f"{name}: expected numbers, got {value!r}") from e
     if not shape_ok(a.shape):
-        raise ValueError(f"{name}: expected shape ({n},) or {shape_ok.expected}, got {a.shape}")
+        raise ConfigError(f"{name}: expected shape ({n},) or {shape_ok.expected}, got {a.shape}")
     bad = np.isnan(a) | (a < 0)
     if name.endswith("force_limit"):
         a = np.where(a > _F32_MAX, np.inf, a)  # an infinite force limit means no limit
@@ -87,7 +51,7 @@ def _host_values(name: str, value, shape_ok, n: int) -> np.ndarray:
         bad |= ~np.isfinite(a) | (a > _F32_MAX)
     if bad.any():
         i = tuple(int(x[0]) for x in np.nonzero(bad))
-        raise ValueError(f"{name}: expected finite values >= 0 (float32 range), got {a[i]!r} at index {list(i)}")
+        raise ConfigError(f"{name}: expected finite values >= 0 (float32 range), got {a[i]!r} at index {list(i)}")
     return a
 
 
@@ -101,11 +65,29 @@ def _ranges(fields, ranges, mode: str):
         try:
             a, b = (float(x) for x in rng)
         except (TypeError, ValueError) as e:
-            raise ValueError(f"{name}: expected a (lo, hi) pair of numbers, got {rng!r}") from e
+            raise ConfigError(f"{name}: expected a (lo, hi) pair of numbers, got {rng!r}") from e
         if not (np.isfinite(a) and np.isfinite(b) and 0.0 <= a <= b <= _F32_MAX):
-            raise ValueError(f"{name}: expected finite 0 <= lo <= hi ({mode} range), got ({a!r}, {b!r})")
+            raise ConfigError(f"{name}: expected finite 0 <= lo <= hi ({mode} range), got ({a!r}, {b!r})")
         lo[p], hi[p], enabled[p] = a, b, 1
     return lo, hi, enabled
+
+
+def _given_values(fields, given, sel: int, n: int):
+    """The given (not None) values of ``fields`` as one float32 ``(len(fields), batch, n)`` host array and the
+    per-field enabled flags, or None when none is given (each validated by :func:`_host_values`)."""
+    arrays = {
+        k: _host_values(f"set_drive_properties.{k}", v, _Shape(sel, n), n)
+        for k, v in zip(fields, given)
+        if v is not None
+    }
+    if not arrays:
+        return None
+    batch = max(a.shape[0] if a.ndim == 2 else 1 for a in arrays.values())
+    values = np.zeros((len(fields), batch, n), np.float32)
+    for p, k in enumerate(fields):
+        if k in arrays:
+            values[p] = np.broadcast_to(arrays[k].astype(np.float32), (batch, n))
+    return values, [int(k in arrays) for k in fields]
 
 
 class _Shape:
@@ -123,25 +105,29 @@ class DrivePropertiesMixin:
     # -- per-env drive properties ---------------------------------------------------------------------------------
 
     @property
+    def _drive(self):
+        return self._engine.part("drive_properties")  # every mode has it
+
+    @property
     def stiffness(self) -> wp.array:
         """(num_envs, n_joints) drive stiffness Kp [N·m/rad or N/m] per env (live; initialised from the config)."""
-        return self._view(self._engine.kp)
+        return self._view(self._drive.kp)
 
     @property
     def damping(self) -> wp.array:
         """(num_envs, n_joints) drive damping Kd [N·m·s/rad or N·s/m] per env (live)."""
-        return self._view(self._engine.kd)
+        return self._view(self._drive.kd)
 
     @property
     def force_limit(self) -> wp.array:
         """(num_envs, n_joints) effort limit [N·m or N] per env (live)."""
-        return self._view(self._engine.force_limit)
+        return self._view(self._drive.force_limit)
 
     @property
     def friction(self) -> wp.array:
         """(num_envs, n_joints) joint friction [N·m or N] per env (live; the solver applies it from
         ``Model.joint_friction``)."""
-        return self._view(self._engine.friction)
+        return self._view(self._drive.friction)
 
     @property
     def saturation_effort(self) -> wp.array | None:
@@ -163,107 +149,99 @@ class DrivePropertiesMixin:
 
     def set_drive_properties(
         self,
+        env_ids=None,
+        *,
         stiffness=None,
         damping=None,
         force_limit=None,
         friction=None,
-        env_ids=None,
-        *,
         saturation_effort=None,
         velocity_limit=None,
     ):
         """Set drive properties of ``env_ids`` (None: all envs) for this controller's joints.
 
-        Each value: shape (n_joints,) (broadcast to every selected env) or (len(env_ids) | num_envs for a bool mask,
-        n_joints), torch / numpy / wp; finite and >= 0 (force_limit may be inf). ``saturation_effort`` and
-        ``velocity_limit`` (> 0) set the DC-motor envelope of controllers built with actuator models. Written to the
-        per-env arrays, to
-        Newton's per-DOF model arrays of those envs (gains with implicit actuation; effort limit and friction always)
-        and the attached solver is notified. Validation reads the values on the host (a sync for device input): call
-        it outside captured graphs; use :meth:`randomize_drive_properties` inside them. With per-id values, list each
-        env once (a repeated id takes one of its rows, unspecified which).
+        ``env_ids`` as in :meth:`~wpctrl.BaseController.reset`; every value by keyword: shape (n_joints,) (broadcast
+        to every selected env) or (len(env_ids) | num_envs for a bool mask, n_joints), torch / numpy / wp; finite and
+        >= 0 (force_limit may be inf). ``saturation_effort`` and ``velocity_limit`` (> 0) set the DC-motor envelope
+        of controllers built with actuator models. Written to the per-env arrays, to Newton's per-DOF model arrays
+        of those envs (gains with implicit actuation; effort limit and friction always) and the attached solver is
+        notified. Validation reads the values on the host (a sync for device input): call it outside captured
+        graphs; use :meth:`randomize_drive_properties` inside them. With per-id values, list each env once (a
+        repeated id takes one of its rows, unspecified which). A bad value raises :class:`wpctrl.ConfigError`.
         """
         eng = self._engine
+        drive = (stiffness, damping, force_limit, friction)
+        motor = (saturation_effort, velocity_limit)
+        if any(v is not None for v in motor):
+            self._actuators("set_drive_properties")
         ids, mask = self._selection(env_ids)
         n = self._rows.stop - self._rows.start
         sel = eng.num_envs if ids is None else ids.shape[0]  # a bool mask takes (num_envs, n) values
-        self._set_actuator_params(saturation_effort, velocity_limit, ids, mask, sel, n)
-        given = {k: v for k, v in zip(DRIVE_FIELDS, (stiffness, damping, force_limit, friction)) if v is not None}
-        if not given:
-            return
-        arrays = {k: _host_values(f"set_drive_properties.{k}", v, _Shape(sel, n), n) for k, v in given.items()}
-        batch = max(a.shape[0] if a.ndim == 2 else 1 for a in arrays.values())
-        values = np.zeros((4, batch, n), np.float32)
-        for p, k in enumerate(DRIVE_FIELDS):
-            if k in arrays:
-                values[p] = np.broadcast_to(arrays[k].astype(np.float32), (batch, n))
-        enabled = [int(k in arrays) for k in DRIVE_FIELDS]
-        dev_values = wp.array(values, dtype=wp.float32, device=eng.device)
-        eng.part("drive_properties").set(eng, dev_values, enabled, ids, mask, self._rows.start, n)
+        motor_values = _given_values(ACTUATOR_FIELDS, motor, sel, n)  # every value checked before any is written
+        drive_values = _given_values(DRIVE_FIELDS, drive, sel, n)
+        if motor_values is not None and motor_values[1][1] and (motor_values[0][1] <= 0).any():
+            raise ConfigError(f"set_drive_properties.velocity_limit: expected values > 0, got {velocity_limit!r}")
+        if motor_values is not None:
+            eng.part("actuator_models").set(eng, *motor_values, ids, mask, self._rows.start, n)
+        if drive_values is not None:
+            values, enabled = drive_values
+            dev_values = wp.array(values, dtype=wp.float32, device=eng.device)
+            eng.part("drive_properties").set(eng, dev_values, enabled, ids, mask, self._rows.start, n)
 
     def _actuators(self, what: str):
         part = self._engine.part("actuator_models")
         if part is None:
-            raise ValueError(f"{what}: this controller was built without actuator models (no DC-motor envelope)")
+            raise ConfigError(
+                f"{what}: saturation_effort / velocity_limit: expected None, this controller was built without "
+                f"actuator models (no DC-motor envelope)"
+            )
         return part
-
-    def _set_actuator_params(self, saturation_effort, velocity_limit, ids, mask, sel: int, n: int) -> None:
-        given = {k: v for k, v in zip(ACTUATOR_FIELDS, (saturation_effort, velocity_limit)) if v is not None}
-        if not given:
-            return
-        part = self._actuators("set_drive_properties")
-        arrays = {k: _host_values(f"set_drive_properties.{k}", v, _Shape(sel, n), n) for k, v in given.items()}
-        if "velocity_limit" in arrays and (arrays["velocity_limit"] <= 0).any():
-            raise ValueError("set_drive_properties.velocity_limit: expected values > 0")
-        batch = max(a.shape[0] if a.ndim == 2 else 1 for a in arrays.values())
-        values = np.zeros((2, batch, n), np.float32)
-        for p, k in enumerate(ACTUATOR_FIELDS):
-            if k in arrays:
-                values[p] = np.broadcast_to(arrays[k].astype(np.float32), (batch, n))
-        part.set(self._engine, values, [int(k in arrays) for k in ACTUATOR_FIELDS], ids, mask, self._rows.start, n)
 
     def randomize_drive_properties(
         self,
         env_ids=None,
+        *,
         stiffness=None,
         damping=None,
         force_limit=None,
         friction=None,
-        mode="scale",
-        seed=0,
-        *,
         saturation_effort=None,
         velocity_limit=None,
+        mode="scale",
+        seed=0,
     ):
         """Draw drive properties uniformly on the device for ``env_ids`` (None: all envs) and this controller's joints.
 
-        Each of stiffness/damping/force_limit/friction: None (untouched) or ``(lo, hi)``; ``mode="scale"`` multiplies
-        the config's nominal value by U(lo, hi) (``(1, 1)`` leaves it bit-identical), ``"abs"`` sets U(lo, hi) in the
-        property's units. Each joint and env draws independently from Warp's RNG keyed by ``seed`` and a device-side
-        counter bumped after every call: a captured graph draws new values on each replay. Mirrored into the model and
-        notified to the attached solver like :meth:`set_drive_properties`. ``env_ids`` as in
-        :meth:`~wpctrl.BaseController.reset` (a device bool mask or int array keeps the call capturable).
-        ``saturation_effort`` / ``velocity_limit`` draw the DC-motor envelope of controllers built with actuator models
-        the same way (streams of their own).
+        ``env_ids`` as in :meth:`~wpctrl.BaseController.reset` (a device bool mask or int array keeps the call
+        capturable); every other argument by keyword. Each of stiffness/damping/force_limit/friction: None
+        (untouched) or ``(lo, hi)``; ``mode="scale"`` multiplies the config's nominal value by U(lo, hi) (``(1, 1)``
+        leaves it bit-identical), ``"abs"`` sets U(lo, hi) in the property's units. Each joint and env draws
+        independently from Warp's RNG keyed by ``seed`` and a device-side counter bumped after every call: a captured
+        graph draws new values on each replay. Mirrored into the model and notified to the attached solver like
+        :meth:`set_drive_properties`. ``saturation_effort`` / ``velocity_limit`` draw the DC-motor envelope of
+        controllers built with actuator models the same way (streams of their own). A bad value raises
+        :class:`wpctrl.ConfigError`.
         """
         if mode not in _RAND_MODES:
-            raise ValueError(f"randomize_drive_properties.mode: expected one of {_RAND_MODES}, got {mode!r}")
+            raise ConfigError(f"randomize_drive_properties.mode: expected one of {_RAND_MODES}, got {mode!r}")
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not -(2**31) <= int(seed) < 2**31:
-            raise ValueError(f"randomize_drive_properties.seed: expected an int32, got {seed!r}")
+            raise ConfigError(f"randomize_drive_properties.seed: expected an int32, got {seed!r}")
         lo, hi, enabled = _ranges(DRIVE_FIELDS, (stiffness, damping, force_limit, friction), mode)
         alo, ahi, aen = _ranges(ACTUATOR_FIELDS, (saturation_effort, velocity_limit), mode)
         if any(aen) and alo[1] <= 0.0 and aen[1]:
-            raise ValueError(f"randomize_drive_properties.velocity_limit: expected lo > 0, got {velocity_limit!r}")
+            raise ConfigError(f"randomize_drive_properties.velocity_limit: expected lo > 0, got {velocity_limit!r}")
+        if any(aen):
+            self._actuators("randomize_drive_properties")
         if not any(enabled) and not any(aen):
             return
+        eng = self._engine
         ids, mask = self._selection(env_ids)
         n = self._rows.stop - self._rows.start
         if any(aen):
-            part = self._actuators("randomize_drive_properties")
-            part.randomize(self._engine, alo, ahi, aen, mode == "abs", int(seed), ids, mask, self._rows.start, n)
+            part = eng.part("actuator_models")
+            part.randomize(eng, alo, ahi, aen, mode == "abs", int(seed), ids, mask, self._rows.start, n)
         if not any(enabled):
             return
-        eng = self._engine
         drive = eng.part("drive_properties")
         drive.randomize(eng, lo, hi, enabled, mode == "abs", int(seed), ids, mask, self._rows.start, n)
 
@@ -273,24 +251,26 @@ class DrivePropertiesMixin:
     def delay(self) -> wp.array | None:
         """(num_envs,) int32 command delay [substeps] per env, drawn at each reset of the env from the build's
         ``delay`` range (live, writable: assign values in [0, max]); None without ``delay``."""
-        return self._engine.delay
+        part = self._engine.part("delay")
+        return None if part is None else part.delay
 
     @delay.setter
     def delay(self, value) -> None:
         eng = self._engine
-        if eng.delay is None:
-            raise ValueError("delay: this controller was built without delay= (no history buffer)")
+        part = eng.part("delay")
+        if part is None:
+            raise ConfigError("delay: this controller was built without delay= (no history buffer)")
         if _is_torch(value):
             value = value.detach().cpu().numpy()
         elif isinstance(value, wp.array):
             value = value.numpy()
         a = np.broadcast_to(np.asarray(value), (eng.num_envs,)) if np.ndim(value) == 0 else np.asarray(value)
-        hi = eng.delay_range[1]
+        hi = part.range[1]
         if a.shape != (eng.num_envs,) or a.dtype.kind not in "iu" or (a < 0).any() or (a > hi).any():
-            raise ValueError(
+            raise ConfigError(
                 f"delay: expected {eng.num_envs} ints in [0, {hi}] (max_delay of the build), got {np.asarray(value)!r}"
             )
-        eng.delay.assign(a.astype(np.int32))
+        part.delay.assign(a.astype(np.int32))
 
     # -- effort readout -------------------------------------------------------------------------------------------
 
@@ -299,18 +279,18 @@ class DrivePropertiesMixin:
         """(num_envs, n_joints) PD effort [N·m or N] before the force-limit clamp, written every substep with
         ``track_effort=True`` (else None). Explicit actuation: the torque law itself. Implicit: the same law on the
         substep's start state and delayed targets, an *estimate* of what the solver's implicit drive applies."""
-        a = self._engine.computed_effort
-        return None if a is None else self._view(a)
+        part = self._engine.part("effort_readout")
+        return None if part is None else self._view(part.computed_effort)
 
     @property
     def applied_effort(self) -> wp.array | None:
         """(num_envs, n_joints) effort after the clamp to ``force_limit`` [N·m or N] (implicit: an estimate)."""
-        a = self._engine.applied_effort
-        return None if a is None else self._view(a)
+        part = self._engine.part("effort_readout")
+        return None if part is None else self._view(part.applied_effort)
 
     @property
     def saturation_count(self) -> wp.array | None:
         """(num_envs, n_joints) int32: substeps in which ``abs(computed_effort)`` exceeded the force limit; zeroed by
         ``reset`` for the reset envs."""
-        a = self._engine.saturation_count
-        return None if a is None else self._view(a)
+        part = self._engine.part("effort_readout")
+        return None if part is None else self._view(part.saturation_count)

@@ -18,6 +18,7 @@ from .ee import EndEffectors
 from .effort_command import EffortCommand
 from .effort_readout import EffortReadout
 from .gravity import BalancePassiveForce
+from .impedance import Impedance
 from .part import Part
 from .response import JointSpaceResponse
 
@@ -32,6 +33,7 @@ PARTS: dict[str, type[Part]] = {
         Delay,
         EffortReadout,
         EndEffectors,
+        Impedance,
         BalancePassiveForce,
     )
 }

@@ -33,7 +33,7 @@ class CoupledDrive(JointSpaceResponse):
 
     def build(self, engine, model, solver) -> None:
         super().build(engine, model, solver)
-        if self.plan.options.inertia_update == "control":
+        if self.plan.inertia_update == "control":
             n = self._fused.layout.num_dofs
             self.h_cache = wp.zeros(
                 self.plan.num_envs, dtype=coupled_drive.coupled_matrix_type(n), device=engine.device

@@ -23,7 +23,7 @@ class Delay(Part):
         return plan.options.delay is not None
 
     def __init__(self, plan, alloc):
-        lo, hi = plan.options.delay
+        lo, hi = plan.delay_range
         rows = plan.rows
         self.range = (int(lo), int(hi))
         self.delay = wp.full(plan.num_envs, int(lo), dtype=wp.int32, device=alloc.device)

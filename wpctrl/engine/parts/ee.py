@@ -337,10 +337,10 @@ class EEPart:
             params.update(
                 {
                     "row_q_off": self.row_q_off,
-                    "env_q_base": eng.env_q_base,
-                    "row_qlo": eng.row_qlo,
-                    "row_qhi": eng.row_qhi,
-                    "clip_targets": int(getattr(eng, "clip_targets", False)),
+                    "env_q_base": eng.core.env_q_base,
+                    "row_qlo": eng.core.row_qlo,
+                    "row_qhi": eng.core.row_qhi,
+                    "clip_targets": int(eng.plan.clip_targets),
                     "row0": self.row0,
                     "num_dof": self.num_dof,
                     "col0": self.col0,
@@ -361,8 +361,8 @@ class EEPart:
                     "rot_scale": wp.vec3(*(float(v) for v in s.rot_scale)),
                     "action_in": action,
                     "joint_q_in": state.joint_q,
-                    "processed_action_out": eng.processed_action,
-                    "target_qpos_out": eng.target_qpos,
+                    "processed_action_out": eng.core.processed_action,
+                    "target_qpos_out": eng.core.target_qpos,
                     "target_pose_out": self.target_pose,
                     "ee_pose_out": self.ee_pose,
                     "ik_success_out": self.ik_success,
@@ -374,8 +374,10 @@ class EEPart:
         self._launch.bind("joint_q_in", state.joint_q)
         self._launch.launch()
 
-    def reset(self, state, env_ids, env_mask) -> None:
+    def reset(self, state, env_ids, env_mask, use_target: bool | None = None) -> None:
+        """The measured EE pose of the reset envs; with ``use_target`` (default: the spec's) also their target."""
         eng = self.engine
+        use_target = self.spec.use_target if use_target is None else use_target
         dim = eng.num_envs if env_ids is None else env_ids.shape[0]
         if dim == 0:
             return
@@ -386,9 +388,9 @@ class EEPart:
             inputs=[
                 *p.values(),
                 self.row_q_off,
-                eng.env_q_base,
+                eng.core.env_q_base,
                 self.num_dof,
-                int(self.spec.use_target),
+                int(use_target),
                 env_ids,
                 env_mask,
                 state.joint_q,
@@ -407,7 +409,15 @@ class EEPart:
         wp.launch(
             ee_kernels._ee_fk_jacobian_kernel,
             dim=eng.num_envs,
-            inputs=[*self._chain_params.values(), self.row_q_off, eng.env_q_base, self.num_dof, joint_q, pose, jac],
+            inputs=[
+                *self._chain_params.values(),
+                self.row_q_off,
+                eng.core.env_q_base,
+                self.num_dof,
+                joint_q,
+                pose,
+                jac,
+            ],
             device=eng.device,
         )
         return pose, jac
@@ -421,10 +431,11 @@ class EndEffectors(Part):
 
     @staticmethod
     def wanted(plan) -> bool:
-        return bool(plan.ee_specs)
+        return any(isinstance(v[2], EESpec) for v in plan.ee_specs.values())
 
     def __init__(self, plan, alloc):
-        self.specs = plan.ee_specs  # {first row: (first action column, rows, spec)}
+        # {first row: (first action column, rows, spec)} (the impedance controllers' specs are another part's)
+        self.specs = {r0: v for r0, v in plan.ee_specs.items() if isinstance(v[2], EESpec)}
         self.parts: dict[int, EEPart] = {}
 
     def build(self, engine, model, solver) -> None:

@@ -15,7 +15,7 @@ class EffortReadout(Part):
 
     @staticmethod
     def wanted(plan) -> bool:
-        return plan.options.track_effort
+        return plan.track_effort
 
     def __init__(self, plan, alloc):
         R = plan.num_rows

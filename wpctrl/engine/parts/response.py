@@ -83,7 +83,7 @@ class JointSpaceResponse(Part):
         self.response = alloc.per_env(max(plan.num_rows, 1), fill=1.0)
         self._fused = None  # the fused H / Cholesky kernel (wpctrl.kernels.inertia) where the articulation allows it
         self._jsr = None  # Newton's JointSpaceResponse otherwise
-        self.update_per_substep = plan.options.inertia_update == "substep"
+        self.update_per_substep = plan.inertia_update == "substep"
         self.write_gains = plan.has_accel and not plan.explicit
 
     def kernel_args(self) -> dict:

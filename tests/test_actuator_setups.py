@@ -252,7 +252,7 @@ def test_effort_controller_after_a_gripper_with_per_env_limits():
     for actuation in ("implicit", "explicit"):
         model = build_panda(E)
         mode = {"gripper": gripper(), "arm": wpctrl.JointEffortControllerConfig(PANDA_ARM_JOINTS, lo, hi)}
-        ctrl = wpctrl.build_controller(mode, model, 20, 100, actuation)
+        ctrl = wpctrl.build_controller(mode, model, 20, 100, actuation=actuation)
         lim = np.array([[3.0], [15.0], [100.0]], f32) * np.ones((E, 7), f32)
         ctrl["arm"].set_drive_properties(force_limit=lim)
         s, c = model.state(), model.control()
@@ -337,7 +337,9 @@ def test_mlp_layers_without_bias_leaky_relu_and_dropout_equal_torch():
     )  # fmt: skip
     act = wpctrl.ActuatorNet(mlp, input_idx=(0,), pos_scale=2.0, vel_scale=0.5, torque_scale=30.0)
     model = build_panda(E)
-    ctrl = wpctrl.build_controller(pos(PANDA_ARM_JOINTS, 0.0, 0.0, 1e9, actuator=act), model, 100, 100, "explicit")
+    ctrl = wpctrl.build_controller(
+        pos(PANDA_ARM_JOINTS, 0.0, 0.0, 1e9, actuator=act), model, 100, 100, actuation="explicit"
+    )
     rng = np.random.default_rng(9)
     for q, qd, tq, tau in substeps(ctrl, model, PANDA_ARM_JOINTS, rng, 2):
         x = np.stack([(tq - q) * f32(2.0), qd * f32(0.5)], axis=2).reshape(E * 7, 2)

@@ -57,7 +57,7 @@ def main(argv=None) -> int:
     solver = newton.solvers.SolverMuJoCo(model, disable_contacts=True)
     s0, s1, control = model.state(), model.state(), model.control()
     ctrl.reset(s0, control=control)
-    dof = ctrl._engine.binding.dof_index[:, args.joint]
+    dof = ctrl.dof_index[:, args.joint]
     rng = np.random.default_rng(0)
     v_all, u_all, f_all = [], [], []
     for _ in range(args.steps):

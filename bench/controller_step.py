@@ -209,7 +209,7 @@ def run_one(args, setup, mode_name: str, interp: bool, sync: Sync, device) -> li
             torch_step()
         fns["torch_graph"] = tgraph.replay
     same_bytes = n_envs * wpctrl_bytes_estimate(
-        mode, K, interp, elided=not ctrl._engine.per_substep, explicit=args.actuation == "explicit"
+        mode, K, interp, elided=not ctrl.substep_launch, explicit=args.actuation == "explicit"
     )
     extra = {}
     if "floor" in args.variants:

@@ -83,11 +83,10 @@ class TorchEEPose:
     def __init__(self, ctrl, state, control, device: torch.device):
         arm = ctrl["arm"]
         part = arm._ee
-        model = ctrl._engine.model
+        model = ctrl.model
         self.dev = device
-        b = ctrl._engine.binding
-        self.coord_arm = torch.as_tensor(b.coord_index[:, :7].astype(np.int64), device=device)
-        self.coord_grip = torch.as_tensor(b.coord_index[:, 7:].astype(np.int64), device=device)
+        self.coord_arm = torch.as_tensor(arm.coord_index.astype(np.int64), device=device)
+        self.coord_grip = torch.as_tensor(ctrl["gripper"].coord_index.astype(np.int64), device=device)
         self.joint_q = wp.to_torch(state.joint_q)
         self.joint_target_q = wp.to_torch(control.joint_target_q)
         # The serial chain of env 0 (as pytorch_kinematics builds it from the URDF): per joint, parent offset,
@@ -114,7 +113,7 @@ class TorchEEPose:
         assert (types == 1).all(), "the torch baseline ports revolute chains only"
         off = part.ee_offset
         self.tcp = torch.tensor(_mat(np.array([*off.p, *off.q])), dtype=torch.float32, device=device)
-        rows = ctrl._engine.rows
+        rows = ctrl._engine.rows  # the mode's raw action bounds (wpctrl internals, read by this baseline)
         self.lo = torch.tensor(rows.action_low[:3], device=device)
         self.hi = torch.tensor(rows.action_high[:3], device=device)
         self.rot_lower = float(arm.config.rot_lower)

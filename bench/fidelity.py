@@ -121,8 +121,7 @@ class Rig:
         self.dt = 1.0 / (setup["sim_freq"] * mult)
         self.s0, self.s1 = self.model.state(), self.model.state()
         self.control = self.model.control()
-        b = self.ctrl._engine.binding
-        self.coord, self.dof = b.coord_index, b.dof_index
+        self.coord, self.dof = self.ctrl.coord_index, self.ctrl.dof_index
 
     def put(self, qpos, qvel):
         q, qd = self.s0.joint_q.numpy(), self.s0.joint_qd.numpy()
@@ -190,8 +189,8 @@ def one_step(trace: dict, option: str, device, merge: str) -> dict:
     finite = np.isfinite(q).all(axis=1) & np.isfinite(qd).all(axis=1) & (np.abs(qd).max(axis=1) < 1e3)
     err = np.linalg.norm(q[:, :ARM] - q_physx, axis=1) / np.maximum(np.linalg.norm(q_physx - q_before, axis=1), 1e-9)
     iters = None
-    if rig.ctrl._engine.coupled:
-        iters = int(rig.ctrl._engine.coupled_iterations.numpy().max())
+    if rig.ctrl.coupled_iterations is not None:
+        iters = int(rig.ctrl.coupled_iterations.numpy().max())
     return {"err": np.where(finite, err, np.inf), "diverged": int((~finite).sum()), "max_iterations": iters}
 
 

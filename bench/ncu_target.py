@@ -55,7 +55,7 @@ def main(argv=None):
     for _ in range(2):
         step()
     sync()
-    per_substep = ctrl._engine.per_substep
+    per_substep = ctrl.substep_launch
     print(
         f"envs {n} ({setup.layout_kind}), {args.mode}, {args.actuation}, interpolate {args.interpolate}: "
         f"{1 + (ctrl.num_substeps if per_substep else 0)} launches per control step",

@@ -155,7 +155,7 @@ def run_one(args, n_envs: int, device, sync: Sync) -> list[dict]:
     osc.before_simulation_step(state, controls["osc"])
     newton_osc.step()
     sync()
-    dof = osc._engine.binding.dof_index[:, :7]
+    dof = osc["arm"].dof_index
     ours = osc["arm"].target_effort.numpy().astype(np.float64)  # the commanded torque (joint_f: clamped to 100 N·m)
     ref = controls["newton"].joint_f.numpy()[dof].astype(np.float64)
     check = {"osc_vs_newton_max_rel_torque_diff": float(np.abs(ours - ref).max() / max(np.abs(ref).max(), 1e-9))}

@@ -21,7 +21,7 @@ class Harness:
         self.ctrl = wpctrl.build_controller(config, self.model, control_freq, sim_freq, actuation=actuation, **kw)
         self.state = self.model.state()
         self.control = self.model.control()
-        b = self.ctrl._engine.binding
+        b = self.ctrl  # the controlled joints' coord_index / dof_index
         self.coord = b.coord_index
         self.dof = b.dof_index
         self.num_envs = num_envs

@@ -273,7 +273,7 @@ class Harness:
                 **opts,
             )
         self.inertia_update = inertia_update
-        self.needs_response = self.ctrl._engine.needs_response
+        self.needs_response = self.ctrl.response is not None
         robot = RefRobot(PANDA_JOINTS, self.layout.limits)
         self.delay_range = _ranged(opts.get("delay"))
         self.ref = RefCombined(
@@ -501,7 +501,8 @@ class Harness:
                     if self.coupled:  # b - D A tau: large terms cancel (a float32 H^-1 against the kernel's float64)
                         atol += 1e-4 * np.abs(exp) + 1e-5 * getattr(rc, "effort_scale", 0.0)
                     if isinstance(rc.config, EE_CONFIGS):
-                        atol += EE_TOL * (float(rc.kp.max()) + 1.0)
+                        kp = max(float(rc.kp.max()), getattr(self, "effort_kp", {}).get(uid, 0.0))
+                        atol += EE_TOL * (kp + 1.0)
                     if rc.actuator.kind == "table" and f == "applied_effort":
                         atol += TABLE_TOL
                     got = getattr(c, f).numpy()
@@ -617,11 +618,13 @@ class Harness:
                 self.put_state()
             self.ctrl.before_simulation_step(self.state, self.control)
             inverse = None
-            if self.coupled or (self.inertia_update == "substep" and self.ctrl._engine.per_substep):
+            if self.coupled or (self.inertia_update == "substep" and self.ctrl.substep_launch):
                 self.response_q = self.state.joint_q.numpy().copy()
             if self.coupled:
                 inverse = self.physics.inverse(self.response_q)
             self.apply(self.ref.before_simulation_step(self.q, self.qd, self.response(), inverse))
+            # the efforts now held were computed with these gains; a later randomisation changes the gains, not them
+            self.effort_kp = {uid: float(rc.kp.max()) for uid, rc in self.ref.children.items()}
             self.check(f"substep {k + 1}")
 
     def op_drive(self):

@@ -80,7 +80,7 @@ def _step_response(drive_mode, actuation, explicit_pd=None, seconds=0.5):
         ctrl.before_simulation_step(s0, control)
         solver.step(s0, s1, control, None, 0.01)
         s0, s1 = s1, s0
-        qs.append(s0.joint_q.numpy()[ctrl._engine.binding.coord_index])
+        qs.append(s0.joint_q.numpy()[ctrl.coord_index])
     return np.array(qs)
 
 
@@ -169,7 +169,7 @@ def test_response_is_refreshed_where_inertia_update_says(inertia_update):
     ctrl = wpctrl.build_controller(_arm_config(kp, kd, "acceleration"), model, 20, 100, inertia_update=inertia_update)
     s, control = model.state(), model.control()
     ctrl.reset(s)
-    dof = ctrl._engine.binding.dof_index
+    dof = ctrl.dof_index
     rng = np.random.default_rng(0)
     target = np.tile(np.asarray(PANDA_INITIAL_Q, np.float32), (2, 1))
 
@@ -249,7 +249,7 @@ def test_substep_inertia_update_and_graph_capture():
     K = ctrl.num_substeps
     s0, control = model.state(), model.control()
     ctrl.reset(s0)
-    b = ctrl._engine.binding
+    b = ctrl  # the controlled joints' coord_index / dof_index
     rng = np.random.default_rng(3)
     qs = [_random_q(model, rng) for _ in range(K)]
     qds = [rng.normal(0.0, 0.5, model.joint_dof_count).astype(np.float32) for _ in range(K)]

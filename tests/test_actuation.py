@@ -338,7 +338,7 @@ def test_effort_readout_and_saturation_counts(actuation):
 def test_effort_readout_is_off_by_default():
     c = Harness(arm_abs(), num_envs=1).ctrl
     assert c.computed_effort is None and c.applied_effort is None and c.saturation_count is None and c.delay is None
-    assert c._engine.delay_q is None
+    assert c._engine.part("delay") is None  # private: no delay part, so no history buffer is allocated
 
 
 # ----------------------------------------------------------------------------------------------------------------------
@@ -361,7 +361,7 @@ def test_clip_targets_keeps_a_virtual_target_inside_the_limits(clip):
     }
     h = Harness(mode, num_envs=2, clip_targets=clip)
     h.ctrl.reset(h.state)
-    lim = h.ctrl._engine.binding.qlimits
+    lim = h.ctrl.joint_limits
     for _ in range(60):  # +0.1 rad per step on the arm: 6 rad, past every limit
         h.act(np.ones(8, F32))
         h.substeps(1)
@@ -452,7 +452,7 @@ def test_delay_setter_checks_range():
 def _arm_rollout(ctrl, solver, model, goal, steps):
     s0, s1, c = model.state(), model.state(), model.control()
     ctrl.reset(s0, control=c)
-    coord = ctrl._engine.binding.coord_index
+    coord = ctrl.coord_index
     err = []
     for _ in range(steps):
         ctrl.set_action(np.broadcast_to(goal, (model.world_count, 7)).copy(), s0)

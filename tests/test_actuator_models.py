@@ -40,7 +40,7 @@ def _one_substep(cfg, model, rng, track_effort=True, **kw):
     s = _random_state(model, rng)
     c = model.control()
     ctrl.reset(model.state(), control=c)
-    b = ctrl._engine.binding
+    b = ctrl  # the controlled joints' coord_index / dof_index
     q = s.joint_q.numpy()[b.coord_index]
     qd = s.joint_qd.numpy()[b.dof_index]
     target = (q + rng.normal(0.0, 0.4, q.shape)).astype(f32)
@@ -69,7 +69,7 @@ def test_dc_motor_equals_newtons_clamping_dc_motor_and_the_closed_form():
     vmax = np.array([2.0, 2.5, 3.0, 1.5, 4.0, 5.0, 6.0], f32)
     ctrl, s, c, q, qd, target = _one_substep(_arm(wpctrl.DCMotor(sat, vmax)), model, rng)
     pd = f32(400.0) * (target - q) + f32(20.0) * (f32(0.0) - qd)
-    tau = c.joint_f.numpy()[ctrl._engine.binding.dof_index]
+    tau = c.joint_f.numpy()[ctrl.dof_index]
     # Newton's component on the same PD torques and velocities (max_motor_effort = the config's force_limit)
     n = E * 7
     comp = ClampingDCMotor(wp.array(np.tile(sat, E)), wp.array(np.tile(vmax, E)), wp.array(np.full(n, 60.0, f32)))
@@ -98,7 +98,7 @@ def test_position_based_limit_equals_newtons_clamping_position_based():
     cfg = _arm(wpctrl.PositionBasedEffortLimit(positions, efforts), force_limit=1e9)
     ctrl, s, c, q, qd, target = _one_substep(cfg, model, rng)
     pd = f32(400.0) * (target - q) + f32(20.0) * (f32(0.0) - qd)
-    tau = c.joint_f.numpy()[ctrl._engine.binding.dof_index]
+    tau = c.joint_f.numpy()[ctrl.dof_index]
     comp = ClampingPositionBased(lookup_positions=tuple(positions), lookup_efforts=tuple(efforts))
     comp.finalize(wp.get_device("cpu"), E * 7)
     ref = _newton_clamp(comp, pd, q, qd, E * 7)
@@ -110,7 +110,7 @@ def test_position_based_limit_equals_newtons_clamping_position_based():
     ctrl2, _, c2, q2, _, t2 = _one_substep(
         _arm(wpctrl.PositionBasedEffortLimit(positions, efforts), force_limit=10.0), model, np.random.default_rng(1)
     )
-    tau2 = c2.joint_f.numpy()[ctrl2._engine.binding.dof_index]
+    tau2 = c2.joint_f.numpy()[ctrl2.dof_index]
     assert np.abs(tau2).max() <= 10.0 + 1e-6
 
 
@@ -132,7 +132,7 @@ def test_position_table_steps_knots_and_ends_equal_newtons_component():
             100,
             actuation="explicit",
         )
-        b = ctrl._engine.binding
+        b = ctrl  # the controlled joints' coord_index / dof_index
         s = model.state()
         c = model.control()
         ctrl.reset(s, control=c)
@@ -187,10 +187,10 @@ def test_per_env_dc_parameters_reach_the_torque():
     s = model.state()
     c = model.control()
     ctrl.reset(s, control=c)
-    q = s.joint_q.numpy()[ctrl._engine.binding.coord_index]
+    q = s.joint_q.numpy()[ctrl.coord_index]
     ctrl.set_action((q + 0.5).astype(f32), s)
     ctrl.before_simulation_step(s, c)
-    tau = c.joint_f.numpy()[ctrl._engine.binding.dof_index]
+    tau = c.joint_f.numpy()[ctrl.dof_index]
     np.testing.assert_allclose(tau[0], np.minimum(2000.0 * 0.5, 200.0), rtol=1e-5)
     np.testing.assert_allclose(tau[1], 5.0, rtol=1e-5)
     del rng
@@ -222,9 +222,10 @@ def test_default_step_is_unchanged_by_the_actuator_fields():
     model = build_panda(E)
     rng = np.random.default_rng(5)
     ctrl, s, c, q, qd, target = _one_substep(_arm(None), model, rng, track_effort=False)
-    assert ctrl._engine.layout.act_model == () and ctrl._engine.part("actuator_models") is None
+    assert ctrl.saturation_effort is None and ctrl.velocity_limit is None
+    assert ctrl._engine.layout.act_model == ()  # private: the compiled step layout carries no actuator entries
     pd = f32(400.0) * (target - q) + f32(20.0) * (f32(0.0) - qd)
-    np.testing.assert_allclose(c.joint_f.numpy()[ctrl._engine.binding.dof_index], np.clip(pd, -60, 60), rtol=1e-6)
+    np.testing.assert_allclose(c.joint_f.numpy()[ctrl.dof_index], np.clip(pd, -60, 60), rtol=1e-6)
 
 
 # --- direct effort control --------------------------------------------------------------------------------------
@@ -246,7 +247,7 @@ def test_joint_effort_controller_writes_the_scaled_action(actuation):
     rng = np.random.default_rng(6)
     a = rng.uniform(-1.3, 1.3, (E, 8)).astype(f32)
     ctrl.set_action(a, s)
-    b = ctrl._engine.binding
+    b = ctrl  # the controlled joints' coord_index / dof_index
     expected = f32(0.5) * (f32(30.0) + f32(-30.0)) + (f32(0.5) * (f32(30.0) - f32(-30.0))) * np.clip(a[:, :7], -1, 1)
     np.testing.assert_array_equal(ctrl["arm"].processed_action.numpy(), expected)
     np.testing.assert_array_equal(ctrl["arm"].target_effort.numpy(), expected)
@@ -271,7 +272,7 @@ def test_effort_commands_are_delayed_like_targets():
     ctrl = wpctrl.build_controller(cfg, model, 20, 100, actuation="explicit", delay=2)
     s, c = model.state(), model.control()
     ctrl.reset(s, control=c)
-    dof = ctrl._engine.binding.dof_index[0]
+    dof = ctrl.dof_index[0]
     seen = []
     for k in range(3):
         ctrl.set_action(np.full(7, float(k + 1), f32), s)
@@ -292,8 +293,8 @@ def test_ema_smooths_absolute_targets_within_the_joint_limits_and_reset_sets_the
     ctrl = wpctrl.build_controller(cfg, model)
     s, c = model.state(), model.control()
     ctrl.reset(s, control=c)
-    q0 = s.joint_q.numpy()[ctrl._engine.binding.coord_index].astype(f32)
-    lim = ctrl._engine.binding.qlimits
+    q0 = s.joint_q.numpy()[ctrl.coord_index].astype(f32)
+    lim = ctrl.joint_limits
     prev = q0.copy()
     rng = np.random.default_rng(7)
     for _ in range(4):
@@ -384,7 +385,7 @@ def test_dc_motor_rollout_on_mujoco_tracks_finite_and_stays_in_the_envelope():
     s0, s1, c = model.state(), model.state(), model.control()
     ctrl.reset(s0, control=c)
     rng = np.random.default_rng(9)
-    dof = ctrl._engine.binding.dof_index[:, :7]
+    dof = ctrl.dof_index[:, :7]
     worst = 0.0
     for _ in range(10):
         ctrl.set_action(rng.uniform(-1, 1, (n, 8)).astype(f32), s0)

@@ -61,7 +61,7 @@ class Replay:
         )
         self.state = self.model.state()
         self.control = self.model.control()
-        b = self.ctrl._engine.binding
+        b = self.ctrl  # the controlled joints' coord_index / dof_index
         assert self.ctrl.joint_names == trace["setup"]["active_joint_names"]
         self.coord = b.coord_index[0]
         self.dof = b.dof_index[0]
@@ -127,7 +127,7 @@ def test_replay(case, actuation, panda_model):
     ctrl = rp.ctrl
     # Implicit replays run the elided substep (set_action writes the drive targets), explicit ones the substep kernel.
     interpolates = any(c["config"].get("interpolate") for c in trace["setup"]["controllers"].values())
-    assert ctrl._engine.per_substep == (actuation == "explicit" or interpolates)
+    assert ctrl.substep_launch == (actuation == "explicit" or interpolates)
     drives = trace["setup"]["drive_properties"]
     kp = f32([d["stiffness"] for d in drives])
     kd = f32([d["damping"] for d in drives])

@@ -28,11 +28,11 @@ def _random_states(model, rng, speed=1.0):
 
 
 def _block(ctrl, state) -> np.ndarray:
-    """The fused kernel's (rows x rows) block of H^-1 per env, float64."""
-    eng = ctrl._engine
-    resp = wp.zeros((eng.num_envs, eng.num_rows), dtype=wp.float32)
-    blk = wp.zeros((eng.num_envs, eng.num_rows, eng.num_rows), dtype=wp.float32)
-    eng._fused.launch_response(state.joint_q, resp, blk)
+    """The fused kernel's (rows x rows) block of H^-1 per env, float64 (private: the response part's fused kernel)."""
+    n = len(ctrl.joint_names)
+    resp = wp.zeros((ctrl.num_envs, n), dtype=wp.float32)
+    blk = wp.zeros((ctrl.num_envs, n, n), dtype=wp.float32)
+    ctrl._engine.response_part._fused.launch_response(state.joint_q, resp, blk)
     np.testing.assert_array_equal(resp.numpy(), np.diagonal(blk.numpy(), axis1=1, axis2=2))
     return blk.numpy().astype(np.float64)
 
@@ -45,7 +45,8 @@ def test_fused_response_matches_joint_space_response_and_featherstone():
         PANDA_JOINTS, None, None, 1e3, 1e2, 100.0, normalize_action=False, drive_mode="acceleration"
     )
     ctrl = wpctrl.build_controller(cfg, model, actuation="explicit", explicit_pd="stable")
-    assert ctrl._engine._fused is not None and ctrl._engine._jsr is None  # the fused path is the default
+    part = ctrl._engine.response_part  # private: which path computes r
+    assert part._fused is not None and part._jsr is None  # the fused path is the default
     jsr = JointSpaceResponse(model)
     fs = newton.solvers.SolverFeatherstone(model)
     s0, s1, control = model.state(), model.state(), model.control()
@@ -56,7 +57,7 @@ def test_fused_response_matches_joint_space_response_and_featherstone():
         s0.joint_qd.assign(qd)
         newton.eval_fk(model, s0.joint_q, s0.joint_qd, s0)
         blk = _block(ctrl, s0)
-        ctrl._engine.update_response(s0)  # what acceleration drives / stable PD read
+        ctrl._engine.update_response(s0)  # private: refresh r now (what acceleration drives / stable PD read)
         np.testing.assert_array_equal(ctrl.response.numpy(), np.diagonal(blk, axis1=1, axis2=2).astype(np.float32))
         jsr.refresh(s0)
         inv = jsr.inverse_blocks.numpy().astype(np.float64)
@@ -79,8 +80,9 @@ def test_unrolled_fused_kernel_matches_the_runtime_loop_kernel():
 
     model = build_panda(E, armature=[0.1, 0.05, 0.02, 0.01, 0.0, 0.0, 0.003, 0.0, 0.0])
     ctrl = _coupled_ctrl(model, 50.0)
-    eng = ctrl._engine
-    loop, unrolled = eng._fused, FusedChain(eng._fused.layout, model, unroll=True)
+    eng = ctrl._engine  # private: the coupled part's fused kernel, swapped for the unrolled one below
+    loop = eng.part("coupled_drive")._fused
+    unrolled = FusedChain(loop.layout, model, unroll=True)
     assert not loop.unroll and loop.kernel_key()[3] is None and unrolled.kernel_key()[3] is not None
     s = model.state()
     rng = np.random.default_rng(11)
@@ -194,7 +196,7 @@ def _setup(ctrl, model, rng, spread=0.3):
     q, qd = _random_states(model, rng)
     s.joint_q.assign(q)
     s.joint_qd.assign(qd)
-    b = ctrl._engine.binding
+    b = ctrl  # the controlled joints' coord_index / dof_index
     target = (q[b.coord_index] + rng.normal(0.0, spread, b.coord_index.shape)).astype(np.float32)
     return s, c, q[b.coord_index].astype(np.float64), qd[b.dof_index].astype(np.float64), target
 
@@ -213,23 +215,21 @@ def _system(A, kp, kd, q, qd, tq, accel=False):
 def test_coupled_without_active_limits_is_the_linear_implicit_solution():
     model = build_panda(E)
     ctrl = _coupled_ctrl(model, 1e9, drive_mode="acceleration")
-    # Per-env gains, as (num_envs, rows) arrays (bound at the first substep).
+    # Per-env gains (num_envs, rows).
     kp = np.array([[1e3] * 9, [400.0] * 9, [2e3] * 9], np.float32)
     kd = np.array([[1e2] * 9, [40.0] * 9, [50.0] * 9], np.float32)
-    drive = ctrl._engine.part("drive_properties")  # per-env gain arrays (bound at the first substep)
-    drive.kp = wp.array(kp)
-    drive.kd = wp.array(kd)
+    ctrl.set_drive_properties(stiffness=kp, damping=kd)
     s, c, q, qd, target = _setup(ctrl, model, np.random.default_rng(1))
     ctrl.set_action(target, s)
     ctrl.before_simulation_step(s, c)
-    tau = c.joint_f.numpy()[ctrl._engine.binding.dof_index].astype(np.float64)
-    np.testing.assert_array_equal(c.joint_target_q.numpy()[ctrl._engine.binding.coord_index], target)
+    tau = c.joint_f.numpy()[ctrl.dof_index].astype(np.float64)
+    np.testing.assert_array_equal(c.joint_target_q.numpy()[ctrl.coord_index], target)
     A = _block(ctrl, s)
     for e in range(E):
         b, d = _system(A[e], kp[e], kd[e], q[e], qd[e], target[e], accel=True)
         want = np.linalg.solve(np.eye(9) + np.diag(d) @ A[e], b)
         np.testing.assert_allclose(tau[e], want, rtol=1e-5, atol=1e-5 * np.abs(want).max())
-    assert (ctrl._engine.coupled_iterations.numpy() == 1).all()  # exact after the first active-set iteration
+    assert (ctrl.coupled_iterations.numpy() == 1).all()  # exact after the first active-set iteration
 
 
 def test_coupled_with_limits_satisfies_box_and_kkt():
@@ -239,7 +239,7 @@ def test_coupled_with_limits_satisfies_box_and_kkt():
     s, c, q, qd, target = _setup(ctrl, model, np.random.default_rng(2), spread=0.5)
     ctrl.set_action(target[:, :7], s)
     ctrl.before_simulation_step(s, c)
-    tau = c.joint_f.numpy()[ctrl._engine.binding.dof_index].astype(np.float64)
+    tau = c.joint_f.numpy()[ctrl.dof_index].astype(np.float64)
     A = _block(ctrl, s)
     kp = np.r_[np.full(7, 1e3), 0.0, 0.0]
     kd = np.r_[np.full(7, 1e2), 0.0, 0.0]
@@ -262,10 +262,9 @@ def test_coupled_with_limits_satisfies_box_and_kkt():
                 assert abs(tau[e, i] - w[i]) <= tol  # free: the law holds exactly
     assert 3 <= saturated < 7 * E  # the case exercises both active and free rows
     # Effort readout: the solved torque, the law at the predicted state, one saturation count per clamped row.
-    eng = ctrl._engine
-    np.testing.assert_array_equal(eng.applied_effort.numpy(), tau.astype(np.float32))
-    assert int(eng.saturation_count.numpy().sum()) == saturated
-    assert ctrl._engine.coupled_iterations.numpy().max() <= 9 + 2  # settled by the active-set iteration
+    np.testing.assert_array_equal(ctrl.applied_effort.numpy(), tau.astype(np.float32))
+    assert int(ctrl.saturation_count.numpy().sum()) == saturated
+    assert ctrl.coupled_iterations.numpy().max() <= 9 + 2  # settled by the active-set iteration
 
 
 @pytest.mark.parametrize("drive_mode", ["force", "acceleration"])
@@ -278,8 +277,7 @@ def test_coupled_matches_the_box_qp_on_random_states(drive_mode):
 
     model = build_panda(E)
     ctrl = _coupled_ctrl(model, 1.0, drive_mode=drive_mode, track_effort=True)
-    eng = ctrl._engine
-    b_ = eng.binding
+    b_ = ctrl  # the controlled joints' coord_index / dof_index
     jsr = JointSpaceResponse(model)
     rng = np.random.default_rng(12)
     s, c = model.state(), model.control()
@@ -346,12 +344,12 @@ def test_coupled_fallback_sweeps_match_numpy_when_the_active_set_does_not_settle
     model = build_panda(E)
     lim = 30.0
     ctrl = _coupled_ctrl(model, lim)
-    ctrl._engine.part("coupled_drive").max_iterations = 1
+    ctrl._engine.part("coupled_drive").max_iterations = 1  # private: the active-set cap, lowered to force the sweeps
     s, c, q, qd, target = _setup(ctrl, model, np.random.default_rng(2), spread=0.5)
     ctrl.set_action(target, s)
     ctrl.before_simulation_step(s, c)
-    tau = c.joint_f.numpy()[ctrl._engine.binding.dof_index].astype(np.float64)
-    its = ctrl._engine.coupled_iterations.numpy()
+    tau = c.joint_f.numpy()[ctrl.dof_index].astype(np.float64)
+    its = ctrl.coupled_iterations.numpy()
     jsr = JointSpaceResponse(model)
     jsr.refresh(s)
     inv = jsr.inverse_blocks.numpy().astype(np.float64)
@@ -380,12 +378,11 @@ def test_coupled_effort_readout_is_zeroed_by_reset():
     ctrl.set_action(target, s)
     for _ in range(2):
         ctrl.before_simulation_step(s, c)
-    eng = ctrl._engine
-    before = [a.numpy().copy() for a in (eng.computed_effort, eng.applied_effort, eng.saturation_count)]
+    before = [a.numpy().copy() for a in (ctrl.computed_effort, ctrl.applied_effort, ctrl.saturation_count)]
     assert all(np.abs(b).min(axis=1).max() > 0 for b in before[:2]) and before[2].sum() > 0
     ctrl.reset(s, env_ids=[1])
     for name, b in zip(("computed", "applied", "saturation"), before):
-        got = getattr(eng, {"computed": "computed_effort", "applied": "applied_effort"}.get(name, "saturation_count"))
+        got = getattr(ctrl, {"computed": "computed_effort", "applied": "applied_effort"}.get(name, "saturation_count"))
         got = got.numpy()
         np.testing.assert_array_equal(got[1], 0, err_msg=name)
         np.testing.assert_array_equal(got[[0, 2]], b[[0, 2]], err_msg=name)
@@ -458,7 +455,8 @@ def test_coupled_rejects_a_floating_base():
         wpctrl.build_controller(cfg, model, actuation="explicit", explicit_pd="coupled")
     # stable PD falls back to Newton's JointSpaceResponse there
     ctrl = wpctrl.build_controller(cfg, model, actuation="explicit", explicit_pd="stable")
-    assert ctrl._engine._fused is None and ctrl._engine._jsr is not None
+    part = ctrl._engine.response_part  # private: which path computes r
+    assert part._fused is None and part._jsr is not None
 
 
 @pytest.mark.parametrize("inertia_update", [None, "substep", "control"])
@@ -475,7 +473,7 @@ def test_coupled_inertia_update_control_reuses_the_first_substeps_block(inertia_
     assert ctrl.num_substeps == 5
     rng = np.random.default_rng(7)
     s, c, q, qd, target = _setup(ctrl, model, rng)
-    b = ctrl._engine.binding
+    b = ctrl  # the controlled joints' coord_index / dof_index
     cached = inertia_update == "control"
 
     def torques_match(A):

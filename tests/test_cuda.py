@@ -155,7 +155,8 @@ def test_cuda_fused_inertia_and_coupled_drive_match_cpu():
                 ),
             }
             ctrl = wpctrl.build_controller(cfg, model, 100, 100, actuation="explicit", explicit_pd="coupled")
-            assert ctrl._engine._fused.unroll == (device != "cpu")
+            fused = ctrl._engine.part("coupled_drive")._fused  # private: the fused inertia kernel's variant
+            assert fused.unroll == (device != "cpu")
             lo, hi = model.joint_limit_lower.numpy(), model.joint_limit_upper.numpy()
             r = np.random.default_rng(3)
             q = r.uniform(lo, hi).astype(np.float32)
@@ -164,7 +165,7 @@ def test_cuda_fused_inertia_and_coupled_drive_match_cpu():
             s.joint_q.assign(q)
             s.joint_qd.assign(qd)
             resp = wp.zeros((n, 9), dtype=wp.float32)
-            ctrl._engine._fused.launch_response(s.joint_q, resp)
+            fused.launch_response(s.joint_q, resp)
             target = (q.reshape(n, 9) + r.normal(0.0, 0.3, (n, 9))).astype(np.float32)
             ctrl.set_action(wp.array(target, dtype=wp.float32), s)
             ctrl.before_simulation_step(s, c)

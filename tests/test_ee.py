@@ -42,7 +42,7 @@ class Rig:
         self.arm = self.ctrl["arm"] if isinstance(mode, dict) else self.ctrl
         self.state = self.model.state()
         self.control = self.model.control()
-        self.coord = self.ctrl._engine.binding.coord_index
+        self.coord = self.ctrl.coord_index
         self.arm_coord = self.coord[:, self.arm._rows]
 
     def put(self, arm_q, state=None):
@@ -521,7 +521,7 @@ def test_bench_torch_baseline_is_the_same_step():
     state, control, control_t = model.state(), model.control(), model.control()
     rig_q = random_q(np.random.default_rng(7), n)
     q = state.joint_q.numpy()
-    q[ctrl._engine.binding.coord_index[:, :7]] = rig_q
+    q[ctrl.coord_index[:, :7]] = rig_q
     state.joint_q.assign(q)
     ref = TorchEEPose(ctrl, state, control_t, torch.device("cpu"))
     action = torch.rand((n, 7), generator=torch.Generator().manual_seed(0)) * 2.4 - 1.2
@@ -536,7 +536,7 @@ def test_bench_torch_baseline_is_the_same_step():
     step_wp = jac @ (wp.to_torch(ctrl["arm"].target_qpos) - q0)[:, :, None]
     step_t = jac @ (ref.target_qpos - q0)[:, :, None]
     np.testing.assert_allclose(step_wp.numpy(), step_t.numpy(), atol=2e-5)
-    coord = ctrl._engine.binding.coord_index
+    coord = ctrl.coord_index
     np.testing.assert_array_equal(
         control.joint_target_q.numpy()[coord[:, 7:]], control_t.joint_target_q.numpy()[coord[:, 7:]]
     )
@@ -549,7 +549,7 @@ def test_interpolated_drive_targets_and_torques(actuation):
     mode = {"arm": pose_cfg(interpolate=True), "gripper": gripper()}
     ctrl = wpctrl.build_controller(mode, model, actuation=actuation)
     state, control = model.state(), model.control()
-    coord, dof = ctrl._engine.binding.coord_index, ctrl._engine.binding.dof_index
+    coord, dof = ctrl.coord_index, ctrl.dof_index
     q = state.joint_q.numpy()
     q[coord[:, :7]] = random_q(np.random.default_rng(8), n)
     state.joint_q.assign(q)

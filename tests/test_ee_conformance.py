@@ -110,7 +110,7 @@ class EEReplay:
         self.state = self.model.state()
         self.fk_state = self.model.state()
         self.control = self.model.control()
-        self.coord = self.ctrl._engine.binding.coord_index  # (envs, 9)
+        self.coord = self.ctrl.coord_index  # (envs, 9)
         self.ee_uid = next(u for u, c in setup["controllers"].items() if "ee_link" in c["config"])
 
     def put(self, qpos, state=None):

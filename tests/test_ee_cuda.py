@@ -35,7 +35,7 @@ def _run(device, mode, qs, acts, graph=False):
         model = build_panda(n, device=device)
         ctrl = wpctrl.build_controller(copy.deepcopy(mode), model)
         state, control = model.state(), model.control()
-        coord = ctrl._engine.binding.coord_index[:, :7]
+        coord = ctrl.coord_index[:, :7]
         act = wp.zeros((n, 7), dtype=wp.float32, device=device)
 
         def put(q):

@@ -228,7 +228,7 @@ def test_normalize_with_infinite_bounds(model, make, kw, field):
 
 def test_infinite_force_limit_means_no_limit(model):
     ctrl = wpctrl.build_controller(pos(force_limit=[np.inf, 1e39, 5.0]), model)
-    assert np.isinf(model.joint_effort_limit.numpy()[ctrl._engine.binding.dof_index[0, :2]]).all()
+    assert np.isinf(model.joint_effort_limit.numpy()[ctrl.dof_index[0, :2]]).all()
 
 
 @pytest.mark.parametrize(
@@ -670,7 +670,7 @@ def test_device_env_ids_out_of_range_are_skipped(setup):
     ctrl.reset(state, wp.array([N + 5, 1, -3], dtype=wp.int32, device="cpu"))
     after = ctrl.target_qpos.numpy()
     np.testing.assert_array_equal(after[[0, 2]], before[[0, 2]])
-    q = state.joint_q.numpy()[ctrl._engine.binding.coord_index[1]]
+    q = state.joint_q.numpy()[ctrl.coord_index[1]]
     np.testing.assert_array_equal(after[1], q)
 
 
@@ -686,7 +686,7 @@ def test_bad_env_ids_rejected_on_the_first_reset(model):
 
 def test_state_and_control_rejected_by_type(setup):
     ctrl, state, control = setup
-    model = ctrl._engine.model
+    model = ctrl.model
     action = np.zeros((N, 3), np.float32)
     before = _snapshot(ctrl, control)
     # A Model has joint_q / joint_qd of the right sizes: only its type tells it apart.

@@ -60,7 +60,7 @@ class Robot:
         rest (OSC damps the EE twist of the controlled joints, Newton's the whole body's: they differ where a base
         or torso moves)."""
         s = self.model.state()
-        b = ctrl._engine.binding
+        b = ctrl  # the controlled joints' coord_index / dof_index
         q = s.joint_q.numpy()
         q[b.coord_index] += rng.uniform(-spread, spread, b.coord_index.shape).astype(np.float32)
         s.joint_q.assign(q)
@@ -143,10 +143,10 @@ def newton_osc(rb: Robot, ctrl, state, decoupling: str, gravity: bool, nullspace
 
 def step_torques(ctrl, state, action) -> np.ndarray:
     """The arm's commanded torque after set_action and one substep: (num_envs, n)."""
-    control = ctrl._engine.model.control()
+    control = ctrl.model.control()
     ctrl.set_action(action, state)
     ctrl.before_simulation_step(state, control)
-    dof = ctrl._engine.binding.dof_index[:, ctrl["arm"]._rows]
+    dof = ctrl["arm"].dof_index
     return control.joint_f.numpy()[dof].astype(np.float64)
 
 
@@ -223,7 +223,7 @@ def test_joint_impedance_equals_newtons_controller(name):
 def _fd_jacobian(rb: Robot, ctrl, state, env: int, h=1e-3) -> np.ndarray:
     """The site's geometric Jacobian (6, n) in the world frame by central differences of Newton's FK (float64 math on
     Newton's float32 poses)."""
-    coord = ctrl._engine.binding.coord_index[env, ctrl["arm"]._rows]
+    coord = ctrl["arm"].coord_index[env]
     site = [i for i, lbl in enumerate(rb.model.shape_label) if lbl.rsplit("/", 1)[-1] == rb.site][env]
     body = int(rb.model.shape_body.numpy()[site])
     st = wp.transform(*rb.model.shape_transform.numpy()[site])
@@ -267,8 +267,8 @@ def test_osc_numpy_closed_form():
     newton.eval_mass_matrix(m, state, H=H)
     newton.eval_inverse_dynamics_passive(m, state, gravity_force=g)
     H, g = H.numpy().astype(np.float64), g.numpy().astype(np.float64)
-    dof = ctrl._engine.binding.dof_index[:, arm._rows]
-    q = state.joint_q.numpy()[ctrl._engine.binding.coord_index[:, arm._rows]].astype(np.float64)
+    dof = arm.dof_index
+    q = state.joint_q.numpy()[arm.coord_index].astype(np.float64)
     qd = state.joint_qd.numpy()[dof].astype(np.float64)
     target, posture = arm.target_pose.numpy().astype(np.float64), arm.target_qpos.numpy().astype(np.float64)
     for e in range(rb.num_envs):
@@ -299,7 +299,7 @@ def test_fused_gravity_torque_matches_newtons_inverse_dynamics(unroll):
     rb = robot("panda")
     cfg = wpctrl.JointImpedanceControllerConfig(list(ARM), -0.1, 0.1, 0.0, 0.0, use_delta=True)
     ctrl = build(rb, cfg, actuation="explicit")
-    unit = ctrl._engine.part("impedance").units[0]
+    unit = ctrl._engine.part("impedance").units[0]  # private: the unit's fused kernel, swapped for the variant
     unit.fused, unit._torque = FusedChain(unit.fused.layout, rb.model, unroll=unroll), None
     rng = np.random.default_rng(3)
     m = rb.model
@@ -309,7 +309,7 @@ def test_fused_gravity_torque_matches_newtons_inverse_dynamics(unroll):
         newton.eval_fk(m, state.joint_q, state.joint_qd, state)
         g = wp.zeros(m.joint_dof_count, dtype=float)
         newton.eval_inverse_dynamics_passive(m, state, gravity_force=g)
-        ref = g.numpy()[ctrl._engine.binding.dof_index[:, ctrl["arm"]._rows]]
+        ref = g.numpy()[ctrl["arm"].dof_index]
         assert np.abs(ref).max() > 5.0
         np.testing.assert_allclose(ours, ref, rtol=0, atol=1e-5 * np.abs(ref).max())
 
@@ -394,7 +394,7 @@ def test_joint_impedance_targets(kw):
     ctrl = build(rb, cfg, clip_targets="joint_limits")
     state = rb.random_state(ctrl, rng)
     ctrl.reset(state)
-    q = state.joint_q.numpy()[ctrl._engine.binding.coord_index[:, :7]]
+    q = state.joint_q.numpy()[ctrl.coord_index[:, :7]]
     ctrl.set_action(rng.uniform(-1, 1, (rb.num_envs, 7)).astype(np.float32), state)  # a first target, off q
     prev = ctrl["arm"].target_qpos.numpy().copy()
     assert not np.allclose(prev, q)
@@ -402,7 +402,7 @@ def test_joint_impedance_targets(kw):
     ctrl.set_action(act, state)
     x = act if not cfg.normalize_action else 0.5 * np.clip(act, -1, 1)
     want = x if not cfg.use_delta else (prev if cfg.use_target else q) + x
-    lo, hi = ctrl._engine.binding.qlimits[:7].T
+    lo, hi = ctrl.joint_limits[:7].T
     np.testing.assert_allclose(ctrl["arm"].target_qpos.numpy(), np.clip(want, lo, hi), atol=1e-6)
     state_dict = ctrl.get_state()
     if cfg.use_target:
@@ -438,7 +438,7 @@ def test_nan_action_holds_the_env_and_reset_takes_the_measured_pose():
     measured = arm.fk_jacobian(moved)[0].numpy()
     np.testing.assert_allclose(arm.target_pose.numpy()[2], measured[2], atol=1e-6)
     assert not np.allclose(arm.target_pose.numpy()[0], measured[0], atol=1e-3)
-    dof = ctrl._engine.binding.dof_index[:, :7]
+    dof = ctrl.dof_index[:, :7]
     f = control.joint_f.numpy()[dof]
     assert (f[2] == 0).all() and (np.abs(f[0]) > 0).any()
 
@@ -456,7 +456,7 @@ def test_force_limit_effort_readout_and_delay():
     action = np.ones((rb.num_envs, 6), np.float32)
     ctrl.set_action(action, state)
     arm = ctrl["arm"]
-    dof = ctrl._engine.binding.dof_index[:, :7]
+    dof = ctrl.dof_index[:, :7]
     commanded, applied = [], []
     for _ in range(4):
         ctrl.before_simulation_step(state, control)
@@ -490,7 +490,7 @@ def test_randomised_joint_gains_reach_the_torque():
     assert kp.min() >= 50.0 and kp.max() <= 200.0 and kp.std() > 5.0
     state = rb.random_state(ctrl, rng)
     t = step_torques(ctrl, state, rng.uniform(-1, 1, (rb.num_envs, 7)).astype(np.float32))
-    q = state.joint_q.numpy()[ctrl._engine.binding.coord_index[:, :7]]
+    q = state.joint_q.numpy()[ctrl.coord_index[:, :7]]
     np.testing.assert_allclose(t, kp * (ctrl["arm"].target_qpos.numpy() - q), rtol=1e-5, atol=1e-5)
 
 
@@ -538,7 +538,7 @@ def test_singular_configuration_is_finite_and_damped():
     peaks = {}
     for sd in (0.0, 1e-3):
         ctrl = build(rb, osc_config(rb, singularity_damping=sd, gravity_compensation=False), actuation="explicit")
-        coord = ctrl._engine.binding.coord_index[:, :7]
+        coord = ctrl.coord_index[:, :7]
         peak = {}
         for d in (0.0, 1e-5, 1e-4, 3e-4, 1e-3, 1e-2):
             state = rb.model.state()
@@ -666,7 +666,7 @@ def test_envs_placed_apart_and_turned_get_the_torques_of_envs_at_the_origin(how)
     for model in (placed, origin):
         ctrl = wpctrl.build_controller(copy.deepcopy(mode), model, actuation="explicit")
         state = model.state()
-        b = ctrl._engine.binding
+        b = ctrl  # the controlled joints' coord_index / dof_index
         q, qd = state.joint_q.numpy(), state.joint_qd.numpy()
         q[b.coord_index[:, :7]] += dq
         qd[b.dof_index[:, :7]] = dqd

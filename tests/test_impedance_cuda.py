@@ -31,7 +31,7 @@ def _run(device, name: str, graph: bool = False):
         model = build_panda(N, device=device)
         ctrl = wpctrl.build_controller(_mode(name), model, actuation="explicit")
         state, control = model.state(), model.control()
-        b = ctrl._engine.binding
+        b = ctrl  # the controlled joints' coord_index / dof_index
         q = state.joint_q.numpy()
         q[b.coord_index[:, :7]] += rng.uniform(-0.4, 0.4, (N, 7)).astype(np.float32)
         state.joint_q.assign(q)

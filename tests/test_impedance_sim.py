@@ -31,7 +31,7 @@ class Loop:
         newton.eval_fk(self.model, self.s0.joint_q, self.s0.joint_qd, self.s0)
         self.ctrl.reset(self.s0, control=self.control)
         self.dt = 1.0 / sim_freq
-        self.coord = self.ctrl._engine.binding.coord_index[:, self.arm._rows]
+        self.coord = self.arm.coord_index
 
     def step(self, action):
         self.ctrl.set_action(np.asarray(action, np.float32), self.s0)
@@ -133,7 +133,7 @@ def test_osc_is_stable_at_100hz_for_10s_of_random_targets():
             assert np.isfinite(loop.s0.joint_q.numpy()).all() and np.isfinite(loop.s0.joint_qd.numpy()).all()
         errs.append(np.linalg.norm(loop.tcp()[:, :3] - target[:, :3], axis=1))
     q = loop.q()
-    lo, hi = loop.ctrl._engine.binding.qlimits[:7].T
+    lo, hi = loop.ctrl.joint_limits[:7].T
     assert ((q >= lo - 0.05) & (q <= hi + 0.05)).all()
     assert np.median(errs) < 5e-3, np.array(errs)
 

@@ -77,7 +77,7 @@ def test_launches_per_control_step(monkeypatch, mode, actuation, options, expect
     counter = LaunchCounter(monkeypatch)
     _control_step(h, act)  # the first Control seen: the elided mode writes it once, in the first substep
     first = counter.take()
-    elided = not h.ctrl._engine.per_substep
+    elided = not h.ctrl.substep_launch
     assert elided == (expected <= 2)
     for _ in range(3):
         _control_step(h, act)
@@ -141,7 +141,7 @@ def test_reset_is_one_launch(monkeypatch, mode, actuation, options):
         for control in (None, h.control):
             h.ctrl.reset(h.state, env_ids=env_ids, control=control)
             assert counter.take() == ["_reset_kernel"], (env_ids, control)
-    elided = not h.ctrl._engine.per_substep
+    elided = not h.ctrl.substep_launch
     h.ctrl.reset(h.state, env_ids=[1], control=h.model.control())
     assert counter.take() == ["_reset_kernel"] + (["_targets_kernel"] if elided else [])
     ranged = Harness(copy.deepcopy(mode), num_envs=n, actuation=actuation, delay=(0, 2))
@@ -229,7 +229,7 @@ def test_step_counter_follows_maniskill_step_without_substep_launches():
     # leaves its env untouched, so that env keeps counting from its last accepted action.
     n = 3
     h = Harness(delta_arm(), num_envs=n)
-    assert not h.ctrl._engine.per_substep
+    assert not h.ctrl.substep_launch
     h.ctrl.reset(h.state)
     expect = np.zeros(n, np.int64)
 
@@ -328,11 +328,11 @@ def test_strided_and_flat_index_tables_agree(actuation, interpolate):
     results = []
     for model in (build_panda(3), _uneven_model()):
         ctrl = wpctrl.build_controller(_mode(interpolate), model, 20, 100, actuation=actuation)
-        eng = ctrl._engine
-        b = eng.binding
+        plan = ctrl._engine.plan  # private: the plan's index tables (a stride, or per-env tables)
+        b = ctrl  # the controlled joints' coord_index / dof_index
         uneven = model.joint_coord_count != 3 * 9
-        assert (eng.q_stride, eng.qd_stride) == ((0, 0) if uneven else (9, 9))
-        assert eng.q_idx.shape == ((3, 9) if uneven else (1, 9))
+        assert (plan.q_stride, plan.qd_stride) == ((0, 0) if uneven else (9, 9))
+        assert plan.q_idx.shape == ((3, 9) if uneven else (1, 9))
         state, control = model.state(), model.control()
         tq0 = control.joint_target_q.numpy().copy()
         sq, sqd = state.joint_q.numpy(), state.joint_qd.numpy()

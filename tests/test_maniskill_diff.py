@@ -169,8 +169,7 @@ def _check_ee(ms, ctrl, sub_uid, q, state, k):
     target = np.concatenate([tp.p.cpu().numpy()[0], tp.q.cpu().numpy()[0]]).astype(np.float64)
     saved = state.joint_q.numpy().copy()
     jq = saved.copy()
-    b = ctrl._engine.binding
-    jq[b.coord_index[0, ctrl._rows]] = ours
+    jq[ctrl.coord_index[0]] = ours
     state.joint_q.assign(jq)
     pose, _ = ctrl._ee.fk_jacobian(state.joint_q)
     state.joint_q.assign(saved)

@@ -81,14 +81,14 @@ def test_tracking_with_a_real_solver(solver_name, actuation):
     # per-env targets: arm angles and gripper opening (normalised action, [-1, 1] -> [0, 0.04] m)
     action = np.array([[0.6, -0.5, 0.5], [-0.4, 0.7, -0.2]], np.float32)
     want = np.column_stack([action[:, :2], np.repeat(0.02 + 0.02 * action[:, 2:], 2, axis=1)])
-    coord = ctrl._engine.binding.coord_index
+    coord = ctrl.coord_index
 
     def error():
         return np.abs(s0.joint_q.numpy()[coord] - want).max(axis=1)
 
     e0 = error()
     dt = 1.0 / 100
-    dof = ctrl._engine.binding.dof_index
+    dof = ctrl.dof_index
     limit = np.array([10.0, 10.0, 50.0, 50.0], np.float32)
     saturated = 0
     for _ in range(20):  # one second

@@ -675,33 +675,33 @@ MUTATIONS: list[Mutation] = [
     # -- actuator networks ------------------------------------------------------------------------------------------
     M(
         "net_lstm_pos_scale_ignored",
-        "wpctrl/kernels/actuator_net.py",
-        "                x[0] = err * pos_scale\n",
+        "wpctrl/kernels/actuator_net_unrolled.py",
+        "                x[0] = _scaled(err, wp.static(PS))\n",
         "                x[0] = err\n",
         "an LSTM actuator (input order pos_vel) ignores pos_scale",
         ("tests/test_actuator_setups.py",),
     ),
     M(
         "net_mlp_vel_scale_ignored",
-        "wpctrl/kernels/actuator_net.py",
-        "x[wp.static(VEL_AT[t])] = hv[wp.static(TAPS[t])] * vel_scale",
+        "wpctrl/kernels/actuator_net_unrolled.py",
+        "x[wp.static(VEL_AT[t])] = _scaled(hv[wp.static(TAPS[t])], wp.static(VS))",
         "x[wp.static(VEL_AT[t])] = hv[wp.static(TAPS[t])]",
         "an MLP actuator ignores vel_scale",
         ("tests/test_actuator_net.py", "tests/test_actuator_setups.py"),
     ),
     M(
         "net_torque_scale_ignored",
-        "wpctrl/kernels/actuator_net.py",
-        "u = x[0] * torque_scale",
-        "u = x[0]",
+        "wpctrl/kernels/actuator_net_unrolled.py",
+        "_net.write_effort(_scaled(x[0], wp.static(TS)), qd,",
+        "_net.write_effort(x[0], qd,",
         "an actuator network's output is not multiplied by torque_scale",
         ("tests/test_actuator_net.py", "tests/test_actuator_setups.py"),
     ),
     M(
         "net_rows_from_zero",
-        "wpctrl/kernels/actuator_net.py",
-        "    r = row0 + j\n",
-        "    r = j\n",
+        "wpctrl/kernels/actuator_net_unrolled.py",
+        "        r = row0 + j\n",
+        "        r = j\n",
         "a network on a later controller of a mode reads and writes the first controller's rows",
         ("tests/test_actuator_setups.py",),
     ),
@@ -715,25 +715,25 @@ MUTATIONS: list[Mutation] = [
     ),
     M(
         "net_history_not_shifted",
-        "wpctrl/kernels/actuator_net.py",
-        "hp[k] = hist_pos_out[k - 1, s]",
-        "hp[k] = hist_pos_out[k, s]",
+        "wpctrl/kernels/actuator_net_unrolled.py",
+        "                    new[k] = hp[k]\n",
+        "                    new[k] = hp[k + 1]\n",
         "an MLP actuator's position-error history does not shift by one substep",
         ("tests/test_actuator_net.py", "tests/test_actuator_setups.py"),
     ),
     M(
         "net_reset_keeps_history",
         "wpctrl/kernels/actuator_net.py",
-        "        hist_pos_out[k, s] = 0.0\n",
-        "        hist_pos_out[k, s] = hist_pos_out[k, s]\n",
+        "        hist_out[s, k] = 0.0\n",
+        "        hist_out[s, k] = hist_out[s, k]\n",
         "a reset leaves the network's position-error history of the reset envs",
         ("tests/test_actuator_net.py",),
     ),
     M(
         "net_lstm_gates_swapped",
         "wpctrl/kernels/actuator_net.py",
-        "ig = _sigmoid(g[k])",
-        "ig = _sigmoid(g[wp.static(H) + k])",
+        "c_new = sigmoid(fg) * c + sigmoid(ig) * tanh(cg)",
+        "c_new = sigmoid(ig) * c + sigmoid(fg) * tanh(cg)",
         "the LSTM reads its forget gate as the input gate (PyTorch's order: input, forget, cell, output)",
         ("tests/test_actuator_net.py", "tests/test_actuator_setups.py"),
     ),
@@ -1190,7 +1190,7 @@ def run_tests(copy: Path, tests: list[str], mod: str, marker: str, args) -> dict
     if args.warp_cache:
         env["WARP_CACHE_PATH"] = args.warp_cache
     cmd = [sys.executable, "-c", _CHILD, str(copy), str(out), mod, marker]
-    cmd += ["-x", "-q", "-p", "no:cacheprovider", "--no-header", *tests]
+    cmd += ["-x", "-q", "-p", "no:cacheprovider", "--no-header", "--no-cov", *tests]  # no coverage in a mutant
     t0 = time.time()
     try:
         proc = subprocess.run(cmd, cwd=copy, env=env, capture_output=True, text=True, timeout=args.timeout)

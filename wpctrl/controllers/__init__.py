@@ -3,7 +3,8 @@
 :mod:`.base_controller` (:class:`BaseController`: the per-step API, the combined controller), :mod:`.joint` (joint
 controllers), :mod:`.mobile_base` (mobile-base controllers), :mod:`.ee` (end-effector controllers),
 :mod:`.impedance` (operational-space and joint-impedance controllers), :mod:`.drive_properties` (per-env drive
-properties, delay and effort readout), :mod:`.inputs` (action and env-id conversion), :mod:`.build`
+properties, delay and effort readout), :mod:`.introspection` (the options that run, the joints' indices, the plan),
+:mod:`.inputs` (action and env-id conversion), :mod:`.build`
 (``build_controller``).
 """
 

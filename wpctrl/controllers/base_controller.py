@@ -19,15 +19,16 @@ from ..binding import bind_joints
 from ..config import ee as cfg_ee
 from ..config import impedance as cfg_imp
 from ..config import rows as cfg
-from ..config.options import Actuation, ControllerOptions, Delay, Diagnostics
+from ..config.options import Actuation, Delay, Diagnostics
 from ..engine.core import _Engine
 from ..engine.parts import gravity
 from ..engine.plan import Options, make_plan
 from .drive_properties import DrivePropertiesMixin
 from .inputs import _action_array, _as_rows_array, _claim, _env_selection, _raise_on_nonfinite, _type_name
+from .introspection import IntrospectionMixin
 
 
-class BaseController(DrivePropertiesMixin):
+class BaseController(IntrospectionMixin, DrivePropertiesMixin):
     """A ManiSkill-style joint controller over all envs of a Newton model.
 
     Build it with :func:`wpctrl.build_controller` (or ``Config.controller_cls(config, model, control_freq, sim_freq,
@@ -138,6 +139,7 @@ class BaseController(DrivePropertiesMixin):
                 c0 += rows.action_dim
             self.single_action_space = _flat_space([ch.single_action_space for ch in self.children.values()])
             self.action_mapping = {uid: (ch._cols.start, ch._cols.stop) for uid, ch in self.children.items()}
+            self.joint_mapping = {uid: (ch._rows.start, ch._rows.stop) for uid, ch in self.children.items()}
             self.sets_target_qpos = any(ch.sets_target_qpos for ch in self.children.values())
             self.sets_target_qvel = any(ch.sets_target_qvel for ch in self.children.values())
         else:
@@ -188,48 +190,6 @@ class BaseController(DrivePropertiesMixin):
         """K = sim_freq // control_freq: solver substeps per control step."""
         return self._engine.num_substeps
 
-    # -- the options that run (resolved: what the engine does, not what was asked) ---------------------------------
-
-    @property
-    def options(self) -> ControllerOptions:
-        """The mode's option groups as they run: :class:`wpctrl.Actuation` with the explicit law and the inertia
-        update resolved (None where nothing of the kind runs), :class:`wpctrl.Delay` (or None),
-        :class:`wpctrl.Diagnostics`, and whether gravity is off the robot."""
-        return self._engine.plan.resolved_options
-
-    @property
-    def actuation(self) -> str:
-        """``"implicit"`` or ``"explicit"``: who computes the drive force."""
-        return self.options.actuation.mode
-
-    @property
-    def explicit_pd(self) -> str | None:
-        """The explicit PD law that runs (``"naive"``, ``"stable"``, ``"coupled"``), or None with implicit
-        actuation."""
-        return self.options.actuation.explicit_pd
-
-    @property
-    def inertia_update(self) -> str | None:
-        """When the inertia is recomputed (``"control"`` or ``"substep"``), or None when the mode computes none."""
-        return self.options.actuation.inertia_update
-
-    @property
-    def nan_policy(self) -> str:
-        return self.options.diagnostics.nan_policy
-
-    @property
-    def clip_targets(self) -> str:
-        return self.options.diagnostics.clip_targets
-
-    @property
-    def track_effort(self) -> bool:
-        return self.options.diagnostics.track_effort
-
-    @property
-    def balance_passive_force(self) -> bool:
-        """Whether gravity is off the controlled robot's links (ManiSkill's agent-level switch)."""
-        return self.options.balance_passive_force
-
     @property
     def is_graphable(self) -> bool:
         """Every per-step call (set_action, before_simulation_step, reset with device env ids) can be captured."""
@@ -251,22 +211,22 @@ class BaseController(DrivePropertiesMixin):
     @property
     def target_qpos(self) -> wp.array:
         """(num_envs, n_joints) position targets [rad or m] at the end of the control step (live view)."""
-        return self._view(self._engine.target_qpos)
+        return self._view(self._engine.core.target_qpos)
 
     @property
     def target_qvel(self) -> wp.array:
         """(num_envs, n_joints) velocity targets [rad/s or m/s] (live view)."""
-        return self._view(self._engine.target_qvel)
+        return self._view(self._engine.core.target_qvel)
 
     @property
     def start_qpos(self) -> wp.array:
         """(num_envs, n_joints) measured positions at the last set_action or reset [rad or m] (live view)."""
-        return self._view(self._engine.start_qpos)
+        return self._view(self._engine.core.start_qpos)
 
     @property
     def processed_action(self) -> wp.array:
         """(num_envs, action_dim) last action after clip and scale (raw units) (live view)."""
-        arr = self._engine.processed_action
+        arr = self._engine.core.processed_action
         if self._owner:
             return arr
         if self._cols.start == self._cols.stop:  # a child without action columns (passive)
@@ -290,7 +250,7 @@ class BaseController(DrivePropertiesMixin):
     @property
     def bad_action_count(self) -> wp.array:
         """(num_envs,) int32 count of actions rejected for NaN/Inf; those envs kept their previous targets."""
-        return self._engine.bad_action_count
+        return self._engine.core.bad_action_count
 
     def attach_solver(self, solver) -> None:
         """Notify ``solver`` of the drive properties now, and after every per-env gain update (implicit acceleration
@@ -427,9 +387,9 @@ class BaseController(DrivePropertiesMixin):
             return
         eng = self._engine
         new = _as_rows_array("target_qpos", state["target_qpos"], (eng.num_envs, self._rows.stop - self._rows.start))
-        full = eng.target_qpos.numpy()
+        full = eng.core.target_qpos.numpy()
         full[:, self._rows] = new
-        eng.target_qpos.assign(full)
+        eng.core.target_qpos.assign(full)
         eng.forget_control()  # the Control's drive targets are now stale: the next substep rewrites them
 
     def __repr__(self) -> str:
@@ -476,4 +436,5 @@ def _batched(space: gym.spaces.Box, num_envs: int) -> gym.spaces.Box:
 
 
 class CombinedController(BaseController):
-    """A control mode ``{uid: config}``: one flat action in dict insertion order, see :attr:`action_mapping`."""
+    """A control mode ``{uid: config}``: one flat action in dict insertion order, see :attr:`action_mapping`; the
+    children's joints in the same order, see :attr:`joint_mapping`."""

@@ -105,25 +105,29 @@ class DrivePropertiesMixin:
     # -- per-env drive properties ---------------------------------------------------------------------------------
 
     @property
+    def _drive(self):
+        return self._engine.part("drive_properties")  # every mode has it
+
+    @property
     def stiffness(self) -> wp.array:
         """(num_envs, n_joints) drive stiffness Kp [N·m/rad or N/m] per env (live; initialised from the config)."""
-        return self._view(self._engine.kp)
+        return self._view(self._drive.kp)
 
     @property
     def damping(self) -> wp.array:
         """(num_envs, n_joints) drive damping Kd [N·m·s/rad or N·s/m] per env (live)."""
-        return self._view(self._engine.kd)
+        return self._view(self._drive.kd)
 
     @property
     def force_limit(self) -> wp.array:
         """(num_envs, n_joints) effort limit [N·m or N] per env (live)."""
-        return self._view(self._engine.force_limit)
+        return self._view(self._drive.force_limit)
 
     @property
     def friction(self) -> wp.array:
         """(num_envs, n_joints) joint friction [N·m or N] per env (live; the solver applies it from
         ``Model.joint_friction``)."""
-        return self._view(self._engine.friction)
+        return self._view(self._drive.friction)
 
     @property
     def saturation_effort(self) -> wp.array | None:
@@ -247,24 +251,26 @@ class DrivePropertiesMixin:
     def delay(self) -> wp.array | None:
         """(num_envs,) int32 command delay [substeps] per env, drawn at each reset of the env from the build's
         ``delay`` range (live, writable: assign values in [0, max]); None without ``delay``."""
-        return self._engine.delay
+        part = self._engine.part("delay")
+        return None if part is None else part.delay
 
     @delay.setter
     def delay(self, value) -> None:
         eng = self._engine
-        if eng.delay is None:
+        part = eng.part("delay")
+        if part is None:
             raise ConfigError("delay: this controller was built without delay= (no history buffer)")
         if _is_torch(value):
             value = value.detach().cpu().numpy()
         elif isinstance(value, wp.array):
             value = value.numpy()
         a = np.broadcast_to(np.asarray(value), (eng.num_envs,)) if np.ndim(value) == 0 else np.asarray(value)
-        hi = eng.delay_range[1]
+        hi = part.range[1]
         if a.shape != (eng.num_envs,) or a.dtype.kind not in "iu" or (a < 0).any() or (a > hi).any():
             raise ConfigError(
                 f"delay: expected {eng.num_envs} ints in [0, {hi}] (max_delay of the build), got {np.asarray(value)!r}"
             )
-        eng.delay.assign(a.astype(np.int32))
+        part.delay.assign(a.astype(np.int32))
 
     # -- effort readout -------------------------------------------------------------------------------------------
 
@@ -273,18 +279,18 @@ class DrivePropertiesMixin:
         """(num_envs, n_joints) PD effort [N·m or N] before the force-limit clamp, written every substep with
         ``track_effort=True`` (else None). Explicit actuation: the torque law itself. Implicit: the same law on the
         substep's start state and delayed targets, an *estimate* of what the solver's implicit drive applies."""
-        a = self._engine.computed_effort
-        return None if a is None else self._view(a)
+        part = self._engine.part("effort_readout")
+        return None if part is None else self._view(part.computed_effort)
 
     @property
     def applied_effort(self) -> wp.array | None:
         """(num_envs, n_joints) effort after the clamp to ``force_limit`` [N·m or N] (implicit: an estimate)."""
-        a = self._engine.applied_effort
-        return None if a is None else self._view(a)
+        part = self._engine.part("effort_readout")
+        return None if part is None else self._view(part.applied_effort)
 
     @property
     def saturation_count(self) -> wp.array | None:
         """(num_envs, n_joints) int32: substeps in which ``abs(computed_effort)`` exceeded the force limit; zeroed by
         ``reset`` for the reset envs."""
-        a = self._engine.saturation_count
-        return None if a is None else self._view(a)
+        part = self._engine.part("effort_readout")
+        return None if part is None else self._view(part.saturation_count)

@@ -22,7 +22,7 @@ class JointImpedanceController(JointEffortController):
     @property
     def target_qpos(self) -> wp.array:
         """(num_envs, n_joints) joint targets [rad or m] (live view; a reset sets them to the measured positions)."""
-        return self._view(self._engine.target_qpos)
+        return self._view(self._engine.core.target_qpos)
 
     @property
     def _uses_target(self) -> bool:
@@ -47,7 +47,7 @@ class OperationalSpaceController(JointEffortController):
     def target_qpos(self) -> wp.array:
         """(num_envs, n_joints) the null-space posture [rad or m] when ``nullspace_target`` is None (live view,
         writable; a reset sets it to the measured positions)."""
-        return self._view(self._engine.target_qpos)
+        return self._view(self._engine.core.target_qpos)
 
     @property
     def task_stiffness(self) -> wp.array:

@@ -56,9 +56,9 @@ class EETask:
         self.mode = mode_name
         self.ctrl = ctrl
         self.arm = ctrl["arm"]
-        self.coord = ctrl._engine.binding.coord_index
-        self.arm_coord = self.coord[:, self.arm._rows]
-        self.grip_coord = self.coord[:, ctrl["gripper"]._rows]
+        self.coord = ctrl.coord_index
+        self.arm_coord = self.arm.coord_index
+        self.grip_coord = ctrl["gripper"].coord_index
         self.scratch = model.state()
         cfg = self.arm.config
         # Normalised increments: processed = action * half range (ManiSkill's symmetric Panda bounds).

@@ -16,7 +16,8 @@ class _Torques:
 
     def _init_torques(self, ctrl):
         self._arm = ctrl["arm"]
-        self._dof = ctrl._engine.binding.dof_index[:, self._arm._rows]
+        self._dof = self._arm.dof_index
+        self._arm_rows = slice(*ctrl.joint_mapping["arm"])
         self.extra_names = [f"{j} torque" for j in self._arm.joint_names]
 
     def extra(self, state, control):
@@ -53,5 +54,5 @@ class JointImpedanceTask(_Torques, JointTask):
 
     def tracked(self, t: float, state, control):
         measured, desired, target = super().tracked(t, state, control)
-        target[:, self._arm._rows] = self._arm.target_qpos.numpy()
+        target[:, self._arm_rows] = self._arm.target_qpos.numpy()
         return measured, desired, target

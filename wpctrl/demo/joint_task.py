@@ -27,7 +27,7 @@ class JointTask:
     def __init__(self, mode_name: str, ctrl, model, rest: np.ndarray, num_envs: int, rng: np.random.Generator):
         self.mode = mode_name
         self.ctrl = ctrl
-        self.coord = ctrl._engine.binding.coord_index
+        self.coord = ctrl.coord_index
         self.rest = rest.astype(np.float64)
         self.amp = rng.uniform(0.1, 0.3, (num_envs, 7))  # [rad]
         self.freq = rng.uniform(0.2, 0.6, (num_envs, 7))  # [Hz]: peak speed < 1.2 rad/s, inside every mode's bounds

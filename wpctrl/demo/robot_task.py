@@ -30,9 +30,8 @@ class RobotTask:
         import newton
 
         self.mode = mode_name
-        binding = ctrl._engine.binding
-        self.coord = binding.coord_index
-        self.dof = binding.dof_index
+        self.coord = ctrl.coord_index
+        self.dof = ctrl.dof_index
         space = ctrl.single_action_space
         low, high = np.asarray(space.low, np.float64), np.asarray(space.high, np.float64)
         low, high = np.where(np.isfinite(low), low, -1.0), np.where(np.isfinite(high), high, 1.0)
@@ -42,9 +41,10 @@ class RobotTask:
         self.freq = rng.uniform(0.2, 0.6, (num_envs, d))  # [Hz]
         self.phase = rng.uniform(0, 2 * math.pi, (num_envs, d))
 
-        jtype = model.joint_type.numpy()[binding.joint_index[0]]
+        jtype = model.joint_type.numpy()[ctrl.joint_index[0]]
         prismatic = jtype == int(newton.JointType.PRISMATIC)
         subs = ctrl.children or {"robot": ctrl}
+        spans = getattr(ctrl, "joint_mapping", None) or {"robot": (0, len(ctrl.joint_names))}
         # Tracked columns, grouped per child controller and unit so that each group is a contiguous run of columns.
         self.rows: list[int] = []  # controller row of each tracked column
         self.velocity: list[bool] = []
@@ -57,7 +57,7 @@ class RobotTask:
                 continue
             if type(child).__name__ == "JointImpedanceController":
                 self.joint_targets.append((len(self.rows), child))
-            rows = np.arange(child._rows.start, child._rows.stop)
+            rows = np.arange(*spans[uid])
             vel = type(child.config).__name__ in _VELOCITY_CONFIGS
             kinds: dict[str, list[int]] = {}
             for r in rows:
@@ -90,8 +90,7 @@ class RobotTask:
         measured = np.where(self.velocity_a, qd[dof], q[coord])
         target = np.where(self.velocity_a, tqd[dof], tq[coord])
         for c0, child in self.joint_targets:  # joint impedance: torques, no drive target; the controller's target
-            n = child._rows.stop - child._rows.start
-            target[:, c0 : c0 + n] = child.target_qpos.numpy()
+            target[:, c0 : c0 + len(child.joint_names)] = child.target_qpos.numpy()
         if self.tcp:
             measured = np.concatenate([measured] + [c.fk_jacobian(state)[0].numpy()[:, :3] for _, c in self.tcp], 1)
             target = np.concatenate([target] + [c.target_pose.numpy()[:, :3] for _, c in self.tcp], 1)

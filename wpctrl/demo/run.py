@@ -187,8 +187,8 @@ def run(args, ctx=None) -> dict:
     model, ctrl, s0, control = rig.model, rig.ctrl, rig.s0, rig.control
     action, control_step = rig.action, rig.control_step
     n_steps = max(1, round(args.seconds * args.control_freq))
-    coord = ctrl._engine.binding.coord_index
-    dof = ctrl._engine.binding.dof_index
+    coord = ctrl.coord_index
+    dof = ctrl.dof_index
     reset_mask = wp.zeros(args.envs, dtype=wp.bool, device=device)
 
     graph = None

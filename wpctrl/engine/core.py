@@ -29,7 +29,7 @@ from ..kernels import pd_step
 from ..kernels.dims import step_block_dim
 from ..kernels.pd import _reset_kernel, _step_view_kernel, _targets_kernel
 from .launch import _Launch, _Targets
-from .parts import Part, part_classes
+from .parts import PARTS, Part, part_classes
 from .plan import Plan
 from .state import Alloc, Arrays, CoreArrays
 
@@ -43,7 +43,11 @@ class _ModelState:
 
 
 class _Engine:
-    """Device arrays, parts and launches of one control mode (all rows, all envs)."""
+    """Device arrays, parts and launches of one control mode (all rows, all envs).
+
+    Every attribute is defined here: the arrays every mode has are ``core`` (:class:`~.state.CoreArrays`), a part's
+    are reached through :meth:`part` (None when the mode does not need it); nothing is looked up by searching.
+    """
 
     def __init__(self, plan: Plan, model: newton.Model, solver=None, write_model: bool = True):
         self.plan = plan
@@ -96,8 +100,11 @@ class _Engine:
     # -- parts ----------------------------------------------------------------------------------------------------
 
     def part(self, name: str):
-        """The active part ``name`` (``"drive_properties"``, ``"response"``, ``"coupled_drive"``, ``"delay"``,
-        ``"effort_readout"``, ``"ee"``, ``"gravity"``, ``"effort_command"``, ``"actuator_models"``), or None."""
+        """The part ``name`` (a key of :data:`wpctrl.engine.parts.PARTS`: ``"drive_properties"``, ``"response"``,
+        ``"coupled_drive"``, ``"delay"``, ``"effort_readout"``, ``"ee"``, ``"impedance"``, ...) when the mode has it,
+        else None; a name that is no part raises ``KeyError``."""
+        if name not in PARTS:
+            raise KeyError(f"no engine part {name!r}; the parts: {list(PARTS)}")
         return self._by_name.get(name)
 
     @property
@@ -117,43 +124,6 @@ class _Engine:
     @property
     def coupled(self) -> bool:
         return self.plan.coupled
-
-    @property
-    def explicit_mode(self) -> int:
-        return self.plan.explicit_mode
-
-    @property
-    def clip_targets(self) -> bool:
-        return self.plan.clip_targets
-
-    @property
-    def inertia_update(self) -> str | None:
-        return self.plan.inertia_update
-
-    @property
-    def sim_dt(self) -> float:
-        return self.plan.options.sim_dt
-
-    @property
-    def delay_range(self):
-        d = self._by_name.get("delay")
-        return None if d is None else d.range
-
-    def __getattr__(self, name: str):
-        """The core's arrays and the parts' attributes by name (``kp``, ``target_qpos``, ``delay``, ...); an array of
-        a part that is off is None."""
-        if name.startswith("__") or name in ("core", "parts", "arrays", "_by_name"):
-            raise AttributeError(name)
-        core = self.__dict__.get("core")
-        if core is not None and hasattr(core, name):
-            return getattr(core, name)
-        for part in self.__dict__.get("parts", ()):
-            if hasattr(part, name):
-                return getattr(part, name)
-        arrays = self.__dict__.get("arrays")
-        if arrays is not None and name in arrays.optional:
-            return None
-        raise AttributeError(f"{type(self).__name__} has no attribute {name!r}")
 
     def model_flags(self):
         """What the engine changed in the model, as ``newton.ModelFlags`` for ``notify_model_changed``."""

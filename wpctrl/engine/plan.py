@@ -1,7 +1,7 @@
 """The plan of one control mode: everything the engine decides on the host before it allocates a byte on the device.
 
 Plain data (numpy tables, tuples, ints): rows, index tables, the options, which parts are on, and the compile-time
-layout of the step kernels. Printable (``print(ctrl._engine.plan)``) and testable without a device. The engine's
+layout of the step kernels. Printable (``print(ctrl.describe())``) and testable without a device. The engine's
 other two stages follow it in one direction: :mod:`.state` allocates the device arrays the plan needs, and
 :mod:`.core` records the launches over them.
 """

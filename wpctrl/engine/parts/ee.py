@@ -337,10 +337,10 @@ class EEPart:
             params.update(
                 {
                     "row_q_off": self.row_q_off,
-                    "env_q_base": eng.env_q_base,
-                    "row_qlo": eng.row_qlo,
-                    "row_qhi": eng.row_qhi,
-                    "clip_targets": int(getattr(eng, "clip_targets", False)),
+                    "env_q_base": eng.core.env_q_base,
+                    "row_qlo": eng.core.row_qlo,
+                    "row_qhi": eng.core.row_qhi,
+                    "clip_targets": int(eng.plan.clip_targets),
                     "row0": self.row0,
                     "num_dof": self.num_dof,
                     "col0": self.col0,
@@ -361,8 +361,8 @@ class EEPart:
                     "rot_scale": wp.vec3(*(float(v) for v in s.rot_scale)),
                     "action_in": action,
                     "joint_q_in": state.joint_q,
-                    "processed_action_out": eng.processed_action,
-                    "target_qpos_out": eng.target_qpos,
+                    "processed_action_out": eng.core.processed_action,
+                    "target_qpos_out": eng.core.target_qpos,
                     "target_pose_out": self.target_pose,
                     "ee_pose_out": self.ee_pose,
                     "ik_success_out": self.ik_success,
@@ -388,7 +388,7 @@ class EEPart:
             inputs=[
                 *p.values(),
                 self.row_q_off,
-                eng.env_q_base,
+                eng.core.env_q_base,
                 self.num_dof,
                 int(use_target),
                 env_ids,
@@ -409,7 +409,15 @@ class EEPart:
         wp.launch(
             ee_kernels._ee_fk_jacobian_kernel,
             dim=eng.num_envs,
-            inputs=[*self._chain_params.values(), self.row_q_off, eng.env_q_base, self.num_dof, joint_q, pose, jac],
+            inputs=[
+                *self._chain_params.values(),
+                self.row_q_off,
+                eng.core.env_q_base,
+                self.num_dof,
+                joint_q,
+                pose,
+                jac,
+            ],
             device=eng.device,
         )
         return pose, jac

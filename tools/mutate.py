@@ -384,7 +384,7 @@ MUTATIONS: list[Mutation] = [
     M(
         "randomize_same_draw_every_env",
         "wpctrl/engine/parts/drive_properties.py",
-        "state = wp.rand_init(key, env * kp_out.shape[1] + r)",
+        "state = wp.rand_init(key, env * drive.kp.shape[1] + r)",
         "state = wp.rand_init(key, r)",
         "randomize_drive_properties draws the same values for every env",
         ("tests/test_actuation.py",),

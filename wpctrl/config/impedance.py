@@ -298,29 +298,15 @@ def _gain_bounds(c, mode: int, n: int, normalize: bool, kp_lim, ratio_lim) -> tu
 def _effort_rows(c, names: list[str], kp, kd, low: np.ndarray, high: np.ndarray, normalize: bool) -> cfg.Rows:
     """Effort rows without an action column of their own (the impedance kernel writes their commanded torque)."""
     n = len(names)
-    z = np.zeros(n, np.float32)
-    return cfg.Rows(
-        joint_names=names,
-        kind=np.full(n, cfg.ROW_EFFORT, np.int32),
-        flags=np.zeros(n, np.int32),
-        act_col=np.full(n, -1, np.int32),
-        vel_col=np.full(n, -1, np.int32),
-        lo=z.copy(),
-        hi=z.copy(),
-        vlo=z.copy(),
-        vhi=z.copy(),
-        mimic_src=np.full(n, -1, np.int32),
-        mimic_mul=np.ones(n, np.float32),
-        mimic_off=z.copy(),
+    return cfg.Rows.of(
+        names,
+        cfg.ROW_EFFORT,
         kp=np.asarray(kp, np.float32),
         kd=np.asarray(kd, np.float32),
-        force_limit=cfg._per_joint(c, "force_limit", c.force_limit, n, nonneg=True).astype(np.float32),
-        friction=cfg._per_joint(c, "friction", c.friction, n, nonneg=True).astype(np.float32),
-        accel=np.zeros(n, np.bool_),
-        action_low=low.astype(np.float32),
-        action_high=high.astype(np.float32),
+        **cfg._drive_fields(c, n, damping=False),
+        action_low=low,
+        action_high=high,
         normalized=normalize,
-        action_dim=int(low.shape[0]),
     )
 
 

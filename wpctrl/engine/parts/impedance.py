@@ -22,15 +22,10 @@ from ...kernels import impedance as impedance_kernels
 from ...kernels import inertia
 from ...kernels.dims import PER_ENV_BLOCK_DIM
 from ...kernels.env_selection import _bump_counter_kernel
+from ...kernels.spatial import Articulation
 from ..launch import _Launch
-from .ee import EEPart
+from .ee import EEPart, ee_chain
 from .part import Part
-
-_FUSED_ARGS = (
-    "chain_type", "chain_parent", "chain_dof", "chain_anc", "row_dof", "env_joint_base", "env_dof_base", "joint_child",
-    "joint_armature", "body_mass", "body_com", "body_inertia", "num_dofs",
-)  # fmt: skip
-"""The torque kernel's parameters that come from :meth:`wpctrl.kernels.inertia.FusedChain.chain_args`."""
 
 
 def _specs(plan) -> dict:
@@ -90,19 +85,7 @@ class _Unit:
     # -- chain parameters (an OSC unit's EE chain; placeholders for joint impedance) ----------------------------------
 
     def chain_params(self) -> dict:
-        m = self.engine.model
-        return {
-            "chain_joint": None,
-            "chain_col": None,
-            "joint_type": m.joint_type,
-            "joint_X_p": m.joint_X_p,
-            "joint_X_c": m.joint_X_c,
-            "joint_axis": m.joint_axis,
-            "joint_q_start": m.joint_q_start,
-            "joint_qd_start": m.joint_qd_start,
-            "env_root": None,
-            "ee_offset": wp.transform_identity(),
-        }
+        return {"chain": ee_chain(self.engine.model)}
 
     def gain_arrays(self) -> tuple[wp.array, wp.array, int]:
         """Where the variable gains go: ``(kp, kd, first column)``."""
@@ -166,13 +149,11 @@ class _Unit:
             fused = self.fused
             params = self.chain_params()
             if fused is not None:
-                chain = fused.chain_args()
-                params.update({k: chain[k] for k in _FUSED_ARGS})
+                params.update(fused.chain_args())
                 row_dof = tuple(int(d) for d in fused.layout.row_dof)
                 kernel = impedance_kernels.torque_kernel(s.osc, self.num_dof, row_dof, fused.kernel_key())
             else:
-                params.update(dict.fromkeys(_FUSED_ARGS))
-                params["num_dofs"] = 0
+                params["art"] = Articulation()  # no fused inertia pass: never read
                 kernel = impedance_kernels.torque_kernel(s.osc, self.num_dof, None, None)
             params.update(
                 gravity_in=eng.model.gravity,

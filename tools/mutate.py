@@ -520,7 +520,7 @@ MUTATIONS: list[Mutation] = [
     ),
     M(
         "osc_task_gain_scale_ignores_the_config",
-        "wpctrl/kernels/impedance.py",
+        "wpctrl/engine/parts/impedance.py",
         "                x = nominal_in[p, k] * x\n",
         "                x = x\n",
         "randomize_task_impedance's 'scale' mode draws the factor itself, not the config's gain times it",

@@ -36,7 +36,6 @@ import warp as wp
 
 from .cholesky import cholesky_funcs
 from .ee_math import EEChain, _chain_fk, _compose, _jacobian, _log3, _pose_action, _read_pose, _write_pose, vecD
-from .env_selection import MODE_SCALE, _select
 from .inertia import chain_hg_func
 from .pd import _action_finite, _bidx, _scale
 from .spatial import Articulation
@@ -333,39 +332,3 @@ def torque_kernel(osc: bool, n: int, row_dof: tuple | None, chain_key: tuple | N
 
     _torque_cache[key] = impedance_torque
     return impedance_torque
-
-
-@wp.kernel(enable_backward=False)
-def _randomize_task_gains_kernel(
-    seed: int,
-    mode: int,  # env_selection.MODE_SCALE / MODE_ABS
-    enabled: wp.vec2i,  # (stiffness, damping)
-    lo: wp.vec2,
-    hi: wp.vec2,
-    # In:
-    env_ids_in: wp.array[wp.int32],  # optional: thread block i draws for env env_ids_in[i]
-    env_mask_in: wp.array[wp.bool],  # optional: only where True
-    nominal_in: wp.array2d[float],  # (2, 6): the config's task stiffness and damping
-    rng_counter_in: wp.array[wp.int32],  # (1,)
-    # Out:
-    task_kp_out: wp.array2d[float],  # (num_envs, 6)
-    task_kd_out: wp.array2d[float],
-):
-    """An OSC controller's task gains: nominal * U(lo, hi) ("scale") or U(lo, hi) ("abs"), per env and axis, from a
-    stream of their own (keyed by the seed, the draw counter and the env's axis)."""
-    tid = wp.tid()
-    env, k, i = _select(tid, 6, env_ids_in, env_mask_in, task_kp_out.shape[0])
-    if env < 0:
-        return
-    key = wp.randi(wp.rand_init(seed, rng_counter_in[0]))
-    state = wp.rand_init(key, 1000003 + env * 6 + k)
-    for p in range(2):
-        u = wp.randf(state)  # drawn for both, so that one's values do not depend on whether the other is drawn
-        if enabled[p] != 0:
-            x = lo[p] + (hi[p] - lo[p]) * u
-            if mode == MODE_SCALE:
-                x = nominal_in[p, k] * x
-            if p == 0:
-                task_kp_out[env, k] = x
-            else:
-                task_kd_out[env, k] = x

@@ -190,3 +190,25 @@ def test_find_cycle_names_the_cycle():
     assert find_cycle({"a": {"b"}, "b": {"c"}, "c": set()}) is None
     assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
     assert find_cycle({"a": {"b", "d"}, "b": {"d"}, "d": set()}) is None  # a diamond is not a cycle
+
+
+def test_controller_cls_resolves_on_first_use():
+    """``Config.controller_cls`` is the controller class right after ``import wpctrl`` (before anything loaded the
+    controllers, which import Newton), for every config class the package exports; reading it loads them."""
+    import subprocess
+    import sys
+
+    code = """
+import sys, dataclasses, wpctrl
+assert "wpctrl.controllers" not in sys.modules, "import wpctrl loaded the controllers"
+configs = [getattr(wpctrl, n) for n in wpctrl.__all__ if n.endswith("ControllerConfig") and n != "ControllerConfig"]
+assert len(configs) >= 12, configs
+for c in configs:
+    cls = c.controller_cls
+    assert isinstance(cls, type) and issubclass(cls, wpctrl.BaseController), (c, cls)
+    assert cls.__name__ == c.__name__.removesuffix("Config"), (c, cls)
+assert wpctrl.ControllerConfig.controller_cls is None
+print("ok", len(configs))
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=ROOT.parent)
+    assert out.returncode == 0 and out.stdout.startswith("ok"), out.stdout + out.stderr

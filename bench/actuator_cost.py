@@ -7,13 +7,20 @@ One control step = ``set_action`` + K x ``before_simulation_step`` (K = 5), Mani
 * ``plain``: no model (ManiSkill's clamp to ``force_limit``);
 * ``dc_motor``: ``wpctrl.DCMotor(87, 2.6)``;
 * ``position_limit``: ``wpctrl.PositionBasedEffortLimit`` with an 8-entry table;
-* ``mlp``: ``wpctrl.ActuatorNet`` of a 6-32-32-1 softsign MLP over 3 history taps (random weights);
-* ``lstm``: ``wpctrl.ActuatorNet`` of a 2-layer, 8-unit LSTM with a linear head (random weights);
+* ``mlp``: ``wpctrl.ActuatorNet`` of a 6-32-32-1 softsign MLP over 3 history taps (random weights), its default
+  kernel (the weights compiled in);
+* ``lstm``: ``wpctrl.ActuatorNet`` of a 2-layer, 8-unit LSTM with a linear head (random weights), default kernel;
+* ``mlp_tiled`` / ``lstm_tiled``: the same networks with ``kernel="tiled"`` (weights staged in shared memory, rows in
+  64-row tiles, each layer a ``wp.tile_matmul``);
+* ``torch_mlp`` / ``torch_lstm`` (CUDA): the same control step with the network's substep written in torch on the same
+  rows (bench/torch_actuator_net.py: cuBLAS / cuDNN, Isaac Lab's ``ActuatorNetMLP`` / ``ActuatorNetLSTM`` code
+  path), wpctrl's launches and the torch ops captured in one CUDA graph;
 * ``newton_dc``: the plain step plus Newton 1.8's ``ClampingDCMotor`` applied to ``joint_f`` after every substep
   (its own launch over every DOF): what the same DC-motor envelope costs as Newton's component.
 
-Graph-captured replay (and eager with ``--eager``), round-robin. Run ``python bench/actuator_cost.py --help``;
-results go to ``<out>/actuator_cost_<device>.{json,md}``.
+Graph-captured replay (and eager with ``--eager``), round-robin. Before timing, on CUDA, each torch variant's first
+control step is checked against the matching wpctrl one (the ``check`` field: max |joint_f| difference). Run
+``python bench/actuator_cost.py --help``; results go to ``<out>/actuator_cost_<device>.{json,md}``.
 """
 
 from __future__ import annotations
@@ -47,19 +54,26 @@ from bench.common import (  # noqa: E402
     synthetic_setup,
 )
 
-VARIANTS = ("plain", "dc_motor", "position_limit", "mlp", "lstm", "newton_dc")
+VARIANTS = ("plain", "dc_motor", "position_limit", "mlp", "lstm", "mlp_tiled", "lstm_tiled", "torch_mlp", "torch_lstm",
+            "newton_dc")  # fmt: skip
 LABELS = {
     "plain": "plain explicit step",
     "dc_motor": "DCMotor",
     "position_limit": "PositionBasedEffortLimit",
     "mlp": "ActuatorNet (MLP 6-32-32-1)",
     "lstm": "ActuatorNet (LSTM 2x8)",
+    "mlp_tiled": "ActuatorNet (MLP, tiled kernel)",
+    "lstm_tiled": "ActuatorNet (LSTM, tiled kernel)",
+    "torch_mlp": "MLP in torch (CUDA graph)",
+    "torch_lstm": "LSTM in torch (CUDA graph)",
     "newton_dc": "plain + Newton ClampingDCMotor",
 }
 
 
 def _actuator(name: str):
     import wpctrl
+
+    name, _, kernel = name.removeprefix("torch_").partition("_")
 
     if name == "dc_motor":
         return wpctrl.DCMotor(87.0, 2.6)
@@ -83,7 +97,8 @@ def _actuator(name: str):
                     self.linear = torch.nn.Linear(8, 1)
 
             net = _LSTM()
-        return wpctrl.ActuatorNet(net, torque_scale=10.0, saturation_effort=87.0, velocity_limit=2.6)
+        return wpctrl.ActuatorNet(net, torque_scale=10.0, saturation_effort=87.0, velocity_limit=2.6,
+                                  kernel=kernel or "auto")  # fmt: skip
     return None
 
 
@@ -111,32 +126,99 @@ def _newton_dc(ctrl, device):
     return comp, idx, scratch
 
 
-def run_one(args, n_envs, model, small_model, sync, device) -> list[dict]:
+def _torch_net(ctrl, state, control, lstm_cells: bool = False):
+    """Replace the controller's network launch by the torch baseline's substep (bench/torch_actuator_net.py)."""
+    from bench.torch_actuator_net import TorchActuatorNet
+
+    tnet = TorchActuatorNet(ctrl, state, control, lstm_cells)
+    group = ctrl._engine.part("actuator_models").nets[0]
+    group.launch = lambda engine, state, control: tnet.substep()
+    return tnet
+
+
+def _setup_variant(args, name, n_envs, model, small_model, sync, device, first_f, checks, lstm_cells):
+    """Build variant ``name``, run its first control step (recorded in ``first_f``; a torch baseline's difference to
+    the matching network kernel's in ``checks``) and capture it: ``(replay function, eager step)``."""
     kw = {"actuation": "explicit", "control_freq": 20, "sim_freq": 100}
-    rng = np.random.default_rng(0)
-    fns = {}
-    for name in args.variants:
-        mode = _mode(name, args.mode)
-        su = real_setup(mode, model, **kw) if model is not None else synthetic_setup(mode, small_model, n_envs, **kw)
-        ctrl, state, control = su.ctrl, su.state, su.control
-        action = wp.array(rng.uniform(-1, 1, (n_envs, ctrl.action_dim)).astype(np.float32), device=device)
-        ctrl.reset(state)
-        extra = _newton_dc(ctrl, device) if name == "newton_dc" else None
+    mode = _mode(name, args.mode)
+    su = real_setup(mode, model, **kw) if model is not None else synthetic_setup(mode, small_model, n_envs, **kw)
+    ctrl, state, control = su.ctrl, su.state, su.control
+    action = wp.array(np.random.default_rng(1).uniform(-1, 1, (n_envs, ctrl.action_dim)).astype(np.float32),
+                      device=device)  # fmt: skip
+    ctrl.reset(state)
+    tnet = _torch_net(ctrl, state, control, lstm_cells) if name.startswith("torch_") else None
+    extra = _newton_dc(ctrl, device) if name == "newton_dc" else None
 
-        def step(ctrl=ctrl, state=state, control=control, action=action, extra=extra):
-            ctrl.set_action(action, state)
-            for _ in range(ctrl.num_substeps):
-                ctrl.before_simulation_step(state, control)
-                if extra is not None:  # Newton's component: read joint_f at the DOFs, clamp, write back
-                    comp, idx, scratch = extra
-                    comp.modify_forces(control.joint_f, scratch, state.joint_q, state.joint_qd, idx, idx)
+    def step(ctrl=ctrl, state=state, control=control, action=action, extra=extra):
+        ctrl.set_action(action, state)
+        for _ in range(ctrl.num_substeps):
+            ctrl.before_simulation_step(state, control)
+            if extra is not None:  # Newton's component: read joint_f at the DOFs, clamp, write back
+                comp, idx, scratch = extra
+                comp.modify_forces(control.joint_f, scratch, state.joint_q, state.joint_qd, idx, idx)
 
-        step()
-        sync()
+    inner = step
+    if tnet is not None:  # eager: Warp's launches on torch's current stream, so that the two stay in order
+        import torch
+
+        wstream = wp.stream_from_torch(torch.cuda.current_stream(torch.device("cuda", wp.get_device(device).ordinal)))
+
+        def step(inner=inner, wstream=wstream):
+            with wp.ScopedStream(wstream):
+                inner()
+
+    sync()
+    step()
+    sync()
+    # the first control step's joint_f (same action, same start): the torch baseline against wpctrl's kernel
+    first_f[name] = control.joint_f.numpy().copy()
+    base = name.removeprefix("torch_")
+    if base != name and base in first_f:
+        checks[name] = float(np.abs(first_f[name] - first_f[base]).max())
+        print(f"[{fmt_envs(n_envs)}] {name}: max |joint_f - {base}'s| after one step = {checks[name]:.3g}")
+    if tnet is not None:
+        from bench.torch_actuator_net import capture, capture_apart
+
+        try:
+            graph = capture(inner, device)
+            checks[name + ":capture"] = "one graph"
+            return (lambda g=graph, keep=(su, action, tnet): g.replay()), step
+        except Exception as e:  # noqa: BLE001 - the two-graph fallback below
+            print(f"[{fmt_envs(n_envs)}] {name}: one graph failed ({type(e).__name__}: {e}); two graphs on one stream")
+        group = ctrl._engine.part("actuator_models").nets[0]
+        group.launch = lambda engine, state, control: None
+        replay = capture_apart(inner, tnet, ctrl.num_substeps, device)
+        checks[name + ":capture"] = "two graphs"
+        return (lambda r=replay, keep=(su, action, tnet): r()), step
+    else:
         with wp.ScopedCapture(device=device) as cap:
             step()
         # the graph replays into these arrays: keep them alive with it (a freed one would be reused or unmapped)
-        fns[name + ":graph"] = lambda g=cap.graph, keep=(su, action, extra): wp.capture_launch(g)
+        return (lambda g=cap.graph, keep=(su, action, extra): wp.capture_launch(g)), step
+
+
+def run_one(args, n_envs, model, small_model, sync, device) -> list[dict]:
+    fns = {}
+    checks = {}
+    first_f = {}
+    for name in args.variants:
+        if name.startswith("torch_") and not wp.get_device(device).is_cuda:
+            print(f"[{fmt_envs(n_envs)}] {name}: skipped (the torch baseline is a CUDA graph)", flush=True)
+            continue
+        tries = (False, True) if name == "torch_lstm" else (False,)
+        for cells in tries:  # the torch LSTM through cuDNN, else (a batch cuDNN refuses) as cell equations
+            try:
+                got = _setup_variant(args, name, n_envs, model, small_model, sync, device, first_f, checks, cells)
+                break
+            except Exception as e:  # noqa: BLE001 - a torch baseline that cannot run is reported, the rest goes on
+                if not name.startswith("torch_"):
+                    raise
+                print(f"[{fmt_envs(n_envs)}] {name} (lstm cells: {cells}): failed ({type(e).__name__}: {e})")
+                got = None
+        if got is None:
+            continue
+        graph_fn, step = got
+        fns[name + ":graph"] = graph_fn
         if args.eager:
             fns[name + ":eager"] = step
     times = measure_interleaved(
@@ -157,6 +239,8 @@ def run_one(args, n_envs, model, small_model, sync, device) -> list[dict]:
                 "samples_us": [x * 1e6 for x in t["samples_s"]],
                 "iters": t["iters"],
                 "clock": args.clock,
+                "check_max_abs_joint_f": checks.get(name),
+                "torch_capture": checks.get(name + ":capture"),
             }
         )
     return rows
@@ -172,7 +256,7 @@ def markdown(meta: dict, rows: list[dict], args) -> str:
     body = [
         [
             fmt_envs(r["envs"]) + ("*" if r["layout"] == "synthetic" else ""),
-            LABELS[r["variant"]],
+            LABELS[r["variant"]] + ("†" if r.get("torch_capture") == "two graphs" else ""),
             r["replay"],
             fmt_us(r["us"] * 1e-6),
             fmt_ratio(r["x_plain"]),
@@ -182,6 +266,14 @@ def markdown(meta: dict, rows: list[dict], args) -> str:
     out.append(md_table(["envs", "variant", "replay", "µs", "× plain"], body))
     if any(r["layout"] == "synthetic" for r in rows):
         out.append("\n\\* synthetic layout (bench/common.py): a small model's layout tiled to N envs.\n")
+    if any(r.get("torch_capture") == "two graphs" for r in rows):
+        out.append("\n† wpctrl's step and the torch network as two graphs replayed on one stream (one graph of both "
+                   "could not be captured).\n")  # fmt: skip
+    checks = [r for r in rows if r.get("check_max_abs_joint_f") is not None and r["replay"] == "graph"]
+    if checks:
+        each = [f"{fmt_envs(r['envs'])} {r['variant']} {r['check_max_abs_joint_f']:.2g} N·m" for r in checks]
+        out.append(f"\nTorch baseline against the network kernel, max |joint_f| difference after the first control "
+                   f"step: {'; '.join(each)}.\n")  # fmt: skip
     return "".join(out)
 
 
@@ -214,7 +306,8 @@ def main(argv=None):
             )
         rows += got
         del model
-    finish_run(args, device, meta, rows, t0, "actuator_cost", lambda: markdown(meta, rows, args))
+        # written after every size, so that a run stopped at its time limit keeps what it measured
+        finish_run(args, device, meta, rows, t0, "actuator_cost", lambda r=rows: markdown(meta, r, args))
 
 
 if __name__ == "__main__":

@@ -1,15 +1,26 @@
 """Actuator networks (Isaac Lab's ActuatorNetMLP / ActuatorNetLSTM conventions) evaluated in Warp, against the same
-TorchScript network run in torch with the histories / hidden states kept in numpy, per env, with partial resets."""
+TorchScript network run in torch with the histories / hidden states kept in numpy, per env, with partial resets.
+
+Both network kernels (``kernel="unrolled"``: weights compiled in; ``"tiled"``: weights in shared memory, rows in
+tiles) on every supported structure: each activation, depth 1 to 6, MLP input orders and history taps, LSTM depth and
+width with a head, random and trained weights; a batch that is not a multiple of the tile size (Warp's cooperative
+CPU blocks run the tiled kernel's 64-row tiles on the CPU); CUDA when there is a device."""
 
 from __future__ import annotations
+
+import functools
 
 import numpy as np
 import pytest
 import torch
-from conftest import build_panda
+import warp as wp
+from conftest import HAS_CUDA, build_panda
 
 import wpctrl
+from wpctrl.kernels import actuator_net as KN
 from wpctrl.robots import PANDA_ARM_JOINTS
+
+KERNELS = ("unrolled", "tiled")
 
 pytestmark = pytest.mark.filterwarnings("ignore:`torch.jit:DeprecationWarning")
 f32 = np.float32
@@ -61,18 +72,21 @@ def _rollout(ctrl, model, steps, rng, reset_at=None):
         yield q[b.coord_index], qd[b.dof_index], target, c.joint_f.numpy()[b.dof_index], mask
 
 
+@pytest.mark.parametrize("kernel", KERNELS)
 @pytest.mark.parametrize("order", ["pos_vel", "vel_pos"])
-def test_mlp_actuator_equals_torch_with_history_and_partial_reset(tmp_path, order):
+def test_mlp_actuator_equals_torch_with_history_and_partial_reset(tmp_path, order, kernel):
     mlp = torch.nn.Sequential(
         torch.nn.Linear(6, 16), torch.nn.Softsign(), torch.nn.Linear(16, 16), torch.nn.ELU(0.7), torch.nn.Linear(16, 1)
     )
     path, net = _scripted(mlp, tmp_path, "mlp")
     idx, ps, vs, ts = (0, 2, 4), 1.3, 0.2, 25.0
-    act = wpctrl.ActuatorNet(path, input_idx=idx, pos_scale=ps, vel_scale=vs, torque_scale=ts, input_order=order)
+    act = wpctrl.ActuatorNet(path, input_idx=idx, pos_scale=ps, vel_scale=vs, torque_scale=ts, input_order=order,
+                             kernel=kernel)  # fmt: skip
     cfg = wpctrl.PDJointPosControllerConfig(PANDA_ARM_JOINTS, None, None, 0.0, 0.0, 40.0, normalize_action=False,
                                             actuator=act)  # fmt: skip
     model = build_panda(E)
     ctrl = wpctrl.build_controller(cfg, model, 100, 100, actuation="explicit", track_effort=True)
+    assert ctrl._engine.part("actuator_models").nets[0].kernel_kind == kernel
     hist_e = np.zeros((E, 5, J), f32)
     hist_v = np.zeros((E, 5, J), f32)
     rng = np.random.default_rng(0)
@@ -96,13 +110,15 @@ def test_mlp_actuator_equals_torch_with_history_and_partial_reset(tmp_path, orde
     assert worst > 1.0  # the network produces real torques (a test of something)
 
 
-def test_lstm_actuator_equals_torch_with_hidden_state_and_partial_reset(tmp_path):
+@pytest.mark.parametrize("kernel", KERNELS)
+def test_lstm_actuator_equals_torch_with_hidden_state_and_partial_reset(tmp_path, kernel):
     path, net = _scripted(_LSTMNet(hidden=8, layers=2), tmp_path, "lstm")
-    act = wpctrl.ActuatorNet(path, saturation_effort=30.0, velocity_limit=6.0)
+    act = wpctrl.ActuatorNet(path, saturation_effort=30.0, velocity_limit=6.0, kernel=kernel)
     cfg = wpctrl.PDJointPosControllerConfig(PANDA_ARM_JOINTS, None, None, 0.0, 0.0, 1e9, normalize_action=False,
                                             actuator=act)  # fmt: skip
     model = build_panda(E)
     ctrl = wpctrl.build_controller(cfg, model, 100, 100, actuation="explicit", track_effort=True)
+    assert ctrl._engine.part("actuator_models").nets[0].kernel_kind == kernel
     h = torch.zeros(2, E * J, 8)
     c = torch.zeros(2, E * J, 8)
     rng = np.random.default_rng(1)
@@ -121,6 +137,211 @@ def test_lstm_actuator_equals_torch_with_hidden_state_and_partial_reset(tmp_path
         v = np.clip(qd.astype(np.float64), -6.0 * (1 + 1e9 / 30.0), 6.0 * (1 + 1e9 / 30.0))
         hi, lo = np.minimum(30.0 * (1 - v / 6.0), 1e9), np.maximum(30.0 * (-1 - v / 6.0), -1e9)
         np.testing.assert_allclose(tau, np.clip(u, lo, hi), rtol=1e-5, atol=1e-5)
+
+
+class _Reference:
+    """An actuator network in torch as Isaac Lab runs it: the MLP's histories / the LSTM's state per (env, joint)."""
+
+    def __init__(self, net, act: wpctrl.ActuatorNet, lstm: tuple[int, int] | None, envs: int):
+        self.net, self.act, self.lstm, self.E = net, act, lstm, envs
+        if lstm is None:
+            self.hist_e = np.zeros((envs, max(act.input_idx) + 1, J), f32)
+            self.hist_v = np.zeros_like(self.hist_e)
+        else:
+            self.h = torch.zeros(lstm[0], envs * J, lstm[1])
+            self.c = torch.zeros(lstm[0], envs * J, lstm[1])
+
+    def reset(self, mask: np.ndarray) -> None:
+        if self.lstm is None:
+            self.hist_e[mask] = 0.0
+            self.hist_v[mask] = 0.0
+        else:
+            m = torch.from_numpy(mask)
+            self.h.view(self.lstm[0], self.E, J, -1)[:, m] = 0.0
+            self.c.view(self.lstm[0], self.E, J, -1)[:, m] = 0.0
+
+    def step(self, q, qd, target) -> np.ndarray:
+        a, E = self.act, self.E
+        with torch.no_grad():
+            if self.lstm is None:
+                self.hist_e = np.roll(self.hist_e, 1, axis=1)
+                self.hist_v = np.roll(self.hist_v, 1, axis=1)
+                self.hist_e[:, 0] = target - q
+                self.hist_v[:, 0] = qd
+                idx = list(a.input_idx)
+                pos = self.hist_e[:, idx].transpose(0, 2, 1).reshape(E * J, -1) * f32(a.pos_scale)
+                vel = self.hist_v[:, idx].transpose(0, 2, 1).reshape(E * J, -1) * f32(a.vel_scale)
+                x = np.concatenate([pos, vel] if a.input_order == "pos_vel" else [vel, pos], axis=1)
+                u = self.net(torch.from_numpy(x)).numpy()
+            else:
+                pos, vel = (target - q) * f32(a.pos_scale), qd * f32(a.vel_scale)
+                x = np.stack([pos, vel] if a.input_order == "pos_vel" else [vel, pos], axis=2).reshape(E * J, 1, 2)
+                u, (self.h, self.c) = self.net(torch.from_numpy(x), (self.h, self.c))
+                u = u.numpy()
+        return u.reshape(E, J) * f32(a.torque_scale)
+
+
+def _check_against_torch(act, net, lstm, envs: int = E, device: str = "cpu", steps: int = 6, kernel=None):
+    """Random states and targets for ``steps`` substeps with a partial reset halfway: the computed effort equals torch's
+    forward of the same weights (1e-5), and the applied one is its clamp to the force limit."""
+    cfg = wpctrl.PDJointPosControllerConfig(PANDA_ARM_JOINTS, None, None, 0.0, 0.0, 40.0, normalize_action=False,
+                                            actuator=act)  # fmt: skip
+    model = build_panda(envs, device)
+    ctrl = wpctrl.build_controller(cfg, model, 100, 100, actuation="explicit", track_effort=True)
+    if kernel is not None:
+        assert ctrl._engine.part("actuator_models").nets[0].kernel_kind == kernel
+    ref = _Reference(net, act, lstm, envs)
+    rng = np.random.default_rng(7)
+    s, c = model.state(), model.control()
+    ctrl.reset(s, control=c)
+    b = ctrl  # the controlled joints' coord_index / dof_index
+    worst = 0.0
+    for k in range(steps):
+        q = s.joint_q.numpy()
+        q[b.coord_index] = rng.uniform(-1.0, 1.0, b.coord_index.shape).astype(f32)
+        s.joint_q.assign(q)
+        qd = s.joint_qd.numpy()
+        qd[b.dof_index] = rng.uniform(-3.0, 3.0, b.dof_index.shape).astype(f32)
+        s.joint_qd.assign(qd)
+        if k == steps // 2:
+            mask = np.arange(envs) % 3 == 1
+            ctrl.reset(s, wp.array(mask, dtype=wp.bool, device=device), control=c)
+            ref.reset(mask)
+        target = rng.uniform(-1.0, 1.0, (envs, J)).astype(f32)
+        ctrl.set_action(wp.array(target, dtype=wp.float32, device=device), s)
+        ctrl.before_simulation_step(s, c)
+        u = ref.step(q[b.coord_index], qd[b.dof_index], target)
+        np.testing.assert_allclose(ctrl.computed_effort.numpy(), u, rtol=1e-5, atol=1e-5)
+        np.testing.assert_allclose(c.joint_f.numpy()[b.dof_index], np.clip(u, -40.0, 40.0), rtol=1e-5, atol=1e-5)
+        worst = max(worst, float(np.abs(u).max()))
+    assert worst > 0.5  # the network produces real torques (a test of something)
+
+
+def _mlp(*layers):
+    torch.manual_seed(3)
+    net = torch.nn.Sequential(*layers)
+    for p in net.parameters():
+        torch.nn.init.uniform_(p, -0.7, 0.7)
+    return net
+
+
+@functools.lru_cache(maxsize=1)
+def _trained_mlp():
+    """A 6-32-32-1 softsign MLP (the shape of Isaac Lab's ANYdrive network) fitted by Adam to a DC-motor-like map
+    from position errors and velocities to torque: weights with the structure training leaves."""
+    torch.manual_seed(5)
+    net = torch.nn.Sequential(torch.nn.Linear(6, 32), torch.nn.Softsign(), torch.nn.Linear(32, 32), torch.nn.Softsign(),
+                              torch.nn.Linear(32, 1))  # fmt: skip
+    x = torch.rand(256, 6) * 2 - 1
+    y = torch.tanh(3.0 * x[:, :1] - 0.8 * x[:, 3:4] + 0.5 * (x[:, :1] - x[:, 1:2])) * 0.8
+    opt = torch.optim.Adam(net.parameters(), lr=2e-2)
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # small products: threads only contend
+    try:
+        for _ in range(200):
+            opt.zero_grad()
+            loss = torch.nn.functional.mse_loss(net(x), y)
+            loss.backward()
+            opt.step()
+    finally:
+        torch.set_num_threads(threads)
+    assert float(loss.detach()) < 5e-3, float(loss.detach())  # it learned the map
+    return net
+
+
+NETWORKS = {
+    # every activation, depth 6, two history taps
+    "activations": (lambda: _mlp(torch.nn.Linear(4, 8), torch.nn.ReLU(), torch.nn.Linear(8, 8), torch.nn.Tanh(),
+                                 torch.nn.Linear(8, 8), torch.nn.Sigmoid(), torch.nn.Linear(8, 8),
+                                 torch.nn.LeakyReLU(0.1), torch.nn.Linear(8, 8), torch.nn.Identity(),
+                                 torch.nn.Linear(8, 8), torch.nn.ELU(0.5), torch.nn.Linear(8, 1)),
+                    {"input_idx": (0, 3), "pos_scale": 2.0, "vel_scale": 0.3, "torque_scale": 8.0}, None),
+    # one Linear layer over the current sample only (no history kept)
+    "linear": (lambda: _mlp(torch.nn.Linear(2, 1)), {"input_idx": (0,), "torque_scale": 10.0}, None),
+    "trained": (_trained_mlp, {"input_idx": (0, 1, 2), "pos_scale": 1.5, "vel_scale": 0.25, "torque_scale": 30.0},
+                None),
+    # one LSTM layer of 4 units, velocity first, a head with an activation
+    "lstm_1x4": (lambda: _LSTMHead(), {"input_order": "vel_pos", "pos_scale": 2.0, "vel_scale": 0.4,
+                                       "torque_scale": 5.0}, (1, 4)),
+}  # fmt: skip
+
+
+class _LSTMHead(torch.nn.Module):
+    def __init__(self):
+        super().__init__()
+        torch.manual_seed(4)
+        self.lstm = torch.nn.LSTM(2, 4, 1, batch_first=True)
+        self.head = torch.nn.Sequential(torch.nn.Linear(4, 4), torch.nn.Tanh(), torch.nn.Linear(4, 1))
+        for p in self.parameters():
+            torch.nn.init.uniform_(p, -0.8, 0.8)
+
+    def forward(self, x, hc: tuple[torch.Tensor, torch.Tensor]):
+        out, (h, c) = self.lstm(x, hc)
+        return self.head(out), (h, c)
+
+
+@pytest.mark.parametrize("kernel", KERNELS)
+@pytest.mark.parametrize("name", list(NETWORKS))
+def test_network_shapes_equal_torch(tmp_path, name, kernel):
+    make, kw, lstm = NETWORKS[name]
+    module = make()
+    path = tmp_path / f"{name}.pt"
+    torch.jit.script(module).save(str(path))
+    net = torch.jit.load(str(path))
+    act = wpctrl.ActuatorNet(path, kernel=kernel, **kw)
+    _check_against_torch(act, net, lstm, kernel=kernel)
+
+
+@pytest.mark.parametrize("kind", ["mlp", "lstm"])
+def test_tiled_kernel_with_a_partial_tile_on_cpu_blocks(tmp_path, monkeypatch, kind):
+    """Warp's cooperative CPU blocks run the tiled kernel as on a GPU: 64-row tiles, 13 envs x 7 joints = 91 rows, the
+    second tile 27 rows full and 37 threads past the end that still take part in the tile products."""
+    monkeypatch.setattr(wp.config, "enable_cpu_blocks", True)
+    if kind == "mlp":
+        make, kw, lstm = NETWORKS["trained"]
+        net = make()
+    else:
+        net, kw, lstm = _LSTMNet(hidden=8, layers=2), {"saturation_effort": 30.0, "velocity_limit": 6.0}, (2, 8)
+        torch.manual_seed(0)
+        for p in net.parameters():
+            torch.nn.init.uniform_(p, -0.6, 0.6)
+    act = wpctrl.ActuatorNet(net, kernel="tiled", **kw)
+    _check_against_torch(act, net, lstm, envs=13, kernel="tiled")
+
+
+@pytest.mark.skipif(not HAS_CUDA, reason="needs a CUDA device: the kernels' GPU build (fast math, 64-row tiles)")
+@pytest.mark.parametrize("kernel", KERNELS)
+@pytest.mark.parametrize("name", ["trained", "activations", "lstm_2x8"])
+def test_networks_equal_torch_on_cuda(name, kernel):
+    """On the GPU, with 13 envs (91 rows: one full and one partial 64-row tile)."""
+    if name == "lstm_2x8":
+        net, kw, lstm = _LSTMNet(hidden=8, layers=2), {"saturation_effort": 30.0, "velocity_limit": 6.0}, (2, 8)
+        torch.manual_seed(0)
+        for p in net.parameters():
+            torch.nn.init.uniform_(p, -0.6, 0.6)
+    else:
+        make, kw, lstm = NETWORKS[name]
+        net = make()
+    act = wpctrl.ActuatorNet(net, kernel=kernel, **kw)
+    _check_against_torch(act, net, lstm, envs=13, device="cuda:0", kernel=kernel)
+
+
+def test_kernel_choice_and_size_limit():
+    small = KN.NetLayout(dense=((6, 32, 5, 0.0, 0, 0), (32, 32, 5, 0.0, 0, 0), (32, 1, 0, 0.0, 0, 0)), lstm=(),
+                         taps=(0, 1, 2), history=3, pos_first=True, rows=7)  # fmt: skip
+    assert small.macs == 6 * 32 + 32 * 32 + 32 and KN.choose_kernel(small, "auto") == "unrolled"
+    big = small._replace(dense=((6, 64, 5, 0.0, 0, 0), (64, 64, 5, 0.0, 0, 0), (64, 1, 0, 0.0, 0, 0)))
+    assert big.macs > KN.UNROLLED_MAX_MACS and KN.choose_kernel(big, "auto") == "tiled"
+    assert KN.choose_kernel(big, "unrolled") == "unrolled"
+    lstm = small._replace(dense=((32, 1, 0, 0.0, 0, 0),), lstm=((2, 32, 0, 0, 0, 0), (32, 32, 0, 0, 0, 0)), taps=())
+    assert lstm.macs == 4 * 32 * 34 + 4 * 32 * 64 + 32 and KN.choose_kernel(lstm, "auto") == "tiled"
+    model = build_panda(1)
+    huge = torch.nn.Sequential(torch.nn.Linear(6, 200), torch.nn.Tanh(), torch.nn.Linear(200, 100),
+                               torch.nn.Linear(100, 1))  # fmt: skip
+    cfg = wpctrl.PDJointPosControllerConfig(PANDA_ARM_JOINTS, None, None, 0, 0, normalize_action=False,
+                                            actuator=wpctrl.ActuatorNet(huge))  # fmt: skip
+    with pytest.raises(wpctrl.ConfigError, match=r"21601 weights and biases; the tiled kernel holds at most 16384"):
+        wpctrl.build_controller(cfg, model, actuation="explicit")
 
 
 def test_network_errors_name_the_problem(tmp_path):
@@ -142,3 +363,5 @@ def test_network_errors_name_the_problem(tmp_path):
         build(torch.nn.Sequential(torch.nn.Conv1d(1, 1, 1), torch.nn.Linear(6, 1)))
     with pytest.raises(wpctrl.ConfigError, match=r"input_idx: expected substep indices"):
         build(torch.nn.Sequential(torch.nn.Linear(6, 1)), input_idx=(0, -1, 2))
+    with pytest.raises(wpctrl.ConfigError, match=r"kernel: expected 'auto', 'unrolled' or 'tiled', got 'fast'"):
+        build(torch.nn.Sequential(torch.nn.Linear(6, 1)), kernel="fast")

@@ -1,12 +1,23 @@
 """Learned actuators in Warp: an MLP over a history of position errors and velocities, or an LSTM, per env and joint.
 
-Private module. One thread per (env, joint of the network's rows); the network's shape (layer widths, activations,
-the history taps or the LSTM's layers) is compiled into the kernel: a layer's outputs in a run-time loop, each
-output's dot product unrolled over the layer's inputs, which stay in registers. Weights are one flat float32 array
-read uniformly by all threads. The kernel runs after the substep kernel has written the drive targets into the
-Control (the network's position target is that substep's, interpolated and delayed as the targets of any other row):
-it reads ``joint_q``/``joint_qd`` and ``joint_target_q``, advances the history (or the recurrent state), evaluates
-the network, applies the DC-motor envelope and the force limit, and writes ``joint_f`` and the effort readout.
+Private module. A network's rows run in one launch after the substep kernel (the network's position target is that
+substep's, interpolated and delayed as the targets of any other row). Each thread of the launch is one (env, joint)
+row: it gathers ``joint_q`` / ``joint_qd`` / ``joint_target_q``, advances the history (or the recurrent state),
+evaluates the network, applies the DC-motor envelope and the force limit, and writes ``joint_f`` and the effort
+readout; no intermediate row buffer leaves the thread (or, in the tiled kernel, the block's shared memory). Two
+kernels evaluate the network, both compiled for its shape:
+
+- :mod:`.actuator_net_unrolled` (networks of up to :data:`UNROLLED_MAX_MACS` multiply-adds per row): the weights are
+  compiled into the kernel as immediate operands, so each multiply-add is one fused multiply-add instruction with no
+  load, no shared memory and no block synchronisation. The kernel is compiled per network (its weights are part of
+  it).
+- :mod:`.actuator_net_tiled` (any size up to :data:`TILED_MAX_WEIGHTS` weights): the weights are staged once per
+  block in shared memory (``wp.tile_load``), each block evaluates tiles of rows as matrix products
+  (``wp.tile_matmul``), one tile per block pass. Compiled per network shape; the weights are data.
+
+The MLP's past samples are one ``(num_envs * rows, 2 * past)`` array, a row's position errors then velocities, newest
+first (the unrolled kernel reads and writes a row's as one vector); the LSTM's ``h`` and ``c`` are ``(layers * hidden,
+num_envs * rows)`` arrays, so that a warp's loads of one unit are one coalesced line.
 
 Activation codes: 0 identity, 1 ReLU, 2 ELU(a), 3 tanh, 4 sigmoid, 5 softsign, 6 LeakyReLU(a).
 """
@@ -15,6 +26,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import numpy as np
 import warp as wp
 
 from .actuator_models import dc_motor_clamp
@@ -24,13 +36,22 @@ wp.set_module_options({"enable_backward": False})
 
 ACT_IDENTITY, ACT_RELU, ACT_ELU, ACT_TANH, ACT_SIGMOID, ACT_SOFTSIGN, ACT_LEAKY = range(7)
 
+UNROLLED_MAX_MACS = 4096
+"""The largest network (multiply-adds per row) that ``kernel="auto"`` compiles with its weights in the code: each
+multiply-add is a 16-byte instruction, and past ~64 KB of straight-line code the instruction caches stop holding the
+kernel."""
+
+TILED_MAX_WEIGHTS = 16384
+"""The most weights and biases the tiled kernel stages in a block's shared memory (64 KB of float32)."""
+
 
 class NetLayout(NamedTuple):
     """What a network kernel is compiled for. ``dense``: ``(in, out, activation code, activation parameter, weight
     offset, bias offset)`` per Linear layer after the input (MLP) or after the LSTM (its head). ``lstm``: ``(in,
     hidden, W_ih offset, W_hh offset, b_ih offset, b_hh offset)`` per LSTM layer (empty for an MLP). ``taps``: the MLP
     history indices (``input_idx``); ``history``: its length; ``pos_first``: input order ``pos_vel``; ``rows``: the
-    joints it drives."""
+    joints it drives; ``q_lin`` / ``qd_lin``: in a replicated layout whose network rows are consecutive coordinates
+    (DOFs) of each env, env 0's first one (the kernel then computes the index instead of reading a table), else -1."""
 
     dense: tuple
     lstm: tuple
@@ -38,20 +59,74 @@ class NetLayout(NamedTuple):
     history: int
     pos_first: bool
     rows: int
+    q_lin: int = -1
+    qd_lin: int = -1
+
+    @property
+    def macs(self) -> int:
+        """Multiply-adds per row."""
+        n = sum(d[0] * d[1] for d in self.dense)
+        return n + sum(4 * s[1] * (s[0] + s[1]) for s in self.lstm)
+
+    @property
+    def past(self) -> int:
+        """MLP history slots kept between substeps (the current sample is not stored)."""
+        return max(self.history - 1, 0)
+
+    def state_shapes(self, num_envs: int) -> tuple[tuple[int, int], tuple[int, int]]:
+        """Shapes of the history array ``(num_envs * rows, 2 * past)`` and of the LSTM state arrays (h and c)
+        ``(layers * hidden, num_envs * rows)``, at least one slot each (Warp indexes no empty dimension)."""
+        s = num_envs * self.rows
+        units = sum(x[1] for x in self.lstm)
+        return (s, max(2 * self.past, 1)), (max(units, 1), s)
 
 
-_KERNELS: dict[NetLayout, wp.Kernel] = {}
+def choose_kernel(layout: NetLayout, kernel: str) -> str:
+    """``"unrolled"`` or ``"tiled"`` for ``kernel`` (``"auto"``, ``"unrolled"`` or ``"tiled"``)."""
+    if kernel == "auto":
+        return "unrolled" if layout.macs <= UNROLLED_MAX_MACS else "tiled"
+    return kernel
 
 
-def net_kernel(layout: NetLayout) -> wp.Kernel:
-    k = _KERNELS.get(layout)
-    if k is None:
-        k = _KERNELS[layout] = _make_net_kernel(layout)
-    return k
+def dense_matrices(layout: NetLayout, weights: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, int, float]]:
+    """``(W (out, in), b (out,), activation code, parameter)`` of each Linear layer, float32."""
+    out = []
+    for n_in, n_out, code, a, wo, bo in layout.dense:
+        w = weights[wo : wo + n_in * n_out].reshape(n_out, n_in)
+        out.append((w, weights[bo : bo + n_out], int(code), float(a)))
+    return out
+
+
+def lstm_matrices(layout: NetLayout, weights: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """``(W_ih (4H, in), W_hh (4H, H), b_ih + b_hh (4H,))`` of each LSTM layer, float32 (the biases added once, in
+    float32)."""
+    out = []
+    for n_in, h, wih, whh, bih, bhh in layout.lstm:
+        g = 4 * h
+        w_ih = weights[wih : wih + g * n_in].reshape(g, n_in)
+        w_hh = weights[whh : whh + g * h].reshape(g, h)
+        out.append((w_ih, w_hh, (weights[bih : bih + g] + weights[bhh : bhh + g]).astype(np.float32)))
+    return out
+
+
+# -- elementwise functions. The network kernels are compiled with fast math on CUDA, where exp is ``ex2.approx`` of a
+# scaled argument and a division one reciprocal and one multiply (2 ulp each); exact on the CPU. --------------------
 
 
 @wp.func
-def _activate(x: float, code: int, a: float):
+def sigmoid(x: float):
+    return 1.0 / (1.0 + wp.exp(-x))
+
+
+@wp.func
+def tanh(x: float):
+    """``1 - 2 / (exp(2x) + 1)``: five instructions with fast math instead of the library's tanh; within ~3e-7 of it
+    (absolute), exactly +-1 at large |x|."""
+    return 1.0 - 2.0 / (wp.exp(2.0 * x) + 1.0)
+
+
+@wp.func
+def activate(x: float, code: int, a: float):
     if code == ACT_RELU:
         return wp.max(x, 0.0)
     if code == ACT_ELU:
@@ -59,9 +134,9 @@ def _activate(x: float, code: int, a: float):
             return x
         return a * (wp.exp(x) - 1.0)
     if code == ACT_TANH:
-        return wp.tanh(x)
+        return tanh(x)
     if code == ACT_SIGMOID:
-        return 1.0 / (1.0 + wp.exp(-x))
+        return sigmoid(x)
     if code == ACT_SOFTSIGN:
         return x / (1.0 + wp.abs(x))
     if code == ACT_LEAKY:
@@ -72,143 +147,64 @@ def _activate(x: float, code: int, a: float):
 
 
 @wp.func
-def _sigmoid(x: float):
-    return 1.0 / (1.0 + wp.exp(-x))
+def lstm_cell(ig: float, fg: float, cg: float, og: float, c: float):
+    """PyTorch's LSTM cell from the gate pre-activations (input, forget, cell, output): ``(h, c)``."""
+    c_new = sigmoid(fg) * c + sigmoid(ig) * tanh(cg)
+    return sigmoid(og) * tanh(c_new), c_new
 
 
-def _make_net_kernel(L: NetLayout) -> wp.Kernel:
-    DENSE, LSTM, TAPS, HIST, POS_FIRST, N = L.dense, L.lstm, L.taps, L.history, bool(L.pos_first), L.rows
-    MLP = not LSTM
-    T = len(TAPS)
-    widths = [2 * T if MLP else 2] + [d[1] for d in DENSE] + [s[1] for s in LSTM]
-    W = max(widths)
-    H = LSTM[0][1] if LSTM else 1
-    vec_w = wp.types.vector(length=W, dtype=wp.float32)
-    vec_g = wp.types.vector(length=4 * H, dtype=wp.float32)
-    vec_h = wp.types.vector(length=H, dtype=wp.float32)
-    vec_t = wp.types.vector(length=max(HIST, 1), dtype=wp.float32)
-    POS_AT = tuple((t if POS_FIRST else T + t) for t in range(T))
-    VEL_AT = tuple((T + t if POS_FIRST else t) for t in range(T))
-    NL = len(LSTM)
-    ND = len(DENSE)
-
-    def net(
-        # Rows of the network (row0 .. row0 + n in the mode's tables):
-        row0: int,
-        q_idx: wp.array2d[wp.int32],
-        qd_idx: wp.array2d[wp.int32],
-        q_stride: int,
-        qd_stride: int,
-        weights: wp.array[float],  # every layer's weights and biases, flat
-        layer_out: wp.array[wp.int32],  # outputs per dense layer, then 4 x hidden per LSTM layer (a run-time bound)
-        pos_scale: float,
-        vel_scale: float,
-        torque_scale: float,
-        # Per env x row of the mode (num_envs, rows):
-        force_limit: wp.array2d[float],  # [N·m or N]
-        sat_effort: wp.array2d[float],  # DC-motor envelope [N·m or N] (inf: none)
-        vel_limit: wp.array2d[float],  # [rad/s or m/s] (inf: none)
-        # In:
-        joint_q_in: wp.array[float],
-        joint_qd_in: wp.array[float],
-        joint_target_q_in: wp.array[float],  # this substep's (interpolated, delayed) target
-        # In/out: MLP history (history, num_envs * n) or LSTM state (layers, num_envs * n, hidden):
-        hist_pos_out: wp.array2d[float],
-        hist_vel_out: wp.array2d[float],
-        lstm_h_out: wp.array3d[float],
-        lstm_c_out: wp.array3d[float],
-        # Out:
-        joint_f_out: wp.array[float],
-        computed_effort_out: wp.array2d[float],  # optional (effort readout)
-        applied_effort_out: wp.array2d[float],
-        saturation_count_out: wp.array2d[wp.int32],
-    ):
-        env, j = wp.tid()
-        r = row0 + j
-        s = env * wp.static(N) + j
+@wp.func
+def row_input(
+    q_idx: wp.array2d[wp.int32],
+    qd_idx: wp.array2d[wp.int32],
+    q_stride: int,
+    qd_stride: int,
+    q_lin: int,
+    qd_lin: int,
+    env: int,
+    r: int,
+    j: int,
+    joint_q_in: wp.array[float],
+    joint_qd_in: wp.array[float],
+    joint_target_q_in: wp.array[float],
+):
+    """The row's DOF index, position error ``q* - q`` and velocity. ``q_lin`` / ``qd_lin`` (>= 0): the network's
+    rows are consecutive coordinates / DOFs of env 0 from there (the index is computed, no table read)."""
+    qi = q_lin + j + env * q_stride
+    if q_lin < 0:
         qi = _at(q_idx, q_stride, env, r)
+    di = qd_lin + j + env * qd_stride
+    if qd_lin < 0:
         di = _at(qd_idx, qd_stride, env, r)
-        q = joint_q_in[qi]
-        qd = joint_qd_in[di]
-        err = joint_target_q_in[qi] - q
-        lim = force_limit[env, r]
-        sat = sat_effort[env, r]
-        vl = vel_limit[env, r]
-        x = vec_w()
-        if wp.static(MLP):
-            # The history, newest first (Isaac Lab rolls it and writes the current sample at index 0).
-            hp = vec_t()
-            hv = vec_t()
-            hp[0] = err
-            hv[0] = qd
-            for k in range(wp.static(HIST)):
-                if wp.static(k >= 1):
-                    hp[k] = hist_pos_out[k - 1, s]
-                    hv[k] = hist_vel_out[k - 1, s]
-            for k in range(wp.static(HIST)):
-                hist_pos_out[k, s] = hp[k]
-                hist_vel_out[k, s] = hv[k]
-            for t in range(wp.static(T)):
-                x[wp.static(POS_AT[t])] = hp[wp.static(TAPS[t])] * pos_scale
-                x[wp.static(VEL_AT[t])] = hv[wp.static(TAPS[t])] * vel_scale
-        else:
-            if wp.static(POS_FIRST):
-                x[0] = err * pos_scale
-                x[1] = qd * vel_scale
-            else:
-                x[0] = qd * vel_scale
-                x[1] = err * pos_scale
-            for li in range(wp.static(NL)):
-                h = vec_h()
-                c = vec_h()
-                for k in range(wp.static(H)):
-                    h[k] = lstm_h_out[li, s, k]
-                    c[k] = lstm_c_out[li, s, k]
-                g = vec_g()
-                for o in range(layer_out[wp.static(ND + li)]):  # a run-time loop over the gates (see the dense layers)
-                    acc = weights[wp.static(LSTM[li][4]) + o] + weights[wp.static(LSTM[li][5]) + o]
-                    wi = wp.static(LSTM[li][2]) + o * wp.static(LSTM[li][0])
-                    for i in range(wp.static(LSTM[li][0])):
-                        acc += weights[wi + i] * x[i]
-                    wh = wp.static(LSTM[li][3]) + o * wp.static(H)
-                    for k in range(wp.static(H)):
-                        acc += weights[wh + k] * h[k]
-                    g[o] = acc
-                # PyTorch's gate order: input, forget, cell, output.
-                for k in range(wp.static(H)):
-                    ig = _sigmoid(g[k])
-                    fg = _sigmoid(g[wp.static(H) + k])
-                    cg = wp.tanh(g[wp.static(2 * H) + k])
-                    og = _sigmoid(g[wp.static(3 * H) + k])
-                    c[k] = fg * c[k] + ig * cg
-                    h[k] = og * wp.tanh(c[k])
-                for k in range(wp.static(H)):
-                    lstm_h_out[li, s, k] = h[k]
-                    lstm_c_out[li, s, k] = c[k]
-                for k in range(wp.static(H)):
-                    x[k] = h[k]
-        for li in range(wp.static(ND)):
-            # Outputs in a run-time loop (its bound is read from an array, so neither Warp nor the CUDA compiler can
-            # unroll it), each output's dot product unrolled with the inputs in registers: a fully unrolled layer lets
-            # the compiler hoist every weight load at once and spill.
-            y = vec_w()
-            for o in range(layer_out[wp.static(li)]):
-                acc = weights[wp.static(DENSE[li][5]) + o]
-                wr = wp.static(DENSE[li][4]) + o * wp.static(DENSE[li][0])
-                for i in range(wp.static(DENSE[li][0])):
-                    acc += weights[wr + i] * x[i]
-                y[o] = _activate(acc, wp.static(DENSE[li][2]), wp.static(DENSE[li][3]))
-            x = y
-        u = x[0] * torque_scale
-        f = dc_motor_clamp(u, qd, sat, vl, lim)
-        joint_f_out[di] = f
-        if computed_effort_out:
-            computed_effort_out[env, r] = u
-            applied_effort_out[env, r] = f
-            if f != u:
-                saturation_count_out[env, r] = saturation_count_out[env, r] + 1
+    q = joint_q_in[qi]
+    return di, joint_target_q_in[qi] - q, joint_qd_in[di]
 
-    return wp.kernel(net, name="wpctrl_actuator_net", enable_backward=False, module="unique")
+
+@wp.func
+def write_effort(
+    u: float,
+    qd: float,
+    env: int,
+    r: int,
+    di: int,
+    lim: float,
+    sat: float,
+    vl: float,
+    joint_f_out: wp.array[float],
+    computed_effort_out: wp.array2d[float],
+    applied_effort_out: wp.array2d[float],
+    saturation_count_out: wp.array2d[wp.int32],
+):
+    """The computed effort ``u`` through the DC-motor envelope (``sat``, ``vl``) and the force limit ``lim`` into
+    ``joint_f`` (and the effort readout when it is on). The kernels read the row's parameters with its other inputs,
+    before the network: a load here would put one more memory round trip after it."""
+    f = dc_motor_clamp(u, qd, sat, vl, lim)
+    joint_f_out[di] = f
+    if computed_effort_out:
+        computed_effort_out[env, r] = u
+        applied_effort_out[env, r] = f
+        if f != u:
+            saturation_count_out[env, r] = saturation_count_out[env, r] + 1
 
 
 @wp.kernel
@@ -218,10 +214,9 @@ def _reset_state_kernel(
     env_ids_in: wp.array[wp.int32],  # optional: thread row i resets env env_ids_in[i]
     env_mask_in: wp.array[wp.bool],  # optional
     # Out:
-    hist_pos_out: wp.array2d[float],  # (history, num_envs * n)
-    hist_vel_out: wp.array2d[float],
-    lstm_h_out: wp.array3d[float],  # (layers, num_envs * n, hidden)
-    lstm_c_out: wp.array3d[float],
+    hist_out: wp.array2d[float],  # (num_envs * n, k)
+    lstm_h_out: wp.array2d[float],  # (k, num_envs * n)
+    lstm_c_out: wp.array2d[float],
 ):
     """Zero the reset envs' history and recurrent state (as Isaac Lab's actuator nets do). Launched over
     ``(selected envs, n)``."""
@@ -235,10 +230,8 @@ def _reset_state_kernel(
         if not env_mask_in[env]:
             return
     s = env * n + j
-    for k in range(hist_pos_out.shape[0]):
-        hist_pos_out[k, s] = 0.0
-        hist_vel_out[k, s] = 0.0
-    for li in range(lstm_h_out.shape[0]):
-        for k in range(lstm_h_out.shape[2]):
-            lstm_h_out[li, s, k] = 0.0
-            lstm_c_out[li, s, k] = 0.0
+    for k in range(hist_out.shape[1]):
+        hist_out[s, k] = 0.0
+    for k in range(lstm_h_out.shape[0]):
+        lstm_h_out[k, s] = 0.0
+        lstm_c_out[k, s] = 0.0

@@ -12,9 +12,10 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from ...config import ConfigError
 from ...config.actuator_models import ActuatorNet
 from ...config.networks import read_network
-from ...kernels import actuator_net
+from ...kernels import actuator_net, actuator_net_tiled, actuator_net_unrolled
 from ...kernels.env_selection import MODE_SCALE, _bump_counter_kernel, _select
 from ..launch import _Launch
 from .part import Part
@@ -145,25 +146,59 @@ class ActuatorModels(Part):
 
 
 class _NetGroup:
-    """One ActuatorNet's rows: its weights, its per-env state and its launch."""
+    """One ActuatorNet's rows: its kernel (weights compiled in, or staged per block in shared memory; see
+    :mod:`wpctrl.kernels.actuator_net`), its per-env state and its launch."""
 
     def __init__(self, plan, alloc, row0: int, n: int, spec: ActuatorNet):
         self.row0, self.n, self.spec = row0, n, spec
         net = read_network(spec)
         E, dev = plan.num_envs, alloc.device
         taps = tuple(int(i) for i in spec.input_idx) if net.kind == "mlp" else ()
-        history = (max(taps) + 1) if taps else 0
         self.layout = actuator_net.NetLayout(
-            dense=net.dense, lstm=net.lstm, taps=taps, history=history, pos_first=spec.input_order == "pos_vel", rows=n
+            dense=net.dense,
+            lstm=net.lstm,
+            taps=taps,
+            history=(max(taps) + 1) if taps else 0,
+            pos_first=spec.input_order == "pos_vel",
+            rows=n,
+            q_lin=_consecutive(plan.q_idx, plan.strided, row0, n),
+            qd_lin=_consecutive(plan.qd_idx, plan.strided, row0, n),
         )
-        self.weights = wp.array(net.weights, dtype=wp.float32, device=dev)
-        widths = [d[1] for d in net.dense] + [4 * s[1] for s in net.lstm]
-        self.layer_out = wp.array(np.asarray(widths, np.int32), dtype=wp.int32, device=dev)
-        self.hist_pos = wp.zeros((max(history, 1), E * n), dtype=wp.float32, device=dev)
-        self.hist_vel = wp.zeros((max(history, 1), E * n), dtype=wp.float32, device=dev)
-        layers, hidden = (len(net.lstm), net.lstm[0][1]) if net.lstm else (1, 1)
-        self.lstm_h = wp.zeros((layers, E * n, hidden), dtype=wp.float32, device=dev)
-        self.lstm_c = wp.zeros((layers, E * n, hidden), dtype=wp.float32, device=dev)
+        self.kernel_kind = actuator_net.choose_kernel(self.layout, spec.kernel)
+        extra = {}
+        if self.kernel_kind == "tiled":
+            wmat, bias = actuator_net_tiled.pack(self.layout, net.weights)
+            if wmat.size + bias.size > actuator_net.TILED_MAX_WEIGHTS:
+                most = actuator_net.TILED_MAX_WEIGHTS
+                raise ConfigError(
+                    f"actuator.network: {net.weights.size} weights and biases; the tiled kernel holds at most {most} "
+                    f"(as {wmat.shape[0]} x {wmat.shape[1]} matrices and {bias.size} biases) in a block's shared memory"
+                )
+            cpu = wp.get_device(dev).is_cpu
+            # On the CPU a block is one thread (a tile one row), unless Warp's cooperative CPU blocks are on.
+            self.block_dim = 1 if cpu and not wp.config.enable_cpu_blocks else actuator_net_tiled.BLOCK_DIM
+            tiles = -(-E * n // self.block_dim)
+            sms = 1 if cpu else wp.get_device(dev).sm_count
+            self.blocks = max(1, min(tiles, 8 * sms))
+            extra = {
+                "weight_tiles": wp.array(wmat, dtype=wp.float32, device=dev),
+                "biases": wp.array(bias, dtype=wp.float32, device=dev),
+                "num_rows": E * n,
+                "num_tiles": tiles,
+                "num_blocks": self.blocks,
+            }
+            self.kernel = actuator_net_tiled.tiled_kernel(self.layout, self.block_dim)
+        hist_shape, state_shape = self.layout.state_shapes(E)
+        self.hist = wp.zeros(hist_shape, dtype=wp.float32, device=dev)
+        self.lstm_h = wp.zeros(state_shape, dtype=wp.float32, device=dev)
+        self.lstm_c = wp.zeros(state_shape, dtype=wp.float32, device=dev)
+        if self.kernel_kind == "unrolled":
+            scales = (spec.pos_scale, spec.vel_scale, spec.torque_scale)
+            self.kernel = actuator_net_unrolled.unrolled_kernel(self.layout, net.weights, scales)
+            extra = {"hist_out": actuator_net_unrolled.history_vectors(self.hist)}
+        else:
+            extra["hist_out"] = self.hist
+        self._extra = extra
         self._launch: _Launch | None = None
 
     def launch(self, engine, state, control) -> None:
@@ -172,24 +207,25 @@ class _NetGroup:
             effort = engine.part("effort_readout")
             per_call = {
                 "row0": self.row0,
-                "weights": self.weights,
-                "layer_out": self.layer_out,
                 "pos_scale": float(s.pos_scale),
                 "vel_scale": float(s.vel_scale),
                 "torque_scale": float(s.torque_scale),
                 "joint_q_in": state.joint_q,
                 "joint_qd_in": state.joint_qd,
                 "joint_target_q_in": control.joint_target_q,
-                "hist_pos_out": self.hist_pos,
-                "hist_vel_out": self.hist_vel,
                 "lstm_h_out": self.lstm_h,
                 "lstm_c_out": self.lstm_c,
                 "joint_f_out": control.joint_f,
                 "computed_effort_out": None if effort is None else effort.computed_effort,
                 "applied_effort_out": None if effort is None else effort.applied_effort,
                 "saturation_count_out": None if effort is None else effort.saturation_count,
+                **self._extra,
             }
-            self._launch = engine._launch(actuator_net.net_kernel(self.layout), (engine.num_envs, self.n), per_call)
+            if self.kernel_kind == "tiled":
+                dim, block_dim = (self.blocks, self.block_dim), self.block_dim
+            else:
+                dim, block_dim = engine.num_envs * self.n, actuator_net_unrolled.BLOCK_DIM
+            self._launch = engine._launch(self.kernel, dim, per_call, block_dim)
         ln = self._launch
         ln.bind("joint_q_in", state.joint_q)
         ln.bind("joint_qd_in", state.joint_qd)
@@ -204,6 +240,15 @@ class _NetGroup:
         wp.launch(
             actuator_net._reset_state_kernel,
             dim=(dim, self.n),
-            inputs=[engine.num_envs, self.n, env_ids, env_mask, self.hist_pos, self.hist_vel, self.lstm_h, self.lstm_c],
+            inputs=[engine.num_envs, self.n, env_ids, env_mask, self.hist, self.lstm_h, self.lstm_c],
             device=engine.device,
         )
+
+
+def _consecutive(idx: np.ndarray, strided: bool, row0: int, n: int) -> int:
+    """Env 0's first index of the rows ``row0 .. row0 + n`` when the layout is replicated and they are consecutive
+    (the network kernel then computes each row's index), else -1 (it reads the table)."""
+    if not strided:
+        return -1
+    first = int(idx[0, row0])
+    return first if np.array_equal(idx[0, row0 : row0 + n], first + np.arange(n)) else -1

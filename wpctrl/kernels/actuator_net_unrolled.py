@@ -1,0 +1,193 @@
+"""The actuator-network kernel with the weights compiled in: one thread per (env, joint) row, every layer unrolled.
+
+Private module (see :mod:`.actuator_net`). Each weight is an immediate operand of its fused multiply-add and each
+bias the start of its accumulator, so a layer of ``out x in`` weights is ``out x in`` instructions per row with no
+load, and the row's inputs and activations stay in registers from the gather to the ``joint_f`` write (a 6-32-32-1
+MLP compiles to 1,248 FFMA in 1,785 instructions and 80 registers on sm_90, no local memory). Only the row's own
+state moves through device memory, all of it read before the network. The kernel is compiled for the network's
+weights: a new network is a new kernel (a few seconds). Compiled with fast math on CUDA: ``exp`` and the
+activations' divisions are the approximate ones (a few ulp).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from . import actuator_net as _net
+from .actuator_net import NetLayout
+
+wp.set_module_options({"enable_backward": False})
+
+BLOCK_DIM = 64
+"""CUDA threads per block: at 4,096 Pandas (28,672 arm rows) 448 blocks spread over every SM."""
+
+_KERNELS: dict[tuple, wp.Kernel] = {}
+
+
+def unrolled_kernel(layout: NetLayout, weights: np.ndarray, scales: tuple[float, float, float]) -> wp.Kernel:
+    """The kernel of ``layout`` with ``weights`` (the flat float32 array of :func:`wpctrl.config.networks.read_network`)
+    and ``scales`` (``pos_scale``, ``vel_scale``, ``torque_scale``, float32 values; a scale of 1 is no multiply)
+    compiled in. Launched over ``num_envs * layout.rows`` threads; the history is a vector array aliasing the
+    ``(num_envs * rows, 2 * past)`` one (:func:`history_vectors`)."""
+    w = np.ascontiguousarray(weights, dtype=np.float32)
+    scales = tuple(float(np.float32(x)) for x in scales)
+    key = (layout, w.tobytes(), scales)
+    k = _KERNELS.get(key)
+    if k is None:
+        k = _KERNELS[key] = _make(layout, w, scales)
+    return k
+
+
+def history_vectors(hist: wp.array) -> wp.array:
+    """The ``(num_envs * rows, 2 * past)`` history array as a ``(num_envs * rows,)`` array of vectors (the same memory:
+    keep ``hist`` alive with it), so that a row's samples are one load with constant offsets."""
+    vec = wp.types.vector(length=hist.shape[1], dtype=wp.float32)
+    return wp.array(ptr=hist.ptr, dtype=vec, shape=(hist.shape[0],), device=hist.device)
+
+
+@wp.func
+def _scaled(x: float, scale: float):
+    """``x * scale``; with a compile-time 1, no instruction."""
+    if scale == 1.0:
+        return x
+    return x * scale
+
+
+def _floats(a) -> tuple:
+    """A float32 array as nested tuples of Python floats (each exactly the float32 value)."""
+    a = np.asarray(a, np.float32)
+    if a.ndim == 0:
+        return float(a)
+    return tuple(_floats(x) for x in a)
+
+
+def _make(L: NetLayout, weights: np.ndarray, scales: tuple[float, float, float]) -> wp.Kernel:
+    N, TAPS, POS_FIRST, PAST = L.rows, L.taps, bool(L.pos_first), L.past
+    PS, VS, TS = scales
+    MLP = not L.lstm
+    T = len(TAPS)
+    dense = _net.dense_matrices(L, weights)
+    lstm = _net.lstm_matrices(L, weights)
+    DW = tuple(_floats(w) for w, _, _, _ in dense)
+    DB = tuple(_floats(b) for _, b, _, _ in dense)
+    DACT = tuple((c, a) for _, _, c, a in dense)
+    DIN = tuple(int(d[0]) for d in L.dense)
+    DOUT = tuple(int(d[1]) for d in L.dense)
+    LWI = tuple(_floats(w) for w, _, _ in lstm)
+    LWH = tuple(_floats(w) for _, w, _ in lstm)
+    LB = tuple(_floats(b) for _, _, b in lstm)
+    LIN = tuple(int(s[0]) for s in L.lstm)
+    H = int(L.lstm[0][1]) if L.lstm else 1
+    NL, ND = len(L.lstm), len(L.dense)
+    width = max([2 * T if MLP else 2, H, *DOUT])
+    vec_w = wp.types.vector(length=width, dtype=wp.float32)
+    vec_g = wp.types.vector(length=4 * H, dtype=wp.float32)
+    vec_s = wp.types.vector(length=max(len(L.lstm) * H, 1), dtype=wp.float32)
+    vec_t = wp.types.vector(length=max(L.history, 1), dtype=wp.float32)
+    vec_p = wp.types.vector(length=max(2 * PAST, 1), dtype=wp.float32)
+    POS_AT = tuple((t if POS_FIRST else T + t) for t in range(T))
+    VEL_AT = tuple((T + t if POS_FIRST else t) for t in range(T))
+
+    def net(
+        # Rows of the network (row0 .. row0 + n in the mode's tables):
+        row0: int,
+        q_idx: wp.array2d[wp.int32],
+        qd_idx: wp.array2d[wp.int32],
+        q_stride: int,
+        qd_stride: int,
+        # Per env x row of the mode (num_envs, rows):
+        force_limit: wp.array2d[float],  # [N·m or N]
+        sat_effort: wp.array2d[float],  # DC-motor envelope [N·m or N] (inf: none)
+        vel_limit: wp.array2d[float],  # [rad/s or m/s] (inf: none)
+        # In:
+        joint_q_in: wp.array[float],
+        joint_qd_in: wp.array[float],
+        joint_target_q_in: wp.array[float],  # this substep's (interpolated, delayed) target
+        # In/out: the MLP's past samples per row (position errors, then velocities, newest first), the LSTM state
+        # (layers * hidden, num_envs * n):
+        hist_out: wp.array[vec_p],
+        lstm_h_out: wp.array2d[float],
+        lstm_c_out: wp.array2d[float],
+        # Out:
+        joint_f_out: wp.array[float],
+        computed_effort_out: wp.array2d[float],  # optional (effort readout)
+        applied_effort_out: wp.array2d[float],
+        saturation_count_out: wp.array2d[wp.int32],
+    ):
+        s = wp.tid()  # (env, joint) row, joint fastest
+        env = s // wp.static(N)
+        j = s - env * wp.static(N)
+        r = row0 + j
+        di, err, qd = _net.row_input(q_idx, qd_idx, q_stride, qd_stride, wp.static(L.q_lin), wp.static(L.qd_lin),
+                                     env, r, j, joint_q_in, joint_qd_in, joint_target_q_in)  # fmt: skip
+        # Every input is read here, before the network, so that all loads are in flight together.
+        lim = force_limit[env, r]
+        sat = sat_effort[env, r]
+        vl = vel_limit[env, r]
+        x = vec_w()
+        if wp.static(MLP):
+            # The history, newest first (Isaac Lab rolls it and writes the current sample at index 0).
+            hp = vec_t()
+            hv = vec_t()
+            hp[0] = err
+            hv[0] = qd
+            if wp.static(PAST > 0):
+                old = hist_out[s]
+                new = vec_p()
+                for k in range(wp.static(PAST)):
+                    hp[k + 1] = old[k]
+                    hv[k + 1] = old[wp.static(PAST) + k]
+                    new[k] = hp[k]
+                    new[wp.static(PAST) + k] = hv[k]
+                hist_out[s] = new
+            for t in range(wp.static(T)):
+                x[wp.static(POS_AT[t])] = _scaled(hp[wp.static(TAPS[t])], wp.static(PS))
+                x[wp.static(VEL_AT[t])] = _scaled(hv[wp.static(TAPS[t])], wp.static(VS))
+        else:
+            if wp.static(POS_FIRST):
+                x[0] = _scaled(err, wp.static(PS))
+                x[1] = _scaled(qd, wp.static(VS))
+            else:
+                x[0] = _scaled(qd, wp.static(VS))
+                x[1] = _scaled(err, wp.static(PS))
+            hs = vec_s()
+            cs = vec_s()
+            for k in range(wp.static(NL * H)):
+                hs[k] = lstm_h_out[k, s]
+                cs[k] = lstm_c_out[k, s]
+            for li in range(wp.static(NL)):
+                g = vec_g()
+                for o in range(wp.static(4 * H)):
+                    acc = float(wp.static(LB[li][o]))
+                    for i in range(wp.static(LIN[li])):
+                        acc = acc + wp.static(LWI[li][o][i]) * x[i]
+                    for k in range(wp.static(H)):
+                        acc = acc + wp.static(LWH[li][o][k]) * hs[wp.static(li * H) + k]
+                    g[o] = acc
+                # PyTorch's gate order: input, forget, cell, output.
+                for k in range(wp.static(H)):
+                    hk, ck = _net.lstm_cell(g[k], g[wp.static(H) + k], g[wp.static(2 * H) + k], g[wp.static(3 * H) + k],
+                                            cs[wp.static(li * H) + k])  # fmt: skip
+                    lstm_h_out[wp.static(li * H) + k, s] = hk
+                    lstm_c_out[wp.static(li * H) + k, s] = ck
+                    x[k] = hk
+        for li in range(wp.static(ND)):
+            y = vec_w()
+            for o in range(wp.static(DOUT[li])):
+                acc = float(wp.static(DB[li][o]))
+                for i in range(wp.static(DIN[li])):
+                    acc = acc + wp.static(DW[li][o][i]) * x[i]
+                y[o] = _net.activate(acc, wp.static(DACT[li][0]), wp.static(DACT[li][1]))
+            x = y
+        _net.write_effort(_scaled(x[0], wp.static(TS)), qd, env, r, di, lim, sat, vl, joint_f_out, computed_effort_out,
+                          applied_effort_out, saturation_count_out)  # fmt: skip
+
+    return wp.kernel(
+        net,
+        name="wpctrl_actuator_net",
+        enable_backward=False,
+        grid_stride=False,
+        module="unique",
+        module_options={"fast_math": True},
+    )

@@ -11,7 +11,10 @@ that takes a bundled argument or the engine's accessors:
 * ``stable``, ``accel_implicit``, ``coupled``, ``coupled_h_control``: the fused inertia kernels (the response per
   control step; the coupled drive's kernel every substep; H once per control step), on real Pandas (4k, 16k);
 * ``ee``: ``pd_ee_delta_pose`` (the EE chain kernel), ``osc``: ``osc_ee_delta_pose`` (the impedance kernels: the EE
-  chain and the articulation), on real Pandas.
+  chain and the articulation), on real Pandas;
+* ``net_mlp`` / ``net_lstm``: an actuator network on the arm (Isaac Lab's MLP shape, 6 inputs and 2 x 32 ELU units,
+  through the unrolled kernel; a 1 x 32 LSTM through the tiled kernel), the same torch weights in both trees (torch
+  seeded), explicit actuation.
 
 ``--outputs FILE`` also writes, per case, what a fixed sequence of actions and states produces at 64 envs
 (``Control.joint_f`` / ``joint_target_q`` / ``joint_target_qd``, the controller's targets and readouts) to an ``.npz``,
@@ -58,6 +61,8 @@ CASES = {
     "coupled_h_control": ("4k", "64"),
     "ee": ("4k,16k", "64"),
     "osc": ("4k,16k", "64"),
+    "net_mlp": ("4k,16k", "64"),
+    "net_lstm": ("4k,16k", "64"),
 }
 
 
@@ -72,6 +77,8 @@ def _mode(case: str):
         return panda_mode("pd_ee_delta_pose"), {}
     if case == "osc":
         return panda_control_modes()["osc_ee_delta_pose"], {}
+    if case.startswith("net_"):
+        return _net_mode(case), {"actuation": "explicit"}
     drive = "acceleration" if case == "accel_implicit" else "force"
     cfg = wpctrl.PDJointPosControllerConfig(ARM9, None, None, 1e3, 1e2, 100.0, normalize_action=False, drive_mode=drive)
     kw = {
@@ -81,6 +88,46 @@ def _mode(case: str):
         "coupled_h_control": {"actuation": "explicit", "explicit_pd": "coupled", "inertia_update": "control"},
     }[case]
     return cfg, kw
+
+
+def _net_mode(case: str) -> dict:
+    """The Panda's arm behind an actuator network (fixed weights: torch seeded), its gripper a plain PD."""
+    import torch
+
+    import wpctrl
+    from wpctrl.robots import PANDA_ARM_JOINTS
+
+    torch.manual_seed(0)
+    if case == "net_mlp":
+        net = torch.nn.Sequential(torch.nn.Linear(6, 32), torch.nn.ELU(), torch.nn.Linear(32, 32), torch.nn.ELU(),
+                                  torch.nn.Linear(32, 1))  # fmt: skip
+        act = wpctrl.ActuatorNet(net, input_idx=(0, 1, 2), kernel="unrolled")
+    else:
+
+        class LSTMNet(torch.nn.Module):
+            def __init__(self):
+                super().__init__()
+                self.lstm = torch.nn.LSTM(2, 32, 1, batch_first=True)
+                self.linear = torch.nn.Linear(32, 1)
+
+            def forward(self, x, hc: tuple[torch.Tensor, torch.Tensor]):
+                out, (h, c) = self.lstm(x, hc)
+                return self.linear(out), (h, c)
+
+        act = wpctrl.ActuatorNet(LSTMNet(), kernel="tiled")
+    mode = panda_mode("pd_joint_delta_pos")
+    arm = mode["arm"]
+    mode["arm"] = wpctrl.PDJointPosControllerConfig(
+        list(PANDA_ARM_JOINTS),
+        arm.lower,
+        arm.upper,
+        arm.stiffness,
+        arm.damping,
+        arm.force_limit,
+        use_delta=True,
+        actuator=act,
+    )
+    return mode
 
 
 def _action(ctrl, n: int, device, seed: int) -> wp.array:

@@ -692,8 +692,8 @@ MUTATIONS: list[Mutation] = [
     M(
         "net_torque_scale_ignored",
         "wpctrl/kernels/actuator_net_unrolled.py",
-        "_net.write_effort(_scaled(x[0], wp.static(TS)), qd,",
-        "_net.write_effort(x[0], qd,",
+        "write_effort(_scaled(x[0], wp.static(TS)), qd,",
+        "write_effort(x[0], qd,",
         "an actuator network's output is not multiplied by torque_scale",
         ("tests/test_actuator_net.py", "tests/test_actuator_setups.py"),
     ),

@@ -24,11 +24,10 @@ from .joint import (
     PDJointVelControllerConfig,
 )
 from .mobile_base import PDBaseForwardVelControllerConfig, PDBaseVelControllerConfig
-from .validate import (  # noqa: F401  (_f32, _joint_names: used by the EE config and the controller layer)
+from .validate import (
     _bounds,
     _check_box,
     _drive_modes,
-    _f32,
     _joint_names,
     _mimic_map,
     _name,

@@ -216,7 +216,8 @@ def test_lstm_with_input_scales_on_a_later_controller_equals_torch(order):
     ctrl = wpctrl.build_controller(mode, model, 100, 100, actuation="explicit", track_effort=True)
     sat = np.array([[50.0], [20.0], [5.0]], f32) * np.ones((E, 4), f32)
     vmax = np.array([[8.0], [1.0], [3.0]], f32) * np.ones((E, 4), f32)
-    ctrl["b"].set_drive_properties(saturation_effort=sat, velocity_limit=vmax)
+    lim = np.array([[2.0], [60.0], [60.0]], f32) * np.ones((E, 4), f32)  # env 0's force limit binds first
+    ctrl["b"].set_drive_properties(saturation_effort=sat, velocity_limit=vmax, force_limit=lim)
     n = len(ARM_B)
     h = torch.zeros(2, E * n, 6)
     cs = torch.zeros(2, E * n, 6)
@@ -230,7 +231,7 @@ def test_lstm_with_input_scales_on_a_later_controller_equals_torch(order):
         u = u.numpy().reshape(E, n) * f32(ts)
         np.testing.assert_allclose(ctrl["b"].computed_effort.numpy(), u, rtol=1e-4, atol=1e-4)
         ref = newton_clamp(
-            ClampingDCMotor(wp.array(sat.ravel()), wp.array(vmax.ravel()), wp.array(np.full(E * n, 60.0, f32))),
+            ClampingDCMotor(wp.array(sat.ravel()), wp.array(vmax.ravel()), wp.array(lim.ravel())),
             u,
             q[:, 3:],
             vel,
@@ -240,6 +241,30 @@ def test_lstm_with_input_scales_on_a_later_controller_equals_torch(order):
         pd = f32(200.0) * (tq - q)[:, :3] + f32(10.0) * (f32(0.0) - qd[:, :3])
         np.testing.assert_allclose(tau[:, :3], np.clip(pd, -45.0, 45.0), rtol=1e-5, atol=1e-4)
     assert np.abs(u).max() > 5.0  # real torques (a test of something)
+    assert np.abs(tau[0, 3:]).max() <= 2.0 + 1e-5 and np.abs(u[0]).max() > 2.0  # env 0's own force limit bound
+
+
+def test_effort_controller_after_a_gripper_with_per_env_limits():
+    """A JointEffortController as the mode's second controller, per-joint bounds, force limits that differ per env:
+    its columns scale onto its own bounds and each env's torque is clamped to that env's limits, in both actuations."""
+    lo = np.array([-30.0, -20.0, -10.0, -40.0, -5.0, -8.0, -1.0], f32)
+    hi = -lo * np.array([1.0, 0.5, 2.0, 1.0, 1.0, 0.25, 3.0], f32)
+    for actuation in ("implicit", "explicit"):
+        model = build_panda(E)
+        mode = {"gripper": gripper(), "arm": wpctrl.JointEffortControllerConfig(PANDA_ARM_JOINTS, lo, hi)}
+        ctrl = wpctrl.build_controller(mode, model, 20, 100, actuation=actuation)
+        lim = np.array([[3.0], [15.0], [100.0]], f32) * np.ones((E, 7), f32)
+        ctrl["arm"].set_drive_properties(force_limit=lim)
+        s, c = model.state(), model.control()
+        ctrl.reset(s, control=c)
+        a = np.random.default_rng(8).uniform(-1.2, 1.2, (E, 8)).astype(f32)
+        ctrl.set_action(a, s)
+        ctrl.before_simulation_step(s, c)
+        want = f32(0.5) * (hi + lo) + f32(0.5) * (hi - lo) * np.clip(a[:, 1:], -1, 1)
+        np.testing.assert_allclose(ctrl["arm"].processed_action.numpy(), want, rtol=1e-6, atol=1e-5)
+        tau = c.joint_f.numpy()[indices(model, PANDA_ARM_JOINTS)[1]]
+        np.testing.assert_allclose(tau, np.clip(want, -lim, lim), rtol=1e-6, atol=1e-5)
+        assert (np.abs(want[0]) > 3.0).any()  # env 0's limit binds
 
 
 def test_mlp_on_a_later_controller_reads_the_delayed_target():
@@ -298,6 +323,29 @@ def test_two_networks_in_one_mode_keep_their_own_weights_scales_and_state():
             ub, (h, cs) = lstm(xb, (h, cs))
         np.testing.assert_allclose(tau[:, :3], ua, rtol=1e-4, atol=1e-4)
         np.testing.assert_allclose(tau[:, 3:], ub.numpy().reshape(E, 4) * f32(-9.0), rtol=1e-4, atol=1e-4)
+
+
+def test_mlp_layers_without_bias_leaky_relu_and_dropout_equal_torch():
+    """A Linear layer without a bias, LeakyReLU's slope, a Sigmoid and (in eval) a Dropout, read from the module:
+    the network's torque equals torch's on the same inputs."""
+    mlp = init(
+        torch.nn.Sequential(
+            torch.nn.Linear(2, 6, bias=False), torch.nn.LeakyReLU(0.3), torch.nn.Dropout(0.5), torch.nn.Linear(6, 4),
+            torch.nn.Sigmoid(), torch.nn.Linear(4, 1),
+        ),
+        seed=4,
+    )  # fmt: skip
+    act = wpctrl.ActuatorNet(mlp, input_idx=(0,), pos_scale=2.0, vel_scale=0.5, torque_scale=30.0)
+    model = build_panda(E)
+    ctrl = wpctrl.build_controller(
+        pos(PANDA_ARM_JOINTS, 0.0, 0.0, 1e9, actuator=act), model, 100, 100, actuation="explicit"
+    )
+    rng = np.random.default_rng(9)
+    for q, qd, tq, tau in substeps(ctrl, model, PANDA_ARM_JOINTS, rng, 2):
+        x = np.stack([(tq - q) * f32(2.0), qd * f32(0.5)], axis=2).reshape(E * 7, 2)
+        with torch.no_grad():
+            u = mlp(torch.from_numpy(x)).numpy().reshape(E, 7) * f32(30.0)
+        np.testing.assert_allclose(tau, u, rtol=1e-4, atol=1e-4)
 
 
 # -- smoothing and binary commands on several controllers -----------------------------------------------------------

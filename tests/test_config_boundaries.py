@@ -89,6 +89,20 @@ def _lstm():
     return Net()
 
 
+def _lstm_net(input_size=2, bias=True, proj_size=0, head_first=False):
+    """An LSTM actuator module of an unsupported shape."""
+
+    class Net(torch.nn.Module):
+        def __init__(self):
+            super().__init__()
+            if head_first:
+                self.pre = torch.nn.Linear(6, 2)
+            self.lstm = torch.nn.LSTM(input_size, 4, 1, bias=bias, proj_size=proj_size, batch_first=True)
+            self.linear = torch.nn.Linear(proj_size or 4, 1)
+
+    return Net()
+
+
 LSTM = Make(_lstm)
 TORCHSCRIPT = Make(_torchscript)
 
@@ -216,6 +230,8 @@ BOUNDS: dict[str, dict[str, Bound]] = {
             ),
             wrong_type=(
                 [("panda_finger_joint2", "panda_finger_joint1")],
+                [("panda_finger_joint2", {"joint": "panda_finger_joint1"})],  # dict() of it would be a valid map
+                [],  # dict() of it would be the default map
                 "panda_finger_joint1",
                 {"panda_finger_joint2": "panda_finger_joint1"},
                 {"panda_finger_joint2": {"joint": "panda_finger_joint1", "multiplier": "2"}},
@@ -593,6 +609,12 @@ BOUNDS: dict[str, dict[str, Bound]] = {
                 V("/no/such/net.pt", label="missing file"),
                 V(Make(lambda: torch.nn.Sequential(torch.nn.Tanh(), torch.nn.Linear(6, 1))), label="activation first"),
                 V(Make(lambda: torch.nn.Sequential(torch.nn.Conv1d(1, 1, 1))), label="a conv layer"),
+                V(Make(lambda: torch.nn.Sequential(torch.nn.Linear(6, 4), torch.nn.Linear(5, 1))), label="no chain"),
+                V(Make(lambda: torch.nn.Sequential(torch.nn.Tanh())), label="no linear layer"),
+                V(Make(lambda: _lstm_net(input_size=3)), label="lstm of 3 inputs"),
+                V(Make(lambda: _lstm_net(bias=False)), label="lstm without biases"),
+                V(Make(lambda: _lstm_net(proj_size=2)), label="projected lstm"),
+                V(Make(lambda: _lstm_net(head_first=True)), label="lstm after a linear layer"),
             ),
             wrong_type=(3, None),
         ),

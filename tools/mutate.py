@@ -1044,7 +1044,7 @@ def run_tests(copy: Path, tests: list[str], mod: str, marker: str, args) -> dict
     if args.warp_cache:
         env["WARP_CACHE_PATH"] = args.warp_cache
     cmd = [sys.executable, "-c", _CHILD, str(copy), str(out), mod, marker]
-    cmd += ["-x", "-q", "-p", "no:cacheprovider", "--no-header", *tests]
+    cmd += ["-x", "-q", "-p", "no:cacheprovider", "--no-header", "--no-cov", *tests]  # no coverage in a mutant
     t0 = time.time()
     try:
         proc = subprocess.run(cmd, cwd=copy, env=env, capture_output=True, text=True, timeout=args.timeout)

@@ -86,7 +86,7 @@ def test_mlp_actuator_equals_torch_with_history_and_partial_reset(tmp_path, orde
                                             actuator=act)  # fmt: skip
     model = build_panda(E)
     ctrl = wpctrl.build_controller(cfg, model, 100, 100, actuation="explicit", track_effort=True)
-    assert ctrl._engine.part("actuator_models").nets[0].kernel_kind == kernel
+    assert ctrl._engine.part("actuator_models").nets[0].kernel_kind == kernel  # private: the kernel variant that runs
     hist_e = np.zeros((E, 5, J), f32)
     hist_v = np.zeros((E, 5, J), f32)
     rng = np.random.default_rng(0)
@@ -118,7 +118,7 @@ def test_lstm_actuator_equals_torch_with_hidden_state_and_partial_reset(tmp_path
                                             actuator=act)  # fmt: skip
     model = build_panda(E)
     ctrl = wpctrl.build_controller(cfg, model, 100, 100, actuation="explicit", track_effort=True)
-    assert ctrl._engine.part("actuator_models").nets[0].kernel_kind == kernel
+    assert ctrl._engine.part("actuator_models").nets[0].kernel_kind == kernel  # private: the kernel variant that runs
     h = torch.zeros(2, E * J, 8)
     c = torch.zeros(2, E * J, 8)
     rng = np.random.default_rng(1)
@@ -189,12 +189,12 @@ def _check_against_torch(act, net, lstm, envs: int = E, device: str = "cpu", ste
     model = build_panda(envs, device)
     ctrl = wpctrl.build_controller(cfg, model, 100, 100, actuation="explicit", track_effort=True)
     if kernel is not None:
-        assert ctrl._engine.part("actuator_models").nets[0].kernel_kind == kernel
+        assert ctrl._engine.part("actuator_models").nets[0].kernel_kind == kernel  # private: the variant
     ref = _Reference(net, act, lstm, envs)
     rng = np.random.default_rng(7)
     s, c = model.state(), model.control()
     ctrl.reset(s, control=c)
-    b = ctrl._engine.binding
+    b = ctrl  # the controlled joints' coord_index / dof_index
     worst = 0.0
     for k in range(steps):
         q = s.joint_q.numpy()

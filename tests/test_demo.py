@@ -13,8 +13,8 @@ import pytest
 
 from wpctrl import demo
 from wpctrl.__main__ import main as cli_main
+from wpctrl.demo import arguments as demo_arguments
 from wpctrl.demo import main
-from wpctrl.demo import options as demo_options
 
 TINY = ["--envs", "2", "--seconds", "0.75", "--no-progress"]
 
@@ -108,7 +108,7 @@ def test_explicit_defaults_and_rates_that_do_not_track_are_refused(tmp_path, cap
 def test_divergence_is_reported_as_null_with_the_cause(tmp_path, capsys, monkeypatch):
     """Force a refused combination through (Featherstone's explicit built-in drive at the Panda's gains): the run
     stops at the first non-finite step, RMS and max are both null, and the message names the options that hold."""
-    monkeypatch.setattr(demo_options, "unsupported", lambda *a: None)
+    monkeypatch.setattr(demo_arguments, "unsupported", lambda *a: None)
     out = tmp_path / "demo"
     rc = main([*TINY, "--solver", "featherstone", "--actuation", "implicit", "--sim-freq", "100", "--out", str(out)])
     assert rc == 1

@@ -190,3 +190,52 @@ def test_find_cycle_names_the_cycle():
     assert find_cycle({"a": {"b"}, "b": {"c"}, "c": set()}) is None
     assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
     assert find_cycle({"a": {"b", "d"}, "b": {"d"}, "d": set()}) is None  # a diamond is not a cycle
+
+
+def test_controller_cls_resolves_on_first_use():
+    """``Config.controller_cls`` is the controller class right after ``import wpctrl`` (before anything loaded the
+    controllers, which import Newton), for every config class the package exports; reading it loads them."""
+    import subprocess
+    import sys
+
+    code = """
+import sys, dataclasses, wpctrl
+assert "wpctrl.controllers" not in sys.modules, "import wpctrl loaded the controllers"
+configs = [getattr(wpctrl, n) for n in wpctrl.__all__ if n.endswith("ControllerConfig") and n != "ControllerConfig"]
+assert len(configs) >= 12, configs
+for c in configs:
+    cls = c.controller_cls
+    assert isinstance(cls, type) and issubclass(cls, wpctrl.BaseController), (c, cls)
+    assert cls.__name__ == c.__name__.removesuffix("Config"), (c, cls)
+assert wpctrl.ControllerConfig.controller_cls is None
+print("ok", len(configs))
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=ROOT.parent)
+    assert out.returncode == 0 and out.stdout.startswith("ok"), out.stdout + out.stderr
+
+
+SHARED_STEMS = {
+    # a module name used in several packages, and the one concept it names in all of them
+    "ee": "end-effector control (config, kernels, engine part, controller classes)",
+    "impedance": "operational-space and joint-impedance control (config, kernels, part, controllers, ManiSkill arms)",
+    "actuator_models": "actuator models: DC motor, position table, networks (config, kernels, engine part)",
+    "coupled_drive": "the coupled (PhysX) drive (its solve kernel, its engine part)",
+    "drive_properties": "per-env drive properties (the engine part, the controllers' API)",
+    "joint": "joint-space controllers (configs, controller classes)",
+    "mobile_base": "mobile-base controllers (configs, controller classes)",
+    "cli": "a command's command line (the demo's, the training's)",
+}
+
+
+def test_a_module_name_names_one_concept():
+    """Two modules share a file name only when they are about the same thing (listed in SHARED_STEMS, with it): a new
+    clash (``drive`` for drive properties and for the coupled drive, ``base`` for a mobile base and a base class,
+    ``options`` for controller options and the demo's command line) fails here until it is renamed or declared."""
+    stems: dict[str, list[str]] = {}
+    for name, path in modules().items():
+        if path.name != "__init__.py":
+            stems.setdefault(path.stem, []).append(name)
+    shared = {s: sorted(m) for s, m in stems.items() if len(m) > 1}
+    undeclared = {s: m for s, m in shared.items() if s not in SHARED_STEMS}
+    assert not undeclared, f"module names shared across packages without one concept declared: {undeclared}"
+    assert set(SHARED_STEMS) <= set(shared), f"no longer shared, remove: {sorted(set(SHARED_STEMS) - set(shared))}"

@@ -87,7 +87,7 @@ def test_actuation_combinations(model, mode, law, inertia, drive):
     # What the engine runs (its parts, private): r for acceleration drives and stable PD, on the reported schedule;
     # the coupled drive's block cached for the control step only with "control".
     assert (ctrl.response is not None) == (drive == "acceleration" or runs == "stable")
-    eng = ctrl._engine
+    eng = ctrl._engine  # private: the engine parts that run (nothing public shows the schedule)
     coupled = eng.part("coupled_drive")
     assert (coupled is not None) == (runs == "coupled")
     if coupled is not None:
@@ -203,7 +203,7 @@ def test_balance_passive_force_combinations(model, entry, keyword):
     ctrl = build()
     want = keyword if keyword is not None else (True if entry == "absent" else entry)
     assert ctrl.balance_passive_force is want and ctrl.options.balance_passive_force is want
-    assert (ctrl._engine.part("gravity") is not None) == want
+    assert (ctrl._engine.part("gravity") is not None) == want  # private: the gravity part is on
 
 
 # -- the options of a child and of the direct constructor -------------------------------------------------------------

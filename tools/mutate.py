@@ -384,7 +384,7 @@ MUTATIONS: list[Mutation] = [
     M(
         "randomize_same_draw_every_env",
         "wpctrl/engine/parts/drive_properties.py",
-        "state = wp.rand_init(key, env * kp_out.shape[1] + r)",
+        "state = wp.rand_init(key, env * drive.kp.shape[1] + r)",
         "state = wp.rand_init(key, r)",
         "randomize_drive_properties draws the same values for every env",
         ("tests/test_actuation.py",),
@@ -520,7 +520,7 @@ MUTATIONS: list[Mutation] = [
     ),
     M(
         "osc_task_gain_scale_ignores_the_config",
-        "wpctrl/kernels/impedance.py",
+        "wpctrl/engine/parts/impedance.py",
         "                x = nominal_in[p, k] * x\n",
         "                x = x\n",
         "randomize_task_impedance's 'scale' mode draws the factor itself, not the config's gain times it",
@@ -692,8 +692,8 @@ MUTATIONS: list[Mutation] = [
     M(
         "net_torque_scale_ignored",
         "wpctrl/kernels/actuator_net_unrolled.py",
-        "_net.write_effort(_scaled(x[0], wp.static(TS)), qd,",
-        "_net.write_effort(x[0], qd,",
+        "write_effort(_scaled(x[0], wp.static(TS)), qd,",
+        "write_effort(x[0], qd,",
         "an actuator network's output is not multiplied by torque_scale",
         ("tests/test_actuator_net.py", "tests/test_actuator_setups.py"),
     ),

@@ -18,10 +18,10 @@ from typing import Literal, Union
 
 import numpy as np
 
-from . import rows as cfg
 from .errors import ConfigError
 from .joint import ControllerClass, ControllerConfig, PDJointPosControllerConfig
-from .validate import DriveMode
+from .rows import Rows, _pos_rows
+from .validate import DriveMode, _f32, _joint_names
 
 POS_FRAMES = ("root_translation", "body_translation")
 POSE_FRAMES = (
@@ -204,7 +204,7 @@ def _solver(c) -> dict:
     return out
 
 
-def ee_rows(c: PDEEPosControllerConfig, qlimits: np.ndarray) -> tuple[cfg.Rows, EESpec]:
+def ee_rows(c: PDEEPosControllerConfig, qlimits: np.ndarray) -> tuple[Rows, EESpec]:
     """Validate an EE config; return its joint rows (position rows, no action column of their own) and its spec.
 
     Args:
@@ -212,7 +212,7 @@ def ee_rows(c: PDEEPosControllerConfig, qlimits: np.ndarray) -> tuple[cfg.Rows, 
         qlimits: (n, 2) joint limits [rad or m] of ``c.joint_names`` (only their count is used).
     """
     pose = isinstance(c, PDEEPoseControllerConfig)
-    names = cfg._joint_names(c)
+    names = _joint_names(c)
     n = len(names)
     if not 1 <= n <= MAX_EE_DOF:
         raise ConfigError(f"{_name(c)}.joint_names: expected 1 to {MAX_EE_DOF} joints on the EE chain, got {n}")
@@ -254,8 +254,8 @@ def ee_rows(c: PDEEPosControllerConfig, qlimits: np.ndarray) -> tuple[cfg.Rows, 
         i = int(bad[0])
         what = "pos_lower/pos_upper" if i < 3 else "rot_lower/rot_upper"
         raise ConfigError(
-            f"{_name(c)}.{what}: lower must be <= upper, got lower={cfg._f32(a_low[i])} > "
-            f"upper={cfg._f32(a_high[i])} for axis {axes[i]!r}"
+            f"{_name(c)}.{what}: lower must be <= upper, got lower={_f32(a_low[i])} > "
+            f"upper={_f32(a_high[i])} for axis {axes[i]!r}"
         )
 
     # Joint rows: position rows (drive, interpolation, NaN hold, reset as any joint controller) whose targets the
@@ -273,7 +273,7 @@ def ee_rows(c: PDEEPosControllerConfig, qlimits: np.ndarray) -> tuple[cfg.Rows, 
         drive_mode=c.drive_mode,
     )
     try:
-        rows = cfg._pos_rows(base, np.full((n, 2), [-np.inf, np.inf], np.float32))
+        rows = _pos_rows(base, np.full((n, 2), [-np.inf, np.inf], np.float32))
     except ConfigError as e:
         raise ConfigError(str(e).replace("PDJointPosControllerConfig", _name(c))) from None
     rows.act_col[:] = -1

@@ -22,10 +22,11 @@ from typing import Literal, Union
 
 import numpy as np
 
-from . import rows as cfg
 from .ee import FRAME_BODY_ROT, FRAME_BODY_TRANS, MAX_EE_DOF, POSE_FRAMES
 from .errors import ConfigError
 from .joint import ControllerClass, ControllerConfig
+from .rows import ROW_EFFORT, Rows, _drive_fields
+from .validate import _bounds, _check_box, _f32, _joint_names
 
 IMPEDANCE_MODES = ("fixed", "variable_kp", "variable")
 NULLSPACE_MODES = ("none", "position")
@@ -295,37 +296,23 @@ def _gain_bounds(c, mode: int, n: int, normalize: bool, kp_lim, ratio_lim) -> tu
     return low, high
 
 
-def _effort_rows(c, names: list[str], kp, kd, low: np.ndarray, high: np.ndarray, normalize: bool) -> cfg.Rows:
+def _effort_rows(c, names: list[str], kp, kd, low: np.ndarray, high: np.ndarray, normalize: bool) -> Rows:
     """Effort rows without an action column of their own (the impedance kernel writes their commanded torque)."""
     n = len(names)
-    z = np.zeros(n, np.float32)
-    return cfg.Rows(
-        joint_names=names,
-        kind=np.full(n, cfg.ROW_EFFORT, np.int32),
-        flags=np.zeros(n, np.int32),
-        act_col=np.full(n, -1, np.int32),
-        vel_col=np.full(n, -1, np.int32),
-        lo=z.copy(),
-        hi=z.copy(),
-        vlo=z.copy(),
-        vhi=z.copy(),
-        mimic_src=np.full(n, -1, np.int32),
-        mimic_mul=np.ones(n, np.float32),
-        mimic_off=z.copy(),
+    return Rows.of(
+        names,
+        ROW_EFFORT,
         kp=np.asarray(kp, np.float32),
         kd=np.asarray(kd, np.float32),
-        force_limit=cfg._per_joint(c, "force_limit", c.force_limit, n, nonneg=True).astype(np.float32),
-        friction=cfg._per_joint(c, "friction", c.friction, n, nonneg=True).astype(np.float32),
-        accel=np.zeros(n, np.bool_),
-        action_low=low.astype(np.float32),
-        action_high=high.astype(np.float32),
+        **_drive_fields(c, n, damping=False),
+        action_low=low,
+        action_high=high,
         normalized=normalize,
-        action_dim=int(low.shape[0]),
     )
 
 
-def _osc_rows(c: OperationalSpaceControllerConfig) -> tuple[cfg.Rows, ImpedanceSpec]:
-    names = cfg._joint_names(c)
+def _osc_rows(c: OperationalSpaceControllerConfig) -> tuple[Rows, ImpedanceSpec]:
+    names = _joint_names(c)
     n = len(names)
     if not 1 <= n <= MAX_EE_DOF:
         raise ConfigError(f"{_name(c)}.joint_names: expected 1 to {MAX_EE_DOF} joints on the EE chain, got {n}")
@@ -355,8 +342,8 @@ def _osc_rows(c: OperationalSpaceControllerConfig) -> tuple[cfg.Rows, ImpedanceS
         i = int(bad[0])
         what = "pos_lower/pos_upper" if i < 3 else "rot_lower/rot_upper"
         raise ConfigError(
-            f"{_name(c)}.{what}: lower must be <= upper, got lower={cfg._f32(t_low[i])} > "
-            f"upper={cfg._f32(t_high[i])} for axis {axes[i]!r}"
+            f"{_name(c)}.{what}: lower must be <= upper, got lower={_f32(t_low[i])} > "
+            f"upper={_f32(t_high[i])} for axis {axes[i]!r}"
         )
     mode = _mode(c)
     kp, kd, ratio = _gains(c, 6, "task axis (x, y, z, rx, ry, rz)", "stiffness", "damping", "damping_ratio")
@@ -425,14 +412,14 @@ def _osc_rows(c: OperationalSpaceControllerConfig) -> tuple[cfg.Rows, ImpedanceS
     return rows, spec
 
 
-def _joint_rows(c: JointImpedanceControllerConfig, qlimits: np.ndarray) -> tuple[cfg.Rows, ImpedanceSpec]:
-    names = cfg._joint_names(c)
+def _joint_rows(c: JointImpedanceControllerConfig, qlimits: np.ndarray) -> tuple[Rows, ImpedanceSpec]:
+    names = _joint_names(c)
     n = len(names)
     flags = {f: _bool(c, f) for f in ("use_delta", "use_target", "normalize_action", "inertial_compensation",
                                       "gravity_compensation")}  # fmt: skip
     normalize = flags["normalize_action"]
-    lo, hi = cfg._bounds(c, c.lower, c.upper, qlimits)
-    cfg._check_box(c, lo, hi, names, normalize, "lower/upper")
+    lo, hi = _bounds(c, c.lower, c.upper, qlimits)
+    _check_box(c, lo, hi, names, normalize, "lower/upper")
     mode = _mode(c)
     kp, kd, ratio = _gains(c, n, "joint", "stiffness", "damping", "damping_ratio")
     kp_lim, ratio_lim = _limits(c, "stiffness_limits"), _limits(c, "damping_ratio_limits")
@@ -466,7 +453,7 @@ def _joint_rows(c: JointImpedanceControllerConfig, qlimits: np.ndarray) -> tuple
     return rows, spec
 
 
-def impedance_rows(c, qlimits: np.ndarray) -> tuple[cfg.Rows, ImpedanceSpec]:
+def impedance_rows(c, qlimits: np.ndarray) -> tuple[Rows, ImpedanceSpec]:
     """Validate an impedance config; return its joint rows (effort rows, no action column of their own: the
     impedance kernels read the action) and its spec.
 

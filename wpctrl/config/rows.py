@@ -24,11 +24,10 @@ from .joint import (
     PDJointVelControllerConfig,
 )
 from .mobile_base import PDBaseForwardVelControllerConfig, PDBaseVelControllerConfig
-from .validate import (  # noqa: F401  (_f32, _joint_names: used by the EE config and the controller layer)
+from .validate import (
     _bounds,
     _check_box,
     _drive_modes,
-    _f32,
     _joint_names,
     _mimic_map,
     _name,
@@ -112,6 +111,38 @@ class Rows:
         for k, (v, dt) in defaults.items():
             if getattr(self, k) is None:
                 setattr(self, k, np.full(n, v, dt))
+
+    @classmethod
+    def of(cls, names: Sequence[str], kind: int, *, action_low=None, action_high=None, normalized=False,
+           action_dim: int | None = None, **fields) -> Rows:  # fmt: skip
+        """Rows of the joints ``names``, all of ``kind``; a per-row field not given takes its neutral value (no flag,
+        no action or velocity column, zero bounds, gains and limits, no mimic source, a force drive). ``action_low``
+        / ``action_high``: the raw bounds of the action (none by default); ``action_dim`` their length unless given."""
+        n = len(names)
+        zero = lambda: np.zeros(n, np.float32)  # noqa: E731
+        neutral = {
+            "flags": np.zeros(n, np.int32),
+            "act_col": np.full(n, -1, np.int32),
+            "vel_col": np.full(n, -1, np.int32),
+            "lo": zero(), "hi": zero(), "vlo": zero(), "vhi": zero(),
+            "mimic_src": np.full(n, -1, np.int32),
+            "mimic_mul": np.ones(n, np.float32),
+            "mimic_off": zero(),
+            "kp": zero(), "kd": zero(), "force_limit": zero(), "friction": zero(),
+            "accel": np.zeros(n, np.bool_),
+        }  # fmt: skip
+        neutral.update(fields)
+        low = np.zeros(0, np.float32) if action_low is None else np.asarray(action_low, np.float32)
+        high = np.zeros(0, np.float32) if action_high is None else np.asarray(action_high, np.float32)
+        return cls(
+            joint_names=list(names),
+            kind=np.full(n, kind, np.int32),
+            action_low=low,
+            action_high=high,
+            normalized=bool(normalized),
+            action_dim=int(low.shape[0]) if action_dim is None else int(action_dim),
+            **neutral,
+        )
 
     @property
     def count(self) -> int:
@@ -289,9 +320,9 @@ def _pos_rows(config, qlimits: np.ndarray, *, mimic: bool = False, posvel: bool 
             what = "use_delta=True" if config.use_delta else "a position-velocity config"
             raise ConfigError(f"{_name(config)}.binary: a binary command sets absolute targets, not with {what}")
         flags |= FLAG_BINARY
-    return Rows(
-        joint_names=names,
-        kind=np.full(n, ROW_POS, np.int32),
+    return Rows.of(
+        names,
+        ROW_POS,
         flags=np.full(n, flags, np.int32),
         act_col=act_col,
         vel_col=vel_col,
@@ -307,9 +338,9 @@ def _pos_rows(config, qlimits: np.ndarray, *, mimic: bool = False, posvel: bool 
         force_limit=fl.astype(np.float32),
         friction=fr.astype(np.float32),
         accel=accel,
-        action_low=a_low.astype(np.float32),
-        action_high=a_high.astype(np.float32),
-        normalized=bool(config.normalize_action),
+        action_low=a_low,
+        action_high=a_high,
+        normalized=config.normalize_action,
         action_dim=d,
         act_model=act["act_model"],
         sat_effort=act["sat_effort"],
@@ -330,30 +361,29 @@ def _vel_rows(config, bounds: tuple[np.ndarray, np.ndarray] | None = None) -> Ro
     if not isinstance(config.normalize_action, (bool, np.bool_)):
         raise ConfigError(f"{_name(config)}.normalize_action: expected a bool, got {config.normalize_action!r}")
     _check_box(config, lo, hi, names, bool(config.normalize_action), "lower/upper")
-    return Rows(
-        joint_names=names,
-        kind=np.full(n, ROW_VEL, np.int32),
+    return Rows.of(
+        names,
+        ROW_VEL,
         flags=np.full(n, FLAG_NORMALIZE if config.normalize_action else 0, np.int32),
         act_col=np.arange(n, dtype=np.int32),
-        vel_col=np.full(n, -1, np.int32),
         lo=lo,
         hi=hi,
-        vlo=np.zeros(n, np.float32),
-        vhi=np.zeros(n, np.float32),
-        mimic_src=np.full(n, -1, np.int32),
-        mimic_mul=np.ones(n, np.float32),
-        mimic_off=np.zeros(n, np.float32),
-        kp=np.zeros(n, np.float32),
-        kd=_per_joint(config, "damping", config.damping, n, nonneg=True).astype(np.float32),
-        force_limit=_per_joint(config, "force_limit", config.force_limit, n, nonneg=True).astype(np.float32),
-        friction=_per_joint(config, "friction", config.friction, n, nonneg=True).astype(np.float32),
+        **_drive_fields(config, n, damping=True),
         accel=_drive_modes(config, n),
         action_low=lo.copy(),
         action_high=hi.copy(),
-        normalized=bool(config.normalize_action),
-        action_dim=n,
+        normalized=config.normalize_action,
         **_vel_actuator(config, n),
     )
+
+
+def _drive_fields(config, n: int, damping: bool) -> dict:
+    """The config's damping (a velocity or passive drive), force limit and friction, per row, validated."""
+    out = {f: _per_joint(config, f, getattr(config, f), n, nonneg=True).astype(np.float32)
+           for f in (("damping",) if damping else ()) + ("force_limit", "friction")}  # fmt: skip
+    if damping:
+        out["kd"] = out.pop("damping")
+    return out
 
 
 def _vel_actuator(config, n: int) -> dict:
@@ -375,29 +405,17 @@ def _effort_rows(config) -> Rows:
     if not isinstance(config.normalize_action, (bool, np.bool_)):
         raise ConfigError(f"{_name(config)}.normalize_action: expected a bool, got {config.normalize_action!r}")
     _check_box(config, lo, hi, names, bool(config.normalize_action), "lower/upper")
-    z = np.zeros(n, np.float32)
-    return Rows(
-        joint_names=names,
-        kind=np.full(n, ROW_EFFORT, np.int32),
+    return Rows.of(
+        names,
+        ROW_EFFORT,
         flags=np.full(n, FLAG_NORMALIZE if config.normalize_action else 0, np.int32),
         act_col=np.arange(n, dtype=np.int32),
-        vel_col=np.full(n, -1, np.int32),
         lo=lo,
         hi=hi,
-        vlo=z.copy(),
-        vhi=z.copy(),
-        mimic_src=np.full(n, -1, np.int32),
-        mimic_mul=np.ones(n, np.float32),
-        mimic_off=z.copy(),
-        kp=z.copy(),
-        kd=z.copy(),
-        force_limit=_per_joint(config, "force_limit", config.force_limit, n, nonneg=True).astype(np.float32),
-        friction=_per_joint(config, "friction", config.friction, n, nonneg=True).astype(np.float32),
-        accel=np.zeros(n, np.bool_),
+        **_drive_fields(config, n, damping=False),
         action_low=lo.copy(),
         action_high=hi.copy(),
-        normalized=bool(config.normalize_action),
-        action_dim=n,
+        normalized=config.normalize_action,
     )
 
 
@@ -434,30 +452,8 @@ def _base_rows(config, forward: bool) -> Rows:
 def _passive_rows(config) -> Rows:
     names = _joint_names(config)
     n = len(names)
-    z = np.zeros(n, np.float32)
-    return Rows(
-        joint_names=names,
-        kind=np.full(n, ROW_PASSIVE, np.int32),
-        flags=np.zeros(n, np.int32),
-        act_col=np.full(n, -1, np.int32),
-        vel_col=np.full(n, -1, np.int32),
-        lo=z.copy(),
-        hi=z.copy(),
-        vlo=z.copy(),
-        vhi=z.copy(),
-        mimic_src=np.full(n, -1, np.int32),
-        mimic_mul=np.ones(n, np.float32),
-        mimic_off=z.copy(),
-        kp=z.copy(),
-        kd=_per_joint(config, "damping", config.damping, n, nonneg=True).astype(np.float32),
-        force_limit=_per_joint(config, "force_limit", config.force_limit, n, nonneg=True).astype(np.float32),
-        friction=_per_joint(config, "friction", config.friction, n, nonneg=True).astype(np.float32),
-        accel=np.zeros(n, np.bool_),  # ManiSkill's passive drive is always "force"
-        action_low=np.zeros(0, np.float32),
-        action_high=np.zeros(0, np.float32),
-        normalized=False,
-        action_dim=0,
-    )
+    # no action; ManiSkill's passive drive is always "force"
+    return Rows.of(names, ROW_PASSIVE, **_drive_fields(config, n, damping=True))
 
 
 def config_rows(config: ControllerConfig, qlimits: np.ndarray) -> Rows:

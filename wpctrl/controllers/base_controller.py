@@ -16,10 +16,13 @@ import numpy as np
 import warp as wp
 
 from ..binding import bind_joints
-from ..config import ee as cfg_ee
-from ..config import impedance as cfg_imp
-from ..config import rows as cfg
+from ..config.ee import EE_CONFIGS, ee_rows
+from ..config.errors import ConfigError
+from ..config.impedance import IMPEDANCE_CONFIGS, impedance_rows
+from ..config.joint import ControllerConfig
 from ..config.options import Actuation, Delay, Diagnostics
+from ..config.rows import Rows, check_mode_dict, config_rows
+from ..config.validate import _joint_names
 from ..engine.core import _Engine
 from ..engine.parts import gravity
 from ..engine.plan import Options, make_plan
@@ -66,13 +69,13 @@ class BaseController(IntrospectionMixin, DrivePropertiesMixin):
         diagnostics = Diagnostics() if diagnostics is None else diagnostics
         for name, value, kind in (("actuation", actuation, Actuation), ("diagnostics", diagnostics, Diagnostics)):
             if not isinstance(value, kind):
-                raise cfg.ConfigError(f"{name}: expected a wpctrl.{kind.__name__}, got {value!r}")
+                raise ConfigError(f"{name}: expected a wpctrl.{kind.__name__}, got {value!r}")
         if delay is not None and not isinstance(delay, Delay):
-            raise cfg.ConfigError(f"delay: expected a wpctrl.Delay or None, got {delay!r}")
+            raise ConfigError(f"delay: expected a wpctrl.Delay or None, got {delay!r}")
         if isinstance(config, Mapping):
             configs = dict(config)
             balance = configs.pop("balance_passive_force", None)  # an agent-level option, not a controller
-            cfg.check_mode_dict(configs)
+            check_mode_dict(configs)
         else:
             configs, balance = {"": config}, None
         balance = _balance_passive_force(balance, balance_passive_force)
@@ -80,27 +83,27 @@ class BaseController(IntrospectionMixin, DrivePropertiesMixin):
             gravity.check_solver(solver)
         names: list[str] = []
         for c in configs.values():
-            if not isinstance(c, cfg.ControllerConfig):
-                raise cfg.ConfigError(f"config: expected a controller config, got {type(c).__name__}")
-            names += cfg._joint_names(c)
+            if not isinstance(c, ControllerConfig):
+                raise ConfigError(f"config: expected a controller config, got {type(c).__name__}")
+            names += _joint_names(c)
         binding = bind_joints(model, names)  # once for the whole mode
-        parts: list[tuple[str, Any, cfg.Rows]] = []
+        parts: list[tuple[str, Any, Rows]] = []
         ee_specs: dict[int, tuple] = {}  # first row -> (first action column, rows, EESpec)
         r0 = c0 = 0
         for uid, c in configs.items():
             n = len(c.joint_names)
-            if isinstance(c, cfg_ee.EE_CONFIGS):  # end-effector controllers: position rows + an EE launch
-                rows, spec = cfg_ee.ee_rows(c, binding.qlimits[r0 : r0 + n])
+            if isinstance(c, EE_CONFIGS):  # end-effector controllers: position rows + an EE launch
+                rows, spec = ee_rows(c, binding.qlimits[r0 : r0 + n])
                 ee_specs[r0] = (c0, rows.count, spec)
-            elif isinstance(c, cfg_imp.IMPEDANCE_CONFIGS):  # OSC / joint impedance: effort rows + their launches
-                rows, spec = cfg_imp.impedance_rows(c, binding.qlimits[r0 : r0 + n])
+            elif isinstance(c, IMPEDANCE_CONFIGS):  # OSC / joint impedance: effort rows + their launches
+                rows, spec = impedance_rows(c, binding.qlimits[r0 : r0 + n])
                 ee_specs[r0] = (c0, rows.count, spec)
             else:
-                rows = cfg.config_rows(c, binding.qlimits[r0 : r0 + n])
+                rows = config_rows(c, binding.qlimits[r0 : r0 + n])
             parts.append((uid, c, rows))
             r0 += n
             c0 += rows.action_dim
-        all_rows = cfg.Rows.concat([p[2] for p in parts])
+        all_rows = Rows.concat([p[2] for p in parts])
         options = Options(
             num_substeps=num_substeps,
             sim_dt=1.0 / sim_freq,
@@ -146,7 +149,7 @@ class BaseController(IntrospectionMixin, DrivePropertiesMixin):
             self._set_spaces(parts[0][2])
         self.action_space = _batched(self.single_action_space, self.num_envs)
 
-    def _init_view(self, config, parent: BaseController, rows_slice: slice, cols_slice: slice, rows: cfg.Rows):
+    def _init_view(self, config, parent: BaseController, rows_slice: slice, cols_slice: slice, rows: Rows):
         self.config = config
         self.control_freq = parent.control_freq
         self.sim_freq = parent.sim_freq
@@ -158,7 +161,7 @@ class BaseController(IntrospectionMixin, DrivePropertiesMixin):
         self._set_spaces(rows)
         self.action_space = _batched(self.single_action_space, self.num_envs)
 
-    def _set_spaces(self, rows: cfg.Rows) -> None:
+    def _set_spaces(self, rows: Rows) -> None:
         raw = gym.spaces.Box(rows.action_low, rows.action_high, shape=(rows.action_dim,), dtype=np.float32)
         if rows.normalized:
             self._original_single_action_space = raw
@@ -402,9 +405,9 @@ def _balance_passive_force(in_mode_dict, keyword) -> bool:
     agree), else True (ManiSkill's default)."""
     for v in (keyword, in_mode_dict):
         if v is not None and not isinstance(v, (bool, np.bool_)):
-            raise cfg.ConfigError(f"balance_passive_force: expected True or False, got {v!r}")
+            raise ConfigError(f"balance_passive_force: expected True or False, got {v!r}")
     if keyword is not None and in_mode_dict is not None and bool(keyword) != bool(in_mode_dict):
-        raise cfg.ConfigError(
+        raise ConfigError(
             f"balance_passive_force: expected None or the mode dict's 'balance_passive_force' entry "
             f"({bool(in_mode_dict)}), got {keyword!r}"
         )
@@ -414,9 +417,9 @@ def _balance_passive_force(in_mode_dict, keyword) -> bool:
 def _num_substeps(control_freq, sim_freq) -> int:
     for name, v in (("control_freq", control_freq), ("sim_freq", sim_freq)):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v <= 0:
-            raise cfg.ConfigError(f"{name}: expected a positive int [Hz], got {v!r}")
+            raise ConfigError(f"{name}: expected a positive int [Hz], got {v!r}")
     if sim_freq % control_freq != 0:
-        raise cfg.ConfigError(
+        raise ConfigError(
             f"sim_freq: expected a multiple of control_freq={control_freq} so that each control step spans whole "
             f"substeps, got sim_freq={sim_freq} (ManiSkill's env asserts this too)"
         )

@@ -55,13 +55,21 @@ def _host_values(name: str, value, shape_ok, n: int) -> np.ndarray:
     return a
 
 
-def _ranges(fields, ranges, mode: str):
+def draw_options(what: str, mode, seed) -> None:
+    """Check a randomisation's ``mode`` and ``seed`` (``what``: the method, named in the error)."""
+    if mode not in _RAND_MODES:
+        raise ConfigError(f"{what}.mode: expected one of {_RAND_MODES}, got {mode!r}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not -(2**31) <= int(seed) < 2**31:
+        raise ConfigError(f"{what}.seed: expected an int32, got {seed!r}")
+
+
+def draw_ranges(fields, ranges, mode: str, what: str = "randomize_drive_properties"):
     """``(lo, hi, enabled)`` lists of the given ``(lo, hi)`` ranges (None: not drawn), validated."""
     lo, hi, enabled = [0.0] * len(fields), [0.0] * len(fields), [0] * len(fields)
     for p, (k, rng) in enumerate(zip(fields, ranges)):
         if rng is None:
             continue
-        name = f"randomize_drive_properties.{k}"
+        name = f"{what}.{k}"
         try:
             a, b = (float(x) for x in rng)
         except (TypeError, ValueError) as e:
@@ -222,12 +230,9 @@ class DrivePropertiesMixin:
         controllers built with actuator models the same way (streams of their own). A bad value raises
         :class:`wpctrl.ConfigError`.
         """
-        if mode not in _RAND_MODES:
-            raise ConfigError(f"randomize_drive_properties.mode: expected one of {_RAND_MODES}, got {mode!r}")
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not -(2**31) <= int(seed) < 2**31:
-            raise ConfigError(f"randomize_drive_properties.seed: expected an int32, got {seed!r}")
-        lo, hi, enabled = _ranges(DRIVE_FIELDS, (stiffness, damping, force_limit, friction), mode)
-        alo, ahi, aen = _ranges(ACTUATOR_FIELDS, (saturation_effort, velocity_limit), mode)
+        draw_options("randomize_drive_properties", mode, seed)
+        lo, hi, enabled = draw_ranges(DRIVE_FIELDS, (stiffness, damping, force_limit, friction), mode)
+        alo, ahi, aen = draw_ranges(ACTUATOR_FIELDS, (saturation_effort, velocity_limit), mode)
         if any(aen) and alo[1] <= 0.0 and aen[1]:
             raise ConfigError(f"randomize_drive_properties.velocity_limit: expected lo > 0, got {velocity_limit!r}")
         if any(aen):

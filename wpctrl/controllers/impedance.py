@@ -8,9 +8,9 @@ readout and NaN holding as for every row).
 
 from __future__ import annotations
 
-import numpy as np
 import warp as wp
 
+from .drive_properties import draw_options, draw_ranges
 from .ee import PDEEPosController
 from .joint import JointEffortController
 
@@ -60,28 +60,17 @@ class OperationalSpaceController(JointEffortController):
         """(num_envs, 6) task damping Kd per env and axis (live, writable)."""
         return self._ee.task_damping
 
-    def randomize_task_impedance(self, env_ids=None, stiffness=None, damping=None, mode="scale", seed=0) -> None:
+    def randomize_task_impedance(self, env_ids=None, *, stiffness=None, damping=None, mode="scale", seed=0) -> None:
         """Draw the task gains uniformly on the device for ``env_ids`` (None: all envs), per env and axis, as
         :meth:`randomize_drive_properties` draws the joints' (which covers this controller's posture gains, force
         limits and friction): each of ``stiffness`` / ``damping`` None (untouched) or ``(lo, hi)``; ``"scale"``
         multiplies the config's value by U(lo, hi), ``"abs"`` sets U(lo, hi); keyed by ``seed`` and the device's
         draw counter (a captured graph draws anew on every replay). Variable impedance overwrites them at the next
-        action."""
-        if mode not in ("scale", "abs"):
-            raise ValueError(f"randomize_task_impedance.mode: expected 'scale' or 'abs', got {mode!r}")
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not -(2**31) <= int(seed) < 2**31:
-            raise ValueError(f"randomize_task_impedance.seed: expected an int32, got {seed!r}")
-        lo, hi, enabled = [0.0, 0.0], [0.0, 0.0], [0, 0]
-        for p, (name, rng) in enumerate((("stiffness", stiffness), ("damping", damping))):
-            if rng is None:
-                continue
-            try:
-                a, b = (float(x) for x in rng)
-            except (TypeError, ValueError) as e:
-                raise ValueError(f"randomize_task_impedance.{name}: expected a (lo, hi) pair, got {rng!r}") from e
-            if not (np.isfinite(a) and np.isfinite(b) and 0.0 <= a <= b <= float(np.finfo(np.float32).max)):
-                raise ValueError(f"randomize_task_impedance.{name}: expected finite 0 <= lo <= hi, got ({a!r}, {b!r})")
-            lo[p], hi[p], enabled[p] = a, b, 1
+        action. ``env_ids`` first, as in every per-env call; the rest by keyword. A bad value raises
+        :class:`wpctrl.ConfigError`."""
+        what = "randomize_task_impedance"
+        draw_options(what, mode, seed)
+        lo, hi, enabled = draw_ranges(("stiffness", "damping"), (stiffness, damping), mode, what)
         if not any(enabled):
             return
         ids, mask = self._selection(env_ids)

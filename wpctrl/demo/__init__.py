@@ -1,12 +1,11 @@
 """The demo (``python -m wpctrl demo``): N Pandas driven through a ManiSkill control mode by wpctrl inside a real Newton
 solver, with a tracking report.
 
-:mod:`.options` (options and their checks), :mod:`.run` (one run), :mod:`.cli` (the command), :mod:`.joint_task` /
-:mod:`.ee_task` (the scripted policy and tracked quantities of each mode family), :mod:`.notice` (the compile notice),
-:mod:`.report` (reductions over ranks, strict JSON, table, plot, timing)."""
+:mod:`.arguments` (command-line options and their checks), :mod:`.run` (one run), :mod:`.cli` (the command),
+:mod:`.joint_task` / :mod:`.ee_task` (the scripted policy and tracked quantities of each mode family), :mod:`.notice`
+(the compile notice), :mod:`.report` (reductions over ranks, strict JSON, table, plot, timing)."""
 
-from .cli import main  # noqa: F401
-from .options import (  # noqa: F401  (the demo's options and checks: tests and the CLI read these)
+from .arguments import (  # noqa: F401  (the demo's command-line options and checks: tests and the CLI read these)
     ACTUATIONS,
     DEFAULT_OUT,
     PANDA_MODES,
@@ -21,4 +20,5 @@ from .options import (  # noqa: F401  (the demo's options and checks: tests and 
     supported_combinations,
     unsupported,
 )
+from .cli import main  # noqa: F401
 from .run import run  # noqa: F401

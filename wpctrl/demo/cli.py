@@ -28,7 +28,7 @@ import sys
 from pathlib import Path
 
 from . import report
-from .options import SOLVER_LABELS, _check_args, _check_extras, _fail, _parser, supported_combinations
+from .arguments import SOLVER_LABELS, _check_args, _check_extras, _fail, _parser, supported_combinations
 from .run import run
 
 

@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 
 from . import report
+from .arguments import COMPILE_ESTIMATE, MAXIMAL_SOLVERS, SCORE_AFTER_S, compile_what
 from .joint_task import JointTask
 from .notice import CompileNotice
-from .options import COMPILE_ESTIMATE, MAXIMAL_SOLVERS, SCORE_AFTER_S, compile_what
 
 # ----------------------------------------------------------------------------------------------------------------------
 # What a control mode's demo does: the policy, the tracked quantities and the plotted trace. A mode family plugs in

@@ -14,11 +14,11 @@ import numpy as np
 
 from ..binding import JointBinding
 from ..config import ConfigError
-from ..config import rows as cfg
 from ..config.actuator_models import ACT_DC_MOTOR, ACT_NET, ACT_NONE, ACT_POSITION_LIMIT
 from ..config.ee import EESpec
 from ..config.impedance import ImpedanceSpec
 from ..config.options import Actuation, ControllerOptions, Delay, Diagnostics
+from ..config.rows import FLAG_INTERPOLATE, FLAG_VEL_TARGET, ROW_EFFORT, ROW_PASSIVE, ROW_POS, ROW_VEL, Rows
 from ..kernels import actuator_models, pd_step
 from .launch import _index_table
 
@@ -42,7 +42,7 @@ class Options:
 class Plan:
     """What one control mode runs: its rows, where they live in the model, its options and active parts."""
 
-    rows: cfg.Rows
+    rows: Rows
     binding: JointBinding
     options: Options
     ee_specs: dict[int, EESpec] = field(default_factory=dict)  # first row of each EE controller -> its spec
@@ -129,7 +129,7 @@ class Plan:
 
     @property
     def has_effort_rows(self) -> bool:
-        return bool((self.rows.kind == cfg.ROW_EFFORT).any())
+        return bool((self.rows.kind == ROW_EFFORT).any())
 
     @property
     def has_actuator_models(self) -> bool:
@@ -150,7 +150,7 @@ class Plan:
         state), interpolation (the target moves), a command delay (the ring buffer shifts), the effort readout (it
         reads the measured state), or a per-substep inertia update. Otherwise the drive targets are constant over the
         control step and the substep launch is elided."""
-        interpolates = bool((self.rows.flags & cfg.FLAG_INTERPOLATE).any())
+        interpolates = bool((self.rows.flags & FLAG_INTERPOLATE).any())
         inertia_per_substep = self.needs_response and self.inertia_update == "substep"
         return (
             self.explicit
@@ -163,7 +163,7 @@ class Plan:
 
     def __str__(self) -> str:
         r = self.rows
-        kinds = {cfg.ROW_POS: "pos", cfg.ROW_VEL: "vel", cfg.ROW_PASSIVE: "passive", cfg.ROW_EFFORT: "effort"}
+        kinds = {ROW_POS: "pos", ROW_VEL: "vel", ROW_PASSIVE: "passive", ROW_EFFORT: "effort"}
         lines = [
             f"Plan: {self.num_envs} envs x {self.num_rows} rows, action_dim {self.action_dim}, "
             f"K = {self.options.num_substeps}, {self.options.actuation.mode}"
@@ -187,7 +187,7 @@ class Plan:
         return "\n".join(lines)
 
 
-def make_plan(rows: cfg.Rows, binding: JointBinding, options: Options, ee_specs: dict | None = None) -> Plan:
+def make_plan(rows: Rows, binding: JointBinding, options: Options, ee_specs: dict | None = None) -> Plan:
     """The plan of ``rows`` bound by ``binding`` (host only).
 
     Raises:
@@ -218,7 +218,7 @@ def make_plan(rows: cfg.Rows, binding: JointBinding, options: Options, ee_specs:
     return plan
 
 
-def check_options(rows: cfg.Rows, options: Options, ee_specs: dict | None = None) -> None:
+def check_options(rows: Rows, options: Options, ee_specs: dict | None = None) -> None:
     """Refuse an option that the mode's rows would silently ignore, or cannot honour (host only).
 
     Each option group checked itself when it was made; what is left depends on the joints: an inertia update for a
@@ -243,7 +243,7 @@ def check_options(rows: cfg.Rows, options: Options, ee_specs: dict | None = None
             f"'acceleration' and the explicit law is {a.law!r}, not 'stable' or 'coupled'), got {a.inertia_update!r}"
         )
     joint_targets = any(isinstance(s, ImpedanceSpec) and not s.osc for _, _, s in (ee_specs or {}).values())
-    if d.clip_targets != "none" and not ((rows.kind == cfg.ROW_POS).any() or joint_targets):
+    if d.clip_targets != "none" and not ((rows.kind == ROW_POS).any() or joint_targets):
         raise ConfigError(
             f"diagnostics.clip_targets: expected 'none': no joint of this mode has a position target (velocity, "
             f"effort and passive joints only), got {d.clip_targets!r}"
@@ -277,7 +277,7 @@ def _layout(plan: Plan) -> pd_step.StepLayout:
     def ints(a) -> tuple:
         return tuple(int(x) for x in a)
 
-    vel_rows = (rows.kind != cfg.ROW_POS) | ((rows.flags & cfg.FLAG_VEL_TARGET) != 0)
+    vel_rows = (rows.kind != ROW_POS) | ((rows.flags & FLAG_VEL_TARGET) != 0)
     return pd_step.StepLayout(
         kind=ints(rows.kind),
         flags=ints(rows.flags),
@@ -302,7 +302,7 @@ def _layout(plan: Plan) -> pd_step.StepLayout:
     )
 
 
-def _limit_tables(rows: cfg.Rows) -> tuple:
+def _limit_tables(rows: Rows) -> tuple:
     """Each row's position table as the substep kernel's constants (``()``: no table)."""
     t = [()] * rows.count
     for r0, count, what in rows.extras:

@@ -153,12 +153,30 @@ def lstm_cell(ig: float, fg: float, cg: float, og: float, c: float):
     return sigmoid(og) * tanh(c_new), c_new
 
 
+@wp.struct
+class NetIO:
+    """What a network's kernel reads and writes besides Newton's state and Control (one argument instead of twelve,
+    shared by both kernels): where each row's coordinate and DOF are (the mode's index tables), the rows' force limit
+    and DC-motor envelope (per env), the LSTM's state (in/out) and the effort readout (optional). Filled by the
+    actuator-model part (:mod:`wpctrl.engine.parts.actuator_models`)."""
+
+    q_idx: wp.array2d[wp.int32]  # (1 | num_envs, rows) the mode's coordinate index table
+    qd_idx: wp.array2d[wp.int32]  # its DOF index table
+    q_stride: int  # a replicated layout's coordinate stride per env (0: per-env tables)
+    qd_stride: int
+    force_limit: wp.array2d[float]  # (num_envs, rows) [N·m or N]
+    sat_effort: wp.array2d[float]  # DC-motor envelope [N·m or N] (inf: none)
+    vel_limit: wp.array2d[float]  # [rad/s or m/s] (inf: none)
+    lstm_h: wp.array2d[float]  # in/out (layers * hidden, num_envs * n)
+    lstm_c: wp.array2d[float]
+    computed_effort: wp.array2d[float]  # optional (effort readout) [N·m or N]
+    applied_effort: wp.array2d[float]
+    saturation_count: wp.array2d[wp.int32]
+
+
 @wp.func
 def row_input(
-    q_idx: wp.array2d[wp.int32],
-    qd_idx: wp.array2d[wp.int32],
-    q_stride: int,
-    qd_stride: int,
+    io: NetIO,
     q_lin: int,
     qd_lin: int,
     env: int,
@@ -170,12 +188,12 @@ def row_input(
 ):
     """The row's DOF index, position error ``q* - q`` and velocity. ``q_lin`` / ``qd_lin`` (>= 0): the network's
     rows are consecutive coordinates / DOFs of env 0 from there (the index is computed, no table read)."""
-    qi = q_lin + j + env * q_stride
+    qi = q_lin + j + env * io.q_stride
     if q_lin < 0:
-        qi = _at(q_idx, q_stride, env, r)
-    di = qd_lin + j + env * qd_stride
+        qi = _at(io.q_idx, io.q_stride, env, r)
+    di = qd_lin + j + env * io.qd_stride
     if qd_lin < 0:
-        di = _at(qd_idx, qd_stride, env, r)
+        di = _at(io.qd_idx, io.qd_stride, env, r)
     q = joint_q_in[qi]
     return di, joint_target_q_in[qi] - q, joint_qd_in[di]
 
@@ -191,20 +209,18 @@ def write_effort(
     sat: float,
     vl: float,
     joint_f_out: wp.array[float],
-    computed_effort_out: wp.array2d[float],
-    applied_effort_out: wp.array2d[float],
-    saturation_count_out: wp.array2d[wp.int32],
+    io: NetIO,
 ):
     """The computed effort ``u`` through the DC-motor envelope (``sat``, ``vl``) and the force limit ``lim`` into
     ``joint_f`` (and the effort readout when it is on). The kernels read the row's parameters with its other inputs,
     before the network: a load here would put one more memory round trip after it."""
     f = dc_motor_clamp(u, qd, sat, vl, lim)
     joint_f_out[di] = f
-    if computed_effort_out:
-        computed_effort_out[env, r] = u
-        applied_effort_out[env, r] = f
+    if io.computed_effort:
+        io.computed_effort[env, r] = u
+        io.applied_effort[env, r] = f
         if f != u:
-            saturation_count_out[env, r] = saturation_count_out[env, r] + 1
+            io.saturation_count[env, r] = io.saturation_count[env, r] + 1
 
 
 @wp.kernel

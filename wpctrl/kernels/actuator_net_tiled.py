@@ -17,8 +17,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from . import actuator_net as _net
-from .actuator_net import NetLayout
+from .actuator_net import NetIO, NetLayout, activate, dense_matrices, lstm_cell, lstm_matrices, row_input, write_effort
 
 wp.set_module_options({"enable_backward": False})
 
@@ -63,11 +62,11 @@ def pack(layout: NetLayout, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray
     lstm_p, dense_p, rows, cols, nb = _placement(layout)
     w = np.zeros((rows, cols), np.float32)
     b = np.zeros(max(nb, 1), np.float32)
-    for (ri, rh, bo), (w_ih, w_hh, bsum) in zip(lstm_p, _net.lstm_matrices(layout, weights)):
+    for (ri, rh, bo), (w_ih, w_hh, bsum) in zip(lstm_p, lstm_matrices(layout, weights)):
         w[ri : ri + w_ih.shape[0], : w_ih.shape[1]] = w_ih
         w[rh : rh + w_hh.shape[0], : w_hh.shape[1]] = w_hh
         b[bo : bo + bsum.size] = bsum
-    for (ro, bo), (wd, bd, _, _) in zip(dense_p, _net.dense_matrices(layout, weights)):
+    for (ro, bo), (wd, bd, _, _) in zip(dense_p, dense_matrices(layout, weights)):
         w[ro : ro + wd.shape[0], : wd.shape[1]] = wd
         b[bo : bo + bd.size] = bd
     return w, b
@@ -96,17 +95,16 @@ def _make(L: NetLayout, block_dim: int) -> wp.Kernel:
         W_AT, W_ROWS, W_COLS = DP[li][0], DOUT[li], DIN[li]
 
         @wp.func(module="unique")
-        def stage(wts: Any, bs: Any, xt: Any, s: int, live: bool, lstm_h_out: wp.array2d[float],
-                  lstm_c_out: wp.array2d[float]):  # fmt: skip
+        def stage(wts: Any, bs: Any, xt: Any, s: int, live: bool, io: NetIO):
             w = wp.tile_view(wts, offset=(wp.static(W_AT), 0), shape=(wp.static(W_ROWS), wp.static(W_COLS)))
             z = wp.untile(wp.tile_matmul(w, xt))
             for o in range(wp.static(DOUT[li])):
-                z[o] = _net.activate(z[o] + bs[wp.static(DP[li][1]) + o], wp.static(DACT[li][0]),
+                z[o] = activate(z[o] + bs[wp.static(DP[li][1]) + o], wp.static(DACT[li][0]),
                                      wp.static(DACT[li][1]))  # fmt: skip
             if wp.static(nxt is None):
                 return z[0]
             else:
-                return nxt(wts, bs, wp.tile(z), s, live, lstm_h_out, lstm_c_out)
+                return nxt(wts, bs, wp.tile(z), s, live, io)
 
         return stage
 
@@ -115,14 +113,13 @@ def _make(L: NetLayout, block_dim: int) -> wp.Kernel:
         G, IH_COLS = 4 * H, LIN[li]
 
         @wp.func(module="unique")
-        def stage(wts: Any, bs: Any, xt: Any, s: int, live: bool, lstm_h_out: wp.array2d[float],
-                  lstm_c_out: wp.array2d[float]):  # fmt: skip
+        def stage(wts: Any, bs: Any, xt: Any, s: int, live: bool, io: NetIO):
             h = vec_h()
             c = vec_h()
             if live:
                 for k in range(wp.static(H)):
-                    h[k] = lstm_h_out[wp.static(li * H) + k, s]
-                    c[k] = lstm_c_out[wp.static(li * H) + k, s]
+                    h[k] = io.lstm_h[wp.static(li * H) + k, s]
+                    c[k] = io.lstm_c[wp.static(li * H) + k, s]
             w_ih = wp.tile_view(wts, offset=(wp.static(IH_AT), 0), shape=(wp.static(G), wp.static(IH_COLS)))
             w_hh = wp.tile_view(wts, offset=(wp.static(HH_AT), 0), shape=(wp.static(G), wp.static(H)))
             gates = wp.tile_matmul(w_ih, xt)
@@ -130,16 +127,16 @@ def _make(L: NetLayout, block_dim: int) -> wp.Kernel:
             g = wp.untile(gates)
             for k in range(wp.static(H)):
                 # PyTorch's gate order: input, forget, cell, output.
-                hk, ck = _net.lstm_cell(g[k] + bs[wp.static(BO) + k], g[wp.static(H) + k] + bs[wp.static(BO + H) + k],
+                hk, ck = lstm_cell(g[k] + bs[wp.static(BO) + k], g[wp.static(H) + k] + bs[wp.static(BO + H) + k],
                                         g[wp.static(2 * H) + k] + bs[wp.static(BO + 2 * H) + k],
                                         g[wp.static(3 * H) + k] + bs[wp.static(BO + 3 * H) + k], c[k])  # fmt: skip
                 h[k] = hk
                 c[k] = ck
             if live:
                 for k in range(wp.static(H)):
-                    lstm_h_out[wp.static(li * H) + k, s] = h[k]
-                    lstm_c_out[wp.static(li * H) + k, s] = c[k]
-            return nxt(wts, bs, wp.tile(h), s, live, lstm_h_out, lstm_c_out)
+                    io.lstm_h[wp.static(li * H) + k, s] = h[k]
+                    io.lstm_c[wp.static(li * H) + k, s] = c[k]
+            return nxt(wts, bs, wp.tile(h), s, live, io)
 
         return stage
 
@@ -156,27 +153,16 @@ def _make(L: NetLayout, block_dim: int) -> wp.Kernel:
         tile: int,
         lane: int,
         row0: int,
-        q_idx: wp.array2d[wp.int32],
-        qd_idx: wp.array2d[wp.int32],
-        q_stride: int,
-        qd_stride: int,
+        io: NetIO,
         pos_scale: float,
         vel_scale: float,
         torque_scale: float,
         num_rows: int,
-        force_limit: wp.array2d[float],
-        sat_effort: wp.array2d[float],
-        vel_limit: wp.array2d[float],
         joint_q_in: wp.array[float],
         joint_qd_in: wp.array[float],
         joint_target_q_in: wp.array[float],
         hist_out: wp.array2d[float],
-        lstm_h_out: wp.array2d[float],
-        lstm_c_out: wp.array2d[float],
         joint_f_out: wp.array[float],
-        computed_effort_out: wp.array2d[float],
-        applied_effort_out: wp.array2d[float],
-        saturation_count_out: wp.array2d[wp.int32],
     ):
         """One tile of rows (a block's pass): a function of its own so that each layer's tiles may differ in shape
         (a symbol inside a run-time loop keeps one type)."""
@@ -193,12 +179,11 @@ def _make(L: NetLayout, block_dim: int) -> wp.Kernel:
         sat = float(0.0)
         vl = float(0.0)
         if live:
-            di, err, qd = _net.row_input(q_idx, qd_idx, q_stride, qd_stride, wp.static(L.q_lin),
-                                         wp.static(L.qd_lin), env, r, j, joint_q_in, joint_qd_in,
-                                         joint_target_q_in)  # fmt: skip
-            lim = force_limit[env, r]
-            sat = sat_effort[env, r]
-            vl = vel_limit[env, r]
+            di, err, qd = row_input(io, wp.static(L.q_lin), wp.static(L.qd_lin), env, r, j, joint_q_in,
+                                                 joint_qd_in, joint_target_q_in)  # fmt: skip
+            lim = io.force_limit[env, r]
+            sat = io.sat_effort[env, r]
+            vl = io.vel_limit[env, r]
         x = vec_in()
         if wp.static(MLP):
             hp = vec_t()
@@ -222,18 +207,13 @@ def _make(L: NetLayout, block_dim: int) -> wp.Kernel:
             else:
                 x[0] = qd * vel_scale
                 x[1] = err * pos_scale
-        u = stage0(wts, bs, wp.tile(x), s, live, lstm_h_out, lstm_c_out)
+        u = stage0(wts, bs, wp.tile(x), s, live, io)
         if live:
-            _net.write_effort(u * torque_scale, qd, env, r, di, lim, sat, vl, joint_f_out, computed_effort_out,
-                              applied_effort_out, saturation_count_out)  # fmt: skip
+            write_effort(u * torque_scale, qd, env, r, di, lim, sat, vl, joint_f_out, io)
 
     def net(
-        # Rows of the network (row0 .. row0 + n in the mode's tables):
-        row0: int,
-        q_idx: wp.array2d[wp.int32],
-        qd_idx: wp.array2d[wp.int32],
-        q_stride: int,
-        qd_stride: int,
+        row0: int,  # the network's rows: row0 .. row0 + n in the mode's tables
+        io: NetIO,  # index tables, per-env limits, the LSTM state, the effort readout
         pos_scale: float,
         vel_scale: float,
         torque_scale: float,
@@ -242,32 +222,21 @@ def _make(L: NetLayout, block_dim: int) -> wp.Kernel:
         num_rows: int,  # num_envs * n
         num_tiles: int,  # ceil(num_rows / block_dim)
         num_blocks: int,  # the launch's blocks: each walks tiles blk, blk + num_blocks, ...
-        # Per env x row of the mode (num_envs, rows):
-        force_limit: wp.array2d[float],
-        sat_effort: wp.array2d[float],
-        vel_limit: wp.array2d[float],
         # In:
         joint_q_in: wp.array[float],
         joint_qd_in: wp.array[float],
         joint_target_q_in: wp.array[float],
-        # In/out: the MLP's past samples (num_envs * n, 2 * past), the LSTM state (layers * hidden, num_envs * n):
+        # In/out: the MLP's past samples (num_envs * n, 2 * past):
         hist_out: wp.array2d[float],
-        lstm_h_out: wp.array2d[float],
-        lstm_c_out: wp.array2d[float],
         # Out:
         joint_f_out: wp.array[float],
-        computed_effort_out: wp.array2d[float],
-        applied_effort_out: wp.array2d[float],
-        saturation_count_out: wp.array2d[wp.int32],
     ):
         blk, lane = wp.tid()
         wts = wp.tile_load(weight_tiles, shape=(wp.static(WROWS), wp.static(WCOLS)), storage="shared")  # once per block
         bs = wp.tile_load(biases, shape=(wp.static(max(NB, 1)),), storage="shared")
         for tile in range(blk, num_tiles, num_blocks):
-            rows(wts, bs, tile, lane, row0, q_idx, qd_idx, q_stride, qd_stride, pos_scale, vel_scale, torque_scale,
-                 num_rows, force_limit, sat_effort, vel_limit, joint_q_in, joint_qd_in, joint_target_q_in,
-                 hist_out, lstm_h_out, lstm_c_out, joint_f_out, computed_effort_out,
-                 applied_effort_out, saturation_count_out)  # fmt: skip
+            rows(wts, bs, tile, lane, row0, io, pos_scale, vel_scale, torque_scale, num_rows, joint_q_in, joint_qd_in,
+                 joint_target_q_in, hist_out, joint_f_out)  # fmt: skip
 
     return wp.kernel(
         net,

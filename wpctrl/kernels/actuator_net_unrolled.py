@@ -14,8 +14,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from . import actuator_net as _net
-from .actuator_net import NetLayout
+from .actuator_net import NetIO, NetLayout, activate, dense_matrices, lstm_cell, lstm_matrices, row_input, write_effort
 
 wp.set_module_options({"enable_backward": False})
 
@@ -67,8 +66,8 @@ def _make(L: NetLayout, weights: np.ndarray, scales: tuple[float, float, float])
     PS, VS, TS = scales
     MLP = not L.lstm
     T = len(TAPS)
-    dense = _net.dense_matrices(L, weights)
-    lstm = _net.lstm_matrices(L, weights)
+    dense = dense_matrices(L, weights)
+    lstm = lstm_matrices(L, weights)
     DW = tuple(_floats(w) for w, _, _, _ in dense)
     DB = tuple(_floats(b) for _, b, _, _ in dense)
     DACT = tuple((c, a) for _, _, c, a in dense)
@@ -90,41 +89,27 @@ def _make(L: NetLayout, weights: np.ndarray, scales: tuple[float, float, float])
     VEL_AT = tuple((T + t if POS_FIRST else t) for t in range(T))
 
     def net(
-        # Rows of the network (row0 .. row0 + n in the mode's tables):
-        row0: int,
-        q_idx: wp.array2d[wp.int32],
-        qd_idx: wp.array2d[wp.int32],
-        q_stride: int,
-        qd_stride: int,
-        # Per env x row of the mode (num_envs, rows):
-        force_limit: wp.array2d[float],  # [N·m or N]
-        sat_effort: wp.array2d[float],  # DC-motor envelope [N·m or N] (inf: none)
-        vel_limit: wp.array2d[float],  # [rad/s or m/s] (inf: none)
+        row0: int,  # the network's rows: row0 .. row0 + n in the mode's tables
+        io: NetIO,  # index tables, per-env limits, the LSTM state, the effort readout
         # In:
         joint_q_in: wp.array[float],
         joint_qd_in: wp.array[float],
         joint_target_q_in: wp.array[float],  # this substep's (interpolated, delayed) target
-        # In/out: the MLP's past samples per row (position errors, then velocities, newest first), the LSTM state
-        # (layers * hidden, num_envs * n):
+        # In/out: the MLP's past samples per row (position errors, then velocities, newest first):
         hist_out: wp.array[vec_p],
-        lstm_h_out: wp.array2d[float],
-        lstm_c_out: wp.array2d[float],
         # Out:
         joint_f_out: wp.array[float],
-        computed_effort_out: wp.array2d[float],  # optional (effort readout)
-        applied_effort_out: wp.array2d[float],
-        saturation_count_out: wp.array2d[wp.int32],
     ):
         s = wp.tid()  # (env, joint) row, joint fastest
         env = s // wp.static(N)
         j = s - env * wp.static(N)
         r = row0 + j
-        di, err, qd = _net.row_input(q_idx, qd_idx, q_stride, qd_stride, wp.static(L.q_lin), wp.static(L.qd_lin),
-                                     env, r, j, joint_q_in, joint_qd_in, joint_target_q_in)  # fmt: skip
+        di, err, qd = row_input(io, wp.static(L.q_lin), wp.static(L.qd_lin), env, r, j, joint_q_in,
+                                             joint_qd_in, joint_target_q_in)  # fmt: skip
         # Every input is read here, before the network, so that all loads are in flight together.
-        lim = force_limit[env, r]
-        sat = sat_effort[env, r]
-        vl = vel_limit[env, r]
+        lim = io.force_limit[env, r]
+        sat = io.sat_effort[env, r]
+        vl = io.vel_limit[env, r]
         x = vec_w()
         if wp.static(MLP):
             # The history, newest first (Isaac Lab rolls it and writes the current sample at index 0).
@@ -154,8 +139,8 @@ def _make(L: NetLayout, weights: np.ndarray, scales: tuple[float, float, float])
             hs = vec_s()
             cs = vec_s()
             for k in range(wp.static(NL * H)):
-                hs[k] = lstm_h_out[k, s]
-                cs[k] = lstm_c_out[k, s]
+                hs[k] = io.lstm_h[k, s]
+                cs[k] = io.lstm_c[k, s]
             for li in range(wp.static(NL)):
                 g = vec_g()
                 for o in range(wp.static(4 * H)):
@@ -167,10 +152,10 @@ def _make(L: NetLayout, weights: np.ndarray, scales: tuple[float, float, float])
                     g[o] = acc
                 # PyTorch's gate order: input, forget, cell, output.
                 for k in range(wp.static(H)):
-                    hk, ck = _net.lstm_cell(g[k], g[wp.static(H) + k], g[wp.static(2 * H) + k], g[wp.static(3 * H) + k],
+                    hk, ck = lstm_cell(g[k], g[wp.static(H) + k], g[wp.static(2 * H) + k], g[wp.static(3 * H) + k],
                                             cs[wp.static(li * H) + k])  # fmt: skip
-                    lstm_h_out[wp.static(li * H) + k, s] = hk
-                    lstm_c_out[wp.static(li * H) + k, s] = ck
+                    io.lstm_h[wp.static(li * H) + k, s] = hk
+                    io.lstm_c[wp.static(li * H) + k, s] = ck
                     x[k] = hk
         for li in range(wp.static(ND)):
             y = vec_w()
@@ -178,10 +163,9 @@ def _make(L: NetLayout, weights: np.ndarray, scales: tuple[float, float, float])
                 acc = float(wp.static(DB[li][o]))
                 for i in range(wp.static(DIN[li])):
                     acc = acc + wp.static(DW[li][o][i]) * x[i]
-                y[o] = _net.activate(acc, wp.static(DACT[li][0]), wp.static(DACT[li][1]))
+                y[o] = activate(acc, wp.static(DACT[li][0]), wp.static(DACT[li][1]))
             x = y
-        _net.write_effort(_scaled(x[0], wp.static(TS)), qd, env, r, di, lim, sat, vl, joint_f_out, computed_effort_out,
-                          applied_effort_out, saturation_count_out)  # fmt: skip
+        write_effort(_scaled(x[0], wp.static(TS)), qd, env, r, di, lim, sat, vl, joint_f_out, io)
 
     return wp.kernel(
         net,

@@ -35,6 +35,7 @@ import warp as wp
 from .cholesky import cholesky_funcs
 from .inertia import chain_h_func
 from .pd import _bidx
+from .spatial import Articulation
 
 wp.set_module_options({"enable_backward": False})
 
@@ -93,27 +94,7 @@ def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None, rows: tuple
 
     @wp.kernel(enable_backward=False, module="unique", module_options={"fast_math": bool(fast_math)})
     def _coupled_drive_kernel(
-        # Chain (articulation template):
-        chain_type: wp.array[wp.int32],
-        chain_parent: wp.array[wp.int32],
-        chain_dof: wp.array[wp.int32],
-        chain_anc: wp.array[wp.int32],
-        row_dof: wp.array[wp.int32],
-        # Envs:
-        env_joint_base: wp.array[wp.int32],
-        env_dof_base: wp.array[wp.int32],
-        # Model:
-        joint_q_start: wp.array[wp.int32],
-        joint_qd_start: wp.array[wp.int32],
-        joint_X_p: wp.array[wp.transform],
-        joint_X_c: wp.array[wp.transform],
-        joint_axis: wp.array[wp.vec3],
-        joint_child: wp.array[wp.int32],
-        joint_armature: wp.array[float],
-        body_mass: wp.array[float],
-        body_com: wp.array[wp.vec3],
-        body_inertia: wp.array[wp.mat33],
-        num_dofs: int,
+        art: Articulation,  # the articulation: chain tables, per-env bases, model arrays
         # Envs:
         env_q_base: wp.array[wp.int32],
         env_qd_base: wp.array[wp.int32],
@@ -147,11 +128,7 @@ def coupled_kernel(nj: int, n: int, nr: int, template: tuple | None, rows: tuple
             fresh = int((step_in[env] - 1) % num_substeps == 0)
         H = MatN()
         if fresh != 0:
-            H = chain_h(
-                num_dofs, env_joint_base[env], env_dof_base[env], chain_type, chain_parent, chain_dof, chain_anc,
-                row_dof, joint_q_start, joint_qd_start, joint_X_p, joint_X_c, joint_axis, joint_child, joint_armature,
-                body_mass, body_com, body_inertia, joint_q_in,
-            )  # fmt: skip
+            H = chain_h(art, env, joint_q_in)
             if h_cache:
                 h_cache[env] = H
         else:

@@ -20,6 +20,7 @@ import warp as wp
 
 from .ee_math import (
     MAX_DOF,
+    EEChain,
     _chain_fk,
     _compose,
     _dls,
@@ -51,17 +52,7 @@ def _make_set_action_kernel(clik: bool):
 
     @wp.kernel(module="unique", enable_backward=False)
     def kernel(
-        # Chain:
-        chain_joint: wp.array2d[wp.int32],
-        chain_col: wp.array[wp.int32],
-        joint_type: wp.array[wp.int32],
-        joint_X_p: wp.array[wp.transform],
-        joint_X_c: wp.array[wp.transform],
-        joint_axis: wp.array[wp.vec3],
-        joint_q_start: wp.array[wp.int32],
-        joint_qd_start: wp.array[wp.int32],
-        env_root: wp.array[wp.transform],
-        ee_offset: wp.transform,
+        chain: EEChain,  # the EE chain (wpctrl.kernels.ee_math.EEChain)
         # Rows of the EE joints (columns of the Jacobian) and action columns:
         row_q_off: wp.array[wp.int32],
         env_q_base: wp.array[wp.int32],
@@ -112,21 +103,7 @@ def _make_set_action_kernel(clik: bool):
             if k < 3 + 3 * pose:
                 processed_action_out[env, col0 + k] = act[k]
 
-        t_ee, t_joint, axes, origins, kinds = _chain_fk(
-            env,
-            chain_joint,
-            chain_col,
-            joint_type,
-            joint_X_p,
-            joint_X_c,
-            joint_axis,
-            joint_q_start,
-            joint_qd_start,
-            env_root,
-            ee_offset,
-            joint_q_in,
-            q0,
-        )
+        t_ee, t_joint, axes, origins, kinds = _chain_fk(env, chain, joint_q_in, q0)
         _write_pose(ee_pose_out, env, t_ee)
 
         compose = iterations > 1 or use_target != 0 or use_delta == 0
@@ -165,21 +142,7 @@ def _make_set_action_kernel(clik: bool):
             q = q0
             success = int(0)
             for it in range(iterations + 1):
-                te, tj, ax, og, kd = _chain_fk(
-                    env,
-                    chain_joint,
-                    chain_col,
-                    joint_type,
-                    joint_X_p,
-                    joint_X_c,
-                    joint_axis,
-                    joint_q_start,
-                    joint_qd_start,
-                    env_root,
-                    ee_offset,
-                    joint_q_in,
-                    q,
-                )
+                te, tj, ax, og, kd = _chain_fk(env, chain, joint_q_in, q)
                 err = _log6(des_inv * tj)
                 if wp.length(err) < tolerance:
                     success = 1
@@ -217,17 +180,7 @@ _ee_clik_kernel = _make_set_action_kernel(True)
 
 @wp.kernel
 def _ee_reset_kernel(
-    # Chain:
-    chain_joint: wp.array2d[wp.int32],
-    chain_col: wp.array[wp.int32],
-    joint_type: wp.array[wp.int32],
-    joint_X_p: wp.array[wp.transform],
-    joint_X_c: wp.array[wp.transform],
-    joint_axis: wp.array[wp.vec3],
-    joint_q_start: wp.array[wp.int32],
-    joint_qd_start: wp.array[wp.int32],
-    env_root: wp.array[wp.transform],
-    ee_offset: wp.transform,
+    chain: EEChain,  # the EE chain (wpctrl.kernels.ee_math.EEChain)
     row_q_off: wp.array[wp.int32],
     env_q_base: wp.array[wp.int32],
     num_dof: int,
@@ -250,21 +203,7 @@ def _ee_reset_kernel(
         if not env_mask_in[env]:
             return
     q0 = _measured_q(env, row_q_off, env_q_base, num_dof, joint_q_in)
-    t_ee, t_joint, axes, origins, kinds = _chain_fk(
-        env,
-        chain_joint,
-        chain_col,
-        joint_type,
-        joint_X_p,
-        joint_X_c,
-        joint_axis,
-        joint_q_start,
-        joint_qd_start,
-        env_root,
-        ee_offset,
-        joint_q_in,
-        q0,
-    )
+    t_ee, t_joint, axes, origins, kinds = _chain_fk(env, chain, joint_q_in, q0)
     _write_pose(ee_pose_out, env, t_ee)
     if use_target != 0:
         _write_pose(target_pose_out, env, t_ee)
@@ -272,17 +211,7 @@ def _ee_reset_kernel(
 
 @wp.kernel
 def _ee_fk_jacobian_kernel(
-    # Chain:
-    chain_joint: wp.array2d[wp.int32],
-    chain_col: wp.array[wp.int32],
-    joint_type: wp.array[wp.int32],
-    joint_X_p: wp.array[wp.transform],
-    joint_X_c: wp.array[wp.transform],
-    joint_axis: wp.array[wp.vec3],
-    joint_q_start: wp.array[wp.int32],
-    joint_qd_start: wp.array[wp.int32],
-    env_root: wp.array[wp.transform],
-    ee_offset: wp.transform,
+    chain: EEChain,  # the EE chain (wpctrl.kernels.ee_math.EEChain)
     row_q_off: wp.array[wp.int32],
     env_q_base: wp.array[wp.int32],
     num_dof: int,
@@ -295,21 +224,7 @@ def _ee_fk_jacobian_kernel(
     """The EE pose (root frame) and its geometric Jacobian (6, num_dof) per env, from ``joint_q``."""
     env = wp.tid()
     q0 = _measured_q(env, row_q_off, env_q_base, num_dof, joint_q_in)
-    t_ee, t_joint, axes, origins, kinds = _chain_fk(
-        env,
-        chain_joint,
-        chain_col,
-        joint_type,
-        joint_X_p,
-        joint_X_c,
-        joint_axis,
-        joint_q_start,
-        joint_qd_start,
-        env_root,
-        ee_offset,
-        joint_q_in,
-        q0,
-    )
+    t_ee, t_joint, axes, origins, kinds = _chain_fk(env, chain, joint_q_in, q0)
     _write_pose(ee_pose_out, env, t_ee)
     jac = _jacobian(wp.transform_get_translation(t_ee), axes, origins, kinds, num_dof)
     for k in range(6):

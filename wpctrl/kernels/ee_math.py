@@ -157,44 +157,54 @@ def _measured_q(
     return q
 
 
+@wp.struct
+class EEChain:
+    """An end-effector chain as the EE and OSC kernels read it (one kernel argument instead of ten): per env, the
+    chain's Newton joints from the root to the EE body, the Jacobian column of each (-1: a joint the controller does
+    not move), each env's root frame and the EE body's offset, and Newton's joint arrays the forward kinematics
+    reads. Filled by the end-effector part (:class:`wpctrl.engine.parts.ee.EEPart`)."""
+
+    chain_joint: wp.array2d[wp.int32]  # (num_envs, chain joints) Newton joint ids, root first
+    chain_col: wp.array[wp.int32]  # (chain joints,) the joint's column in the Jacobian, -1 when not controlled
+    joint_type: wp.array[wp.int32]  # Newton's model arrays
+    joint_X_p: wp.array[wp.transform]
+    joint_X_c: wp.array[wp.transform]
+    joint_axis: wp.array[wp.vec3]
+    joint_q_start: wp.array[wp.int32]
+    joint_qd_start: wp.array[wp.int32]
+    env_root: wp.array[wp.transform]  # (num_envs,) the root frame in world
+    ee_offset: wp.transform  # the EE frame in its body's frame
+
+
 @wp.func
 def _chain_fk(
     env: int,
-    chain_joint: wp.array2d[wp.int32],
-    chain_col: wp.array[wp.int32],
-    joint_type: wp.array[wp.int32],
-    joint_X_p: wp.array[wp.transform],
-    joint_X_c: wp.array[wp.transform],
-    joint_axis: wp.array[wp.vec3],
-    joint_q_start: wp.array[wp.int32],
-    joint_qd_start: wp.array[wp.int32],
-    env_root: wp.array[wp.transform],
-    ee_offset: wp.transform,
+    chain: EEChain,
     joint_q: wp.array[float],
     qv: vecD,
 ):
     """FK of one env's chain in the root frame. Controlled joints (column c >= 0) take ``qv[c]``, other 1-DOF joints
     their ``joint_q``. Returns the EE pose, the frame of the last moving joint (Pinocchio's joint frame), the
     columns' axes, origins (root frame) and kinds (1 revolute, 0 prismatic)."""
-    t = env_root[env]
+    t = chain.env_root[env]
     t_joint = t
     axes = mat3D()
     origins = mat3D()
     kinds = vecD()
-    for i in range(chain_joint.shape[1]):
-        j = chain_joint[env, i]
-        x = t * joint_X_p[j]
-        jt = joint_type[j]
+    for i in range(chain.chain_joint.shape[1]):
+        j = chain.chain_joint[env, i]
+        x = t * chain.joint_X_p[j]
+        jt = chain.joint_type[j]
         if jt == JOINT_REVOLUTE or jt == JOINT_PRISMATIC:
-            c = chain_col[i]
-            a = joint_axis[joint_qd_start[j]]
+            c = chain.chain_col[i]
+            a = chain.joint_axis[chain.joint_qd_start[j]]
             q = float(0.0)
             if c >= 0:
                 for cc in range(MAX_DOF):  # constant indices (registers on the GPU), not qv[c]
                     if cc == c:
                         q = qv[cc]
             else:
-                q = joint_q[joint_q_start[j]]
+                q = joint_q[chain.joint_q_start[j]]
             if jt == JOINT_REVOLUTE:
                 x = x * wp.transform(wp.vec3(), wp.quat_from_axis_angle(a, q))
             else:
@@ -210,8 +220,8 @@ def _chain_fk(
                             origins[k, cc] = o[k]
                         if jt == JOINT_REVOLUTE:
                             kinds[cc] = 1.0
-        t = x * wp.transform_inverse(joint_X_c[j])
-    return t * ee_offset, t_joint, axes, origins, kinds
+        t = x * wp.transform_inverse(chain.joint_X_c[j])
+    return t * chain.ee_offset, t_joint, axes, origins, kinds
 
 
 @wp.func

@@ -35,10 +35,10 @@ from __future__ import annotations
 import warp as wp
 
 from .cholesky import cholesky_funcs
-from .ee_math import _chain_fk, _compose, _jacobian, _log3, _pose_action, _read_pose, _write_pose, vecD
-from .env_selection import MODE_SCALE, _select
+from .ee_math import EEChain, _chain_fk, _compose, _jacobian, _log3, _pose_action, _read_pose, _write_pose, vecD
 from .inertia import chain_hg_func
 from .pd import _action_finite, _bidx, _scale
+from .spatial import Articulation
 
 wp.set_module_options({"enable_backward": False})
 
@@ -89,17 +89,7 @@ def set_action_kernel(osc: bool, n: int) -> wp.Kernel:
 
     @wp.kernel(enable_backward=False, module="unique")
     def impedance_set_action(
-        # EE chain (OSC):
-        chain_joint: wp.array2d[wp.int32],
-        chain_col: wp.array[wp.int32],
-        joint_type: wp.array[wp.int32],
-        joint_X_p: wp.array[wp.transform],
-        joint_X_c: wp.array[wp.transform],
-        joint_axis: wp.array[wp.vec3],
-        joint_q_start: wp.array[wp.int32],
-        joint_qd_start: wp.array[wp.int32],
-        env_root: wp.array[wp.transform],
-        ee_offset: wp.transform,
+        chain: EEChain,  # the EE chain (wpctrl.kernels.ee_math.EEChain)
         # Rows and columns:
         row_q_off: wp.array[wp.int32],  # (n,) the rows' coordinate offsets from the env's first
         env_q_base: wp.array[wp.int32],
@@ -148,10 +138,7 @@ def set_action_kernel(osc: bool, n: int) -> wp.Kernel:
             act = _pose_action(action_in, env, col0, 1, normalize, lo, hi, rot_scale)
             for k in range(6):
                 processed_action_out[env, col0 + k] = act[k]
-            t_ee, t_joint, axes, origins, kinds = _chain_fk(
-                env, chain_joint, chain_col, joint_type, joint_X_p, joint_X_c, joint_axis, joint_q_start,
-                joint_qd_start, env_root, ee_offset, joint_q_in, q0,
-            )  # fmt: skip
+            t_ee, t_joint, axes, origins, kinds = _chain_fk(env, chain, joint_q_in, q0)
             _write_pose(ee_pose_out, env, t_ee)
             prev = t_ee
             if use_target != 0:
@@ -213,31 +200,8 @@ def torque_kernel(osc: bool, n: int, row_dof: tuple | None, chain_key: tuple | N
 
     @wp.kernel(enable_backward=False, module="unique")
     def impedance_torque(
-        # EE chain (OSC):
-        chain_joint: wp.array2d[wp.int32],
-        chain_col: wp.array[wp.int32],
-        joint_type: wp.array[wp.int32],
-        joint_X_p: wp.array[wp.transform],
-        joint_X_c: wp.array[wp.transform],
-        joint_axis: wp.array[wp.vec3],
-        joint_q_start: wp.array[wp.int32],
-        joint_qd_start: wp.array[wp.int32],
-        env_root: wp.array[wp.transform],
-        ee_offset: wp.transform,
-        # Articulation (the fused inertia pass):
-        chain_type: wp.array[wp.int32],
-        chain_parent: wp.array[wp.int32],
-        chain_dof: wp.array[wp.int32],
-        chain_anc: wp.array[wp.int32],
-        row_dof: wp.array[wp.int32],
-        env_joint_base: wp.array[wp.int32],
-        env_dof_base: wp.array[wp.int32],
-        joint_child: wp.array[wp.int32],
-        joint_armature: wp.array[float],
-        body_mass: wp.array[float],
-        body_com: wp.array[wp.vec3],
-        body_inertia: wp.array[wp.mat33],
-        num_dofs: int,
+        chain: EEChain,  # the EE chain (wpctrl.kernels.ee_math.EEChain)
+        art: Articulation,  # the articulation for the fused inertia pass (an empty one without it)
         gravity_in: wp.array[wp.vec3],  # Model.gravity, per world
         env_world: wp.array[wp.int32],  # (num_envs,) index into gravity_in
         # Rows:
@@ -280,11 +244,7 @@ def torque_kernel(osc: bool, n: int, row_dof: tuple | None, chain_key: tuple | N
                 gv = wp.vec3(0.0)
                 if gravity_on != 0:
                     gv = gravity_in[env_world[env]]
-                H, G = chain_hg(
-                    num_dofs, env_joint_base[env], env_dof_base[env], chain_type, chain_parent, chain_dof, chain_anc,
-                    row_dof, joint_q_start, joint_qd_start, joint_X_p, joint_X_c, joint_axis, joint_child,
-                    joint_armature, body_mass, body_com, body_inertia, joint_q_in, gv,
-                )  # fmt: skip
+                H, G = chain_hg(art, env, joint_q_in, gv)
                 for r in range(wp.static(N)):
                     g[r] = G[wp.static(ROWD[r])]
                     for c in range(wp.static(N)):
@@ -295,10 +255,7 @@ def torque_kernel(osc: bool, n: int, row_dof: tuple | None, chain_key: tuple | N
             q32 = vecD()
             for c in range(wp.static(N)):
                 q32[c] = float(q[c])
-            t_ee, t_joint, axes, origins, kinds = _chain_fk(
-                env, chain_joint, chain_col, joint_type, joint_X_p, joint_X_c, joint_axis, joint_q_start,
-                joint_qd_start, env_root, ee_offset, joint_q_in, q32,
-            )  # fmt: skip
+            t_ee, t_joint, axes, origins, kinds = _chain_fk(env, chain, joint_q_in, q32)
             jac = _jacobian(wp.transform_get_translation(t_ee), axes, origins, kinds, wp.static(N))
             J = Mat6N()
             for k in range(6):
@@ -375,39 +332,3 @@ def torque_kernel(osc: bool, n: int, row_dof: tuple | None, chain_key: tuple | N
 
     _torque_cache[key] = impedance_torque
     return impedance_torque
-
-
-@wp.kernel(enable_backward=False)
-def _randomize_task_gains_kernel(
-    seed: int,
-    mode: int,  # env_selection.MODE_SCALE / MODE_ABS
-    enabled: wp.vec2i,  # (stiffness, damping)
-    lo: wp.vec2,
-    hi: wp.vec2,
-    # In:
-    env_ids_in: wp.array[wp.int32],  # optional: thread block i draws for env env_ids_in[i]
-    env_mask_in: wp.array[wp.bool],  # optional: only where True
-    nominal_in: wp.array2d[float],  # (2, 6): the config's task stiffness and damping
-    rng_counter_in: wp.array[wp.int32],  # (1,)
-    # Out:
-    task_kp_out: wp.array2d[float],  # (num_envs, 6)
-    task_kd_out: wp.array2d[float],
-):
-    """An OSC controller's task gains: nominal * U(lo, hi) ("scale") or U(lo, hi) ("abs"), per env and axis, from a
-    stream of their own (keyed by the seed, the draw counter and the env's axis)."""
-    tid = wp.tid()
-    env, k, i = _select(tid, 6, env_ids_in, env_mask_in, task_kp_out.shape[0])
-    if env < 0:
-        return
-    key = wp.randi(wp.rand_init(seed, rng_counter_in[0]))
-    state = wp.rand_init(key, 1000003 + env * 6 + k)
-    for p in range(2):
-        u = wp.randf(state)  # drawn for both, so that one's values do not depend on whether the other is drawn
-        if enabled[p] != 0:
-            x = lo[p] + (hi[p] - lo[p]) * u
-            if mode == MODE_SCALE:
-                x = nominal_in[p, k] * x
-            if p == 0:
-                task_kp_out[env, k] = x
-            else:
-                task_kd_out[env, k] = x

@@ -28,7 +28,7 @@ import warp as wp
 
 from .dims import PER_ENV_BLOCK_DIM
 from .inertia_unrolled import h_only, unrolled_chain_funcs
-from .spatial import _FLOAT32_EPS, J_FIXED, J_PRISMATIC, J_REVOLUTE, _body_world_inertia  # noqa: F401
+from .spatial import _FLOAT32_EPS, J_FIXED, J_PRISMATIC, J_REVOLUTE, Articulation, _body_world_inertia  # noqa: F401
 
 wp.set_module_options({"enable_backward": False})
 
@@ -188,32 +188,13 @@ def _chain_funcs(nj: int, n: int, nr: int, template: tuple | None, full: bool):
         """``chain_hg``: H and, with ``GRAV``, the gravity force of every DOF from the same pass (0 without)."""
 
         @wp.func
-        def chain_hg(
-            num_dofs: int,
-            jb: int,
-            db: int,
-            chain_type: wp.array[wp.int32],
-            chain_parent: wp.array[wp.int32],
-            chain_dof: wp.array[wp.int32],
-            chain_anc: wp.array[wp.int32],
-            row_dof: wp.array[wp.int32],
-            joint_q_start: wp.array[wp.int32],
-            joint_qd_start: wp.array[wp.int32],
-            joint_X_p: wp.array[wp.transform],
-            joint_X_c: wp.array[wp.transform],
-            joint_axis: wp.array[wp.vec3],
-            joint_child: wp.array[wp.int32],
-            joint_armature: wp.array[float],
-            body_mass: wp.array[float],
-            body_com: wp.array[wp.vec3],
-            body_inertia: wp.array[wp.mat33],
-            joint_q: wp.array[float],
-            gravity: wp.vec3,
-        ):
+        def chain_hg(art: Articulation, env: int, joint_q: wp.array[float], gravity: wp.vec3):
             # Loop bounds are read at run time (not unrolled): the fully unrolled triple loop over a 9-DOF chain takes
             # ~20 s to compile on the CPU backend for no measured gain.
-            nj_rt = chain_type.shape[0]
-            n_rt = num_dofs
+            jb = art.env_joint_base[env]
+            db = art.env_dof_base[env]
+            nj_rt = art.chain_type.shape[0]
+            n_rt = art.num_dofs
             H = MatN()
             G = VecN()  # with GRAV: the gravity force dU/dq of every DOF [N·m or N]
             gv = wp.vec3d(wp.float64(gravity[0]), wp.float64(gravity[1]), wp.float64(gravity[2]))
@@ -224,20 +205,20 @@ def _chain_funcs(nj: int, n: int, nr: int, template: tuple | None, full: bool):
             bq = MatJ4()  # child-body world rotations (x, y, z, w)
             for k in range(nj_rt):
                 j = jb + k
-                par = chain_parent[k]
+                par = art.chain_parent[k]
                 Xw = wp.transform_identity()
                 if par >= 0:
                     Xw = wp.transform(
                         wp.vec3(bp[par, 0], bp[par, 1], bp[par, 2]),
                         wp.quat(bq[par, 0], bq[par, 1], bq[par, 2], bq[par, 3]),
                     )
-                Xj = Xw * joint_X_p[j]
-                t = chain_type[k]
+                Xj = Xw * art.joint_X_p[j]
+                t = art.chain_type[k]
                 Xm = wp.transform_identity()
                 if t != 0:
-                    a = joint_axis[joint_qd_start[j]]
-                    qv = joint_q[joint_q_start[j]]
-                    d = chain_dof[k]
+                    a = art.joint_axis[art.joint_qd_start[j]]
+                    qv = joint_q[art.joint_q_start[j]]
+                    d = art.chain_dof[k]
                     aw = wp.transform_vector(Xj, a)
                     ow = wp.transform_get_translation(Xj)
                     ax[d] = wp.vec3d(wp.float64(aw[0]), wp.float64(aw[1]), wp.float64(aw[2]))
@@ -247,14 +228,14 @@ def _chain_funcs(nj: int, n: int, nr: int, template: tuple | None, full: bool):
                         isrev[d, 0] = wp.float64(1.0)
                     else:
                         Xm = wp.transform(a * qv, wp.quat_identity())
-                Xb = Xj * Xm * wp.transform_inverse(joint_X_c[j])
+                Xb = Xj * Xm * wp.transform_inverse(art.joint_X_c[j])
                 p = wp.transform_get_translation(Xb)
                 r = wp.transform_get_rotation(Xb)
                 bp[k] = p
                 bq[k] = wp.vec4(r[0], r[1], r[2], r[3])
                 # This body's contribution to H over the DOFs that move it.
-                m, c, Iw = _body_world_inertia(Xb, joint_child[j], body_mass, body_com, body_inertia)
-                mask = chain_anc[k]
+                m, c, Iw = _body_world_inertia(Xb, art.joint_child[j], art)
+                mask = art.chain_anc[k]
                 jv = MatN3()  # COM velocity per unit rate of each DOF that moves this body [m/s]
                 jw = MatN3()  # angular velocity per unit rate [rad/s]
                 for i in range(n_rt):
@@ -277,7 +258,7 @@ def _chain_funcs(nj: int, n: int, nr: int, template: tuple | None, full: bool):
                             if (mask >> jj) & 1:
                                 H[i, jj] = H[i, jj] + m * wp.dot(jvi, jv[jj]) + wp.dot(Ijwi, jw[jj])
             for i in range(n_rt):
-                H[i, i] = H[i, i] + wp.float64(joint_armature[db + i])
+                H[i, i] = H[i, i] + wp.float64(art.joint_armature[db + i])
             return H, G
 
         return chain_hg
@@ -286,33 +267,10 @@ def _chain_funcs(nj: int, n: int, nr: int, template: tuple | None, full: bool):
     chain_h = h_only(make_chain_hg(False))
 
     @wp.func
-    def chain_rows_factor(
-        num_dofs: int,
-        jb: int,
-        db: int,
-        chain_type: wp.array[wp.int32],
-        chain_parent: wp.array[wp.int32],
-        chain_dof: wp.array[wp.int32],
-        chain_anc: wp.array[wp.int32],
-        row_dof: wp.array[wp.int32],
-        joint_q_start: wp.array[wp.int32],
-        joint_qd_start: wp.array[wp.int32],
-        joint_X_p: wp.array[wp.transform],
-        joint_X_c: wp.array[wp.transform],
-        joint_axis: wp.array[wp.vec3],
-        joint_child: wp.array[wp.int32],
-        joint_armature: wp.array[float],
-        body_mass: wp.array[float],
-        body_com: wp.array[wp.vec3],
-        body_inertia: wp.array[wp.mat33],
-        joint_q: wp.array[float],
-    ):
-        H = chain_h(
-            num_dofs, jb, db, chain_type, chain_parent, chain_dof, chain_anc, row_dof, joint_q_start, joint_qd_start,
-            joint_X_p, joint_X_c, joint_axis, joint_child, joint_armature, body_mass, body_com, body_inertia, joint_q,
-        )  # fmt: skip
-        n_rt = num_dofs
-        nr_rt = row_dof.shape[0]
+    def chain_rows_factor(art: Articulation, env: int, joint_q: wp.array[float]):
+        H = chain_h(art, env, joint_q)
+        n_rt = art.num_dofs
+        nr_rt = art.row_dof.shape[0]
         # Cholesky H = L L^T in place (lower triangle), pivots floored as in Newton's JointSpaceResponse.
         for jc in range(n_rt):
             s = H[jc, jc]
@@ -329,7 +287,7 @@ def _chain_funcs(nj: int, n: int, nr: int, template: tuple | None, full: bool):
         # y_r = L^-1 e_{d_r}: forward substitution from row d_r (entries above it are 0).
         Y = MatRN()
         for rr in range(nr_rt):
-            dr = row_dof[rr]
+            dr = art.row_dof[rr]
             for i in range(dr, n_rt):
                 tt = wp.float64(0.0)
                 if i == dr:
@@ -364,27 +322,7 @@ def response_kernel(nj: int, n: int, nr: int, template: tuple | None = None) -> 
 
     @wp.kernel(enable_backward=False, module="unique")
     def _fused_response_kernel(
-        # Chain (articulation template):
-        chain_type: wp.array[wp.int32],
-        chain_parent: wp.array[wp.int32],
-        chain_dof: wp.array[wp.int32],
-        chain_anc: wp.array[wp.int32],
-        row_dof: wp.array[wp.int32],
-        # Envs:
-        env_joint_base: wp.array[wp.int32],
-        env_dof_base: wp.array[wp.int32],
-        # Model:
-        joint_q_start: wp.array[wp.int32],
-        joint_qd_start: wp.array[wp.int32],
-        joint_X_p: wp.array[wp.transform],
-        joint_X_c: wp.array[wp.transform],
-        joint_axis: wp.array[wp.vec3],
-        joint_child: wp.array[wp.int32],
-        joint_armature: wp.array[float],
-        body_mass: wp.array[float],
-        body_com: wp.array[wp.vec3],
-        body_inertia: wp.array[wp.mat33],
-        num_dofs: int,
+        art: Articulation,  # the articulation: chain tables, per-env bases, model arrays
         # In:
         joint_q_in: wp.array[float],
         # Out:
@@ -393,12 +331,8 @@ def response_kernel(nj: int, n: int, nr: int, template: tuple | None = None) -> 
     ):
         """Per env: r = (H^-1)_ii [1/(kg m^2) or 1/kg] of every controlled row (and optionally the whole block)."""
         env = wp.tid()
-        A = chain_rows_factor(
-            num_dofs, env_joint_base[env], env_dof_base[env], chain_type, chain_parent, chain_dof, chain_anc, row_dof,
-            joint_q_start, joint_qd_start, joint_X_p, joint_X_c, joint_axis, joint_child, joint_armature,
-            body_mass, body_com, body_inertia, joint_q_in,
-        )  # fmt: skip
-        nr_rt = row_dof.shape[0]
+        A = chain_rows_factor(art, env, joint_q_in)
+        nr_rt = art.row_dof.shape[0]
         for rr in range(nr_rt):
             response_out[env, rr] = float(A[rr, rr])
         if block_out:
@@ -435,30 +369,32 @@ class FusedChain:
         self.env_joint_base = up(layout.env_joint_base)
         self.env_dof_base = up(layout.env_dof_base)
         self.num_rows = int(layout.row_dof.shape[0])
+        self._art = self._art_key = None
+
+    def articulation(self) -> Articulation:
+        """The articulation as the fused kernels take it (:class:`~wpctrl.kernels.spatial.Articulation`): this chain's
+        tables and per-env bases, and the model's arrays."""
+        m = self.model
+        arrays = (m.joint_q_start, m.joint_qd_start, m.joint_X_p, m.joint_X_c, m.joint_axis, m.joint_child,
+                  m.joint_armature, m.body_mass, m.body_com, m.body_inertia)  # fmt: skip
+        key = tuple(a.ptr for a in arrays)  # the model's arrays as they are now (a replaced array is picked up)
+        if self._art is not None and self._art_key == key:
+            return self._art
+        art = Articulation()
+        art.chain_type, art.chain_parent, art.chain_dof = self.chain_type, self.chain_parent, self.chain_dof
+        art.chain_anc, art.row_dof = self.chain_anc, self.row_dof
+        art.env_joint_base, art.env_dof_base = self.env_joint_base, self.env_dof_base
+        art.joint_q_start, art.joint_qd_start = m.joint_q_start, m.joint_qd_start
+        art.joint_X_p, art.joint_X_c, art.joint_axis = m.joint_X_p, m.joint_X_c, m.joint_axis
+        art.joint_child, art.joint_armature = m.joint_child, m.joint_armature
+        art.body_mass, art.body_com, art.body_inertia = m.body_mass, m.body_com, m.body_inertia
+        art.num_dofs = self.layout.num_dofs
+        self._art, self._art_key = art, key
+        return art
 
     def chain_args(self) -> dict:
-        """The chain, env and model parameters shared by the fused kernels (in their signature order)."""
-        m = self.model
-        return {
-            "chain_type": self.chain_type,
-            "chain_parent": self.chain_parent,
-            "chain_dof": self.chain_dof,
-            "chain_anc": self.chain_anc,
-            "row_dof": self.row_dof,
-            "env_joint_base": self.env_joint_base,
-            "env_dof_base": self.env_dof_base,
-            "joint_q_start": m.joint_q_start,
-            "joint_qd_start": m.joint_qd_start,
-            "joint_X_p": m.joint_X_p,
-            "joint_X_c": m.joint_X_c,
-            "joint_axis": m.joint_axis,
-            "joint_child": m.joint_child,
-            "joint_armature": m.joint_armature,
-            "body_mass": m.body_mass,
-            "body_com": m.body_com,
-            "body_inertia": m.body_inertia,
-            "num_dofs": self.layout.num_dofs,
-        }
+        """The fused kernels' articulation argument, by name (``art``)."""
+        return {"art": self.articulation()}
 
     def kernel_key(self) -> tuple:
         """``(joints, DOFs, rows, template or None)``: what the fused kernels are compiled for."""

@@ -13,7 +13,7 @@ from __future__ import annotations
 import warp as wp
 
 from .cholesky import cholesky_funcs
-from .spatial import J_FIXED, J_REVOLUTE, _body_world_inertia
+from .spatial import J_FIXED, J_REVOLUTE, Articulation, _body_world_inertia
 
 wp.set_module_options({"enable_backward": False})
 
@@ -38,32 +38,8 @@ def h_only(chain_hg_no_gravity):
     without the gravity pass."""
 
     @wp.func
-    def chain_h(
-        num_dofs: int,
-        jb: int,
-        db: int,
-        chain_type: wp.array[wp.int32],
-        chain_parent: wp.array[wp.int32],
-        chain_dof: wp.array[wp.int32],
-        chain_anc: wp.array[wp.int32],
-        row_dof: wp.array[wp.int32],
-        joint_q_start: wp.array[wp.int32],
-        joint_qd_start: wp.array[wp.int32],
-        joint_X_p: wp.array[wp.transform],
-        joint_X_c: wp.array[wp.transform],
-        joint_axis: wp.array[wp.vec3],
-        joint_child: wp.array[wp.int32],
-        joint_armature: wp.array[float],
-        body_mass: wp.array[float],
-        body_com: wp.array[wp.vec3],
-        body_inertia: wp.array[wp.mat33],
-        joint_q: wp.array[float],
-    ):
-        H, G = chain_hg_no_gravity(
-            num_dofs, jb, db, chain_type, chain_parent, chain_dof, chain_anc, row_dof, joint_q_start, joint_qd_start,
-            joint_X_p, joint_X_c, joint_axis, joint_child, joint_armature, body_mass, body_com, body_inertia, joint_q,
-            wp.vec3(0.0),
-        )  # fmt: skip
+    def chain_h(art: Articulation, env: int, joint_q: wp.array[float]):
+        H, G = chain_hg_no_gravity(art, env, joint_q, wp.vec3(0.0))
         return H
 
     return chain_h
@@ -113,28 +89,9 @@ def unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool):
         """``chain_hg``: H and, with ``GRAV``, the gravity force of every DOF from the same pass (0 without)."""
 
         @wp.func
-        def chain_hg(
-            num_dofs: int,
-            jb: int,
-            db: int,
-            chain_type: wp.array[wp.int32],
-            chain_parent: wp.array[wp.int32],
-            chain_dof: wp.array[wp.int32],
-            chain_anc: wp.array[wp.int32],
-            row_dof: wp.array[wp.int32],
-            joint_q_start: wp.array[wp.int32],
-            joint_qd_start: wp.array[wp.int32],
-            joint_X_p: wp.array[wp.transform],
-            joint_X_c: wp.array[wp.transform],
-            joint_axis: wp.array[wp.vec3],
-            joint_child: wp.array[wp.int32],
-            joint_armature: wp.array[float],
-            body_mass: wp.array[float],
-            body_com: wp.array[wp.vec3],
-            body_inertia: wp.array[wp.mat33],
-            joint_q: wp.array[float],
-            gravity: wp.vec3,
-        ):
+        def chain_hg(art: Articulation, env: int, joint_q: wp.array[float], gravity: wp.vec3):
+            jb = art.env_joint_base[env]
+            db = art.env_dof_base[env]
             H = MatN()
             G = VecN()  # with GRAV: the gravity force dU/dq of every DOF [N·m or N]
             gv = wp.vec3d(wp.float64(gravity[0]), wp.float64(gravity[1]), wp.float64(gravity[2]))
@@ -155,11 +112,11 @@ def unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool):
                     Xw = wp.transform(
                         wp.vec3(bp[pk, 0], bp[pk, 1], bp[pk, 2]), wp.quat(bq[pk, 0], bq[pk, 1], bq[pk, 2], bq[pk, 3])
                     )
-                Xj = Xw * joint_X_p[j]
+                Xj = Xw * art.joint_X_p[j]
                 Xjm = Xj  # Xj * X_joint(q), the identity and zero parts of X_joint left out
                 if wp.static(JT[k] != J_FIXED):
-                    a = joint_axis[joint_qd_start[j]]
-                    qv = joint_q[joint_q_start[j]]
+                    a = art.joint_axis[art.joint_qd_start[j]]
+                    qv = joint_q[art.joint_q_start[j]]
                     d = wp.static(max(DOF[k], 0))
                     aw = wp.transform_vector(Xj, a)
                     ow = wp.transform_get_translation(Xj)
@@ -170,7 +127,7 @@ def unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool):
                     else:
                         Xjm = wp.transform(ow + aw * qv, wp.transform_get_rotation(Xj))
                 # Xb = Xjm * inverse(X_c): rotation q_jm q_c^-1, origin p_jm - R_b t_c (one rotation fewer)
-                Xc = joint_X_c[j]
+                Xc = art.joint_X_c[j]
                 qb = wp.transform_get_rotation(Xjm) * wp.quat_inverse(wp.transform_get_rotation(Xc))
                 Xb = wp.transform(
                     wp.transform_get_translation(Xjm) - wp.quat_rotate(qb, wp.transform_get_translation(Xc)), qb
@@ -200,7 +157,7 @@ def unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool):
                             G[i] = G[i] + wp.dot(gv, pl)
                     # This body joins the composite.
                     if wp.static(len(MOV[k]) > 0):
-                        m, c, Iw = _body_world_inertia(Xb, joint_child[j], body_mass, body_com, body_inertia)
+                        m, c, Iw = _body_world_inertia(Xb, art.joint_child[j], art)
                         rr = c - o
                         pm = pm + m
                         ph = ph + m * rr
@@ -218,7 +175,7 @@ def unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool):
                 else:
                     # This body's contribution to H over the DOF pairs that move it.
                     if wp.static(len(MOV[k]) > 0):
-                        m, c, Iw = _body_world_inertia(Xb, joint_child[j], body_mass, body_com, body_inertia)
+                        m, c, Iw = _body_world_inertia(Xb, art.joint_child[j], art)
                         jv = MatN3()  # COM velocity per unit rate of each DOF that moves this body [m/s]
                         Ijw = MatN3()  # I_world times the angular velocity per unit rate (revolute DOFs)
                         for ii in range(wp.static(len(MOV[k]))):
@@ -240,7 +197,7 @@ def unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool):
                                 h = h + wp.dot(Ijw[i], ax[i2])
                             H[i, i2] = h
             for i in range(wp.static(n)):
-                H[i, i] = H[i, i] + wp.float64(joint_armature[db + i])
+                H[i, i] = H[i, i] + wp.float64(art.joint_armature[db + i])
             return H, G
 
         return chain_hg
@@ -249,31 +206,8 @@ def unrolled_chain_funcs(nj: int, n: int, nr: int, template: tuple, full: bool):
     chain_h = h_only(make_chain_hg(False))
 
     @wp.func
-    def chain_rows_factor(
-        num_dofs: int,
-        jb: int,
-        db: int,
-        chain_type: wp.array[wp.int32],
-        chain_parent: wp.array[wp.int32],
-        chain_dof: wp.array[wp.int32],
-        chain_anc: wp.array[wp.int32],
-        row_dof: wp.array[wp.int32],
-        joint_q_start: wp.array[wp.int32],
-        joint_qd_start: wp.array[wp.int32],
-        joint_X_p: wp.array[wp.transform],
-        joint_X_c: wp.array[wp.transform],
-        joint_axis: wp.array[wp.vec3],
-        joint_child: wp.array[wp.int32],
-        joint_armature: wp.array[float],
-        body_mass: wp.array[float],
-        body_com: wp.array[wp.vec3],
-        body_inertia: wp.array[wp.mat33],
-        joint_q: wp.array[float],
-    ):
-        H = chain_h(
-            num_dofs, jb, db, chain_type, chain_parent, chain_dof, chain_anc, row_dof, joint_q_start, joint_qd_start,
-            joint_X_p, joint_X_c, joint_axis, joint_child, joint_armature, body_mass, body_com, body_inertia, joint_q,
-        )  # fmt: skip
+    def chain_rows_factor(art: Articulation, env: int, joint_q: wp.array[float]):
+        H = chain_h(art, env, joint_q)
         if wp.static(FULL):
             return inverse_block(H)
         return inverse_diag(H)

@@ -205,20 +205,25 @@ class _NetGroup:
         if self._launch is None:
             s = self.spec
             effort = engine.part("effort_readout")
+            c, models = engine.core, engine.part("actuator_models")
+            io = actuator_net.NetIO()
+            io.q_idx, io.qd_idx, io.q_stride, io.qd_stride = c.q_idx, c.qd_idx, c.q_stride, c.qd_stride
+            io.force_limit = engine.part("drive_properties").force_limit
+            io.sat_effort, io.vel_limit = models.sat_effort, models.vel_limit
+            io.lstm_h, io.lstm_c = self.lstm_h, self.lstm_c
+            if effort is not None:
+                io.computed_effort, io.applied_effort = effort.computed_effort, effort.applied_effort
+                io.saturation_count = effort.saturation_count
             per_call = {
                 "row0": self.row0,
+                "io": io,
                 "pos_scale": float(s.pos_scale),
                 "vel_scale": float(s.vel_scale),
                 "torque_scale": float(s.torque_scale),
                 "joint_q_in": state.joint_q,
                 "joint_qd_in": state.joint_qd,
                 "joint_target_q_in": control.joint_target_q,
-                "lstm_h_out": self.lstm_h,
-                "lstm_c_out": self.lstm_c,
                 "joint_f_out": control.joint_f,
-                "computed_effort_out": None if effort is None else effort.computed_effort,
-                "applied_effort_out": None if effort is None else effort.applied_effort,
-                "saturation_count_out": None if effort is None else effort.saturation_count,
                 **self._extra,
             }
             if self.kernel_kind == "tiled":

@@ -27,61 +27,59 @@ DRIVE_FIELDS = ("stiffness", "damping", "force_limit", "friction")
 """The per-env drive properties, in the order of the kernels' property index p."""
 
 
+@wp.struct
+class DriveArrays:
+    """What the set / randomise kernels write: the per-env drive properties (``(num_envs, rows)``), their mirror in
+    Newton's per-DOF model arrays, and what the mirror needs (each row's DOF, its acceleration flag and r). One kernel
+    argument instead of twelve; :meth:`DriveProperties.arrays` fills it."""
+
+    kp: wp.array2d[float]
+    kd: wp.array2d[float]
+    force_limit: wp.array2d[float]
+    friction: wp.array2d[float]
+    joint_target_ke: wp.array[float]  # optional (implicit actuation: the gains reach the solver's drive)
+    joint_target_kd: wp.array[float]  # optional
+    joint_effort_limit: wp.array[float]
+    joint_friction: wp.array[float]
+    row_accel: wp.array[wp.int32]  # (rows,) 1 for an acceleration drive
+    row_qd_off: wp.array[wp.int32]  # (rows,) the row's DOF offset from its env's first
+    env_qd_base: wp.array[wp.int32]  # (num_envs,)
+    response: wp.array2d[float]  # (num_envs | 1, rows) r, for acceleration rows
+
+
 @wp.func
-def _store(
-    env: int,
-    r: int,
-    p: int,
-    value: float,
-    kp_out: wp.array2d[float],
-    kd_out: wp.array2d[float],
-    force_limit_out: wp.array2d[float],
-    friction_out: wp.array2d[float],
-    row_accel: wp.array[wp.int32],
-    row_qd_off: wp.array[wp.int32],
-    env_qd_base: wp.array[wp.int32],
-    response_in: wp.array2d[float],
-    joint_target_ke_out: wp.array[float],
-    joint_target_kd_out: wp.array[float],
-    joint_effort_limit_out: wp.array[float],
-    joint_friction_out: wp.array[float],
-):
+def _store(env: int, r: int, p: int, value: float, drive: DriveArrays):
     """Write one property of (env, row) into its per-env array and mirror it into Newton's per-DOF model array.
     Gains reach the model only with implicit actuation (the ke/kd outputs are None otherwise); an acceleration row
     hands the solver Kp / r, Kd / r."""
     if p == 0:
-        kp_out[env, r] = value
+        drive.kp[env, r] = value
     elif p == 1:
-        kd_out[env, r] = value
+        drive.kd[env, r] = value
     elif p == 2:
-        force_limit_out[env, r] = value
+        drive.force_limit[env, r] = value
     else:
-        friction_out[env, r] = value
-    di = env_qd_base[env] + row_qd_off[r]
+        drive.friction[env, r] = value
+    di = drive.env_qd_base[env] + drive.row_qd_off[r]
     if p < 2:
-        if joint_target_ke_out:
+        if drive.joint_target_ke:
             g = value
-            if row_accel[r] != 0:
-                g = value / response_in[wp.min(env, response_in.shape[0] - 1), r]
+            if drive.row_accel[r] != 0:
+                g = value / drive.response[wp.min(env, drive.response.shape[0] - 1), r]
             if p == 0:
-                joint_target_ke_out[di] = g
+                drive.joint_target_ke[di] = g
             else:
-                joint_target_kd_out[di] = g
+                drive.joint_target_kd[di] = g
     elif p == 2:
-        joint_effort_limit_out[di] = value
+        drive.joint_effort_limit[di] = value
     else:
-        joint_friction_out[di] = value
+        drive.joint_friction[di] = value
 
 
 @wp.kernel
 def _randomize_drive_kernel(
-    # Rows:
-    row_accel: wp.array[wp.int32],
-    row_qd_off: wp.array[wp.int32],
     row0: int,
     num_rows: int,
-    # Envs:
-    env_qd_base: wp.array[wp.int32],
     # Draw:
     seed: int,
     mode: int,
@@ -93,80 +91,42 @@ def _randomize_drive_kernel(
     env_mask_in: wp.array[wp.bool],  # optional: only where True
     nominal_in: wp.array2d[float],  # (4, rows) the config's values
     rng_counter_in: wp.array[wp.int32],  # (1,)
-    response_in: wp.array2d[float],  # (num_envs, rows) r, for acceleration rows
     # Out:
-    kp_out: wp.array2d[float],  # (num_envs, rows)
-    kd_out: wp.array2d[float],
-    force_limit_out: wp.array2d[float],
-    friction_out: wp.array2d[float],
-    joint_target_ke_out: wp.array[float],  # optional (implicit actuation)
-    joint_target_kd_out: wp.array[float],  # optional
-    joint_effort_limit_out: wp.array[float],
-    joint_friction_out: wp.array[float],
+    drive: DriveArrays,
 ):
     """value = nominal * U(lo, hi) ("scale") or U(lo, hi) ("abs"); lo == hi gives exactly nominal * lo (no rounding
     of the draw can enter: (hi - lo) * u == 0)."""
     tid = wp.tid()
-    env, rl, i = _select(tid, num_rows, env_ids_in, env_mask_in, kp_out.shape[0])
+    env, rl, i = _select(tid, num_rows, env_ids_in, env_mask_in, drive.kp.shape[0])
     if env < 0:
         return
     r = row0 + rl
     key = wp.randi(wp.rand_init(seed, rng_counter_in[0]))
-    state = wp.rand_init(key, env * kp_out.shape[1] + r)
+    state = wp.rand_init(key, env * drive.kp.shape[1] + r)
     for p in range(4):
         u = wp.randf(state)  # drawn for every p, so a property's values do not depend on which others are enabled
         if enabled[p] != 0:
             x = lo[p] + (hi[p] - lo[p]) * u
             if mode == MODE_SCALE:
                 x = nominal_in[p, r] * x
-            _store(
-                env,
-                r,
-                p,
-                x,
-                kp_out,
-                kd_out,
-                force_limit_out,
-                friction_out,
-                row_accel,
-                row_qd_off,
-                env_qd_base,
-                response_in,
-                joint_target_ke_out,
-                joint_target_kd_out,
-                joint_effort_limit_out,
-                joint_friction_out,
-            )
+            _store(env, r, p, x, drive)
 
 
 @wp.kernel
 def _set_drive_kernel(
-    # Rows:
-    row_accel: wp.array[wp.int32],
-    row_qd_off: wp.array[wp.int32],
     row0: int,
     num_rows: int,
-    # Envs:
-    env_qd_base: wp.array[wp.int32],
     enabled: wp.vec4i,
     # In:
     env_ids_in: wp.array[wp.int32],  # optional
     env_mask_in: wp.array[wp.bool],  # optional
     values_in: wp.array3d[float],  # (4, 1 | len(env_ids) | num_envs, num_rows): row 0 broadcasts
-    response_in: wp.array2d[float],
     # Out:
-    kp_out: wp.array2d[float],
-    kd_out: wp.array2d[float],
-    force_limit_out: wp.array2d[float],
-    friction_out: wp.array2d[float],
-    joint_target_ke_out: wp.array[float],  # optional (implicit actuation)
-    joint_target_kd_out: wp.array[float],  # optional
-    joint_effort_limit_out: wp.array[float],
-    joint_friction_out: wp.array[float],
+    drive: DriveArrays,
 ):
     """Copy given values into the per-env drive arrays (and the model) for the selected envs."""
     tid = wp.tid()
-    env, rl, i = _select(tid, num_rows, env_ids_in, env_mask_in, kp_out.shape[0])
+    env, rl, i = _select(tid, num_rows, env_ids_in, env_mask_in, drive.kp.shape[0])
     if env < 0:
         return
     r = row0 + rl
@@ -177,25 +137,7 @@ def _set_drive_kernel(
             b = env  # a mask selects from values of shape (num_envs, n)
     for p in range(4):
         if enabled[p] != 0:
-            x = values_in[p, b, rl]
-            _store(
-                env,
-                r,
-                p,
-                x,
-                kp_out,
-                kd_out,
-                force_limit_out,
-                friction_out,
-                row_accel,
-                row_qd_off,
-                env_qd_base,
-                response_in,
-                joint_target_ke_out,
-                joint_target_kd_out,
-                joint_effort_limit_out,
-                joint_friction_out,
-            )
+            _store(env, r, p, values_in[p, b, rl], drive)
 
 
 class DriveProperties(Part):
@@ -225,43 +167,26 @@ class DriveProperties(Part):
 
     # -- set / randomise ------------------------------------------------------------------------------------------
 
-    def _outputs(self, model) -> list:
-        """The per-env arrays and the model arrays they mirror."""
-        return [
-            self.kp,
-            self.kd,
-            self.force_limit,
-            self.friction,
-            None if self.gains_off else model.joint_target_ke,
-            None if self.gains_off else model.joint_target_kd,
-            model.joint_effort_limit,
-            model.joint_friction,
-        ]
+    def arrays(self, engine) -> DriveArrays:
+        """The set / randomise kernels' output: the per-env arrays, the model arrays they mirror (the gains only with
+        implicit actuation), and the rows' DOFs, acceleration flags and r."""
+        m, c = engine.model, engine.core
+        d = DriveArrays()
+        d.kp, d.kd, d.force_limit, d.friction = self.kp, self.kd, self.force_limit, self.friction
+        if not self.gains_off:
+            d.joint_target_ke, d.joint_target_kd = m.joint_target_ke, m.joint_target_kd
+        d.joint_effort_limit, d.joint_friction = m.joint_effort_limit, m.joint_friction
+        d.row_accel, d.row_qd_off, d.env_qd_base = c.row_accel, c.row_qd_off, c.env_qd_base
+        d.response = engine.response
+        return d
 
     def set(self, engine, values: wp.array, enabled, env_ids, env_mask, row0: int, num_rows: int) -> None:
         """Copy ``values`` (4, 1 | selected | num_envs, num_rows) into rows [row0, row0 + num_rows) of the selected
         envs and mirror them into the model; then notify the attached solver."""
-        c = engine.core
         dim = (engine.num_envs if env_ids is None else env_ids.shape[0]) * num_rows
         if dim:
-            wp.launch(
-                _set_drive_kernel,
-                dim=dim,
-                inputs=[
-                    c.row_accel,
-                    c.row_qd_off,
-                    row0,
-                    num_rows,
-                    c.env_qd_base,
-                    wp.vec4i(*enabled),
-                    env_ids,
-                    env_mask,
-                    values,
-                    engine.response,
-                    *self._outputs(engine.model),
-                ],
-                device=engine.device,
-            )
+            inputs = [row0, num_rows, wp.vec4i(*enabled), env_ids, env_mask, values, self.arrays(engine)]
+            wp.launch(_set_drive_kernel, dim=dim, inputs=inputs, device=engine.device)
         engine.notify_solver()
 
     def randomize(self, engine, lo, hi, enabled, mode_abs: bool, seed: int, env_ids, env_mask, row0, num_rows) -> None:
@@ -270,29 +195,9 @@ class DriveProperties(Part):
         c = engine.core
         dim = (engine.num_envs if env_ids is None else env_ids.shape[0]) * num_rows
         if dim:
-            wp.launch(
-                _randomize_drive_kernel,
-                dim=dim,
-                inputs=[
-                    c.row_accel,
-                    c.row_qd_off,
-                    row0,
-                    num_rows,
-                    c.env_qd_base,
-                    int(seed),
-                    int(mode_abs),
-                    wp.vec4i(*enabled),
-                    wp.vec4(*lo),
-                    wp.vec4(*hi),
-                    env_ids,
-                    env_mask,
-                    self.nominal,
-                    c.rng_counter,
-                    engine.response,
-                    *self._outputs(engine.model),
-                ],
-                device=engine.device,
-            )
+            draw = [int(seed), int(mode_abs), wp.vec4i(*enabled), wp.vec4(*lo), wp.vec4(*hi)]
+            inputs = [row0, num_rows, *draw, env_ids, env_mask, self.nominal, c.rng_counter, self.arrays(engine)]
+            wp.launch(_randomize_drive_kernel, dim=dim, inputs=inputs, device=engine.device)
             wp.launch(_bump_counter_kernel, dim=1, inputs=[c.rng_counter], device=engine.device)
         engine.notify_solver()
 

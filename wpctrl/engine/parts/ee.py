@@ -27,6 +27,7 @@ from ...config import ConfigError
 from ...config.ee import MAX_EE_DOF, EESpec
 from ...kernels import ee as ee_kernels
 from ...kernels.dims import PER_ENV_BLOCK_DIM
+from ...kernels.ee_math import EEChain
 from ..hostmath import qmul, rpy_quat
 from ..launch import _Launch
 from .part import Part
@@ -35,6 +36,18 @@ logger = logging.getLogger("wpctrl")
 
 _MOVING = (int(newton.JointType.REVOLUTE), int(newton.JointType.PRISMATIC))
 _FIXED = int(newton.JointType.FIXED)
+
+
+def ee_chain(model, chain_joint=None, chain_col=None, env_root=None, ee_offset=None) -> EEChain:
+    """The EE kernels' chain argument (:class:`wpctrl.kernels.ee_math.EEChain`): the chain's tables, the model's joint
+    arrays (alone, without a chain: a placeholder for kernels compiled without one)."""
+    chain = EEChain()
+    chain.chain_joint, chain.chain_col, chain.env_root = chain_joint, chain_col, env_root
+    chain.ee_offset = wp.transform_identity() if ee_offset is None else ee_offset
+    chain.joint_type, chain.joint_axis = model.joint_type, model.joint_axis
+    chain.joint_X_p, chain.joint_X_c = model.joint_X_p, model.joint_X_c
+    chain.joint_q_start, chain.joint_qd_start = model.joint_q_start, model.joint_qd_start
+    return chain
 
 
 def _short(label: str) -> str:
@@ -179,18 +192,7 @@ class EEPart:
         self.ik_success = wp.ones(E, dtype=wp.int32, device=dev)
         self.initialized = False
         self._launch = None
-        self._chain_params = {
-            "chain_joint": self.chain_joint,
-            "chain_col": self.chain_col,
-            "joint_type": model.joint_type,
-            "joint_X_p": model.joint_X_p,
-            "joint_X_c": model.joint_X_c,
-            "joint_axis": model.joint_axis,
-            "joint_q_start": model.joint_q_start,
-            "joint_qd_start": model.joint_qd_start,
-            "env_root": self.env_root,
-            "ee_offset": self.ee_offset,
-        }
+        self._chain_params = {"chain": ee_chain(model, self.chain_joint, self.chain_col, self.env_root, self.ee_offset)}
 
     # -- binding ----------------------------------------------------------------------------------------------------
 

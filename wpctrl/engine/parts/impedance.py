@@ -1,4 +1,5 @@
-"""The impedance part of a control mode: operational-space and joint-impedance controllers.
+"""The impedance part of a control mode: operational-space and joint-impedance controllers (and the kernel that
+randomises an OSC controller's task gains).
 
 Their joints are effort rows of the mode's engine (no action column of their own): the substep kernel delays,
 clamps to ``force_limit``, reads out and writes ``Control.joint_f`` for them as for any effort row, and a reset zeroes
@@ -21,20 +22,51 @@ from ...config.impedance import DECOUPLE_NONE, MODE_FIXED, ImpedanceSpec
 from ...kernels import impedance as impedance_kernels
 from ...kernels import inertia
 from ...kernels.dims import PER_ENV_BLOCK_DIM
-from ...kernels.env_selection import _bump_counter_kernel
+from ...kernels.env_selection import MODE_SCALE, _bump_counter_kernel, _select
+from ...kernels.spatial import Articulation
 from ..launch import _Launch
-from .ee import EEPart
+from .ee import EEPart, ee_chain
 from .part import Part
-
-_FUSED_ARGS = (
-    "chain_type", "chain_parent", "chain_dof", "chain_anc", "row_dof", "env_joint_base", "env_dof_base", "joint_child",
-    "joint_armature", "body_mass", "body_com", "body_inertia", "num_dofs",
-)  # fmt: skip
-"""The torque kernel's parameters that come from :meth:`wpctrl.kernels.inertia.FusedChain.chain_args`."""
 
 
 def _specs(plan) -> dict:
     return {r0: v for r0, v in plan.ee_specs.items() if isinstance(v[2], ImpedanceSpec)}
+
+
+@wp.kernel(enable_backward=False)
+def _randomize_task_gains_kernel(
+    seed: int,
+    mode: int,  # env_selection.MODE_SCALE / MODE_ABS
+    enabled: wp.vec2i,  # (stiffness, damping)
+    lo: wp.vec2,
+    hi: wp.vec2,
+    # In:
+    env_ids_in: wp.array[wp.int32],  # optional: thread block i draws for env env_ids_in[i]
+    env_mask_in: wp.array[wp.bool],  # optional: only where True
+    nominal_in: wp.array2d[float],  # (2, 6): the config's task stiffness and damping
+    rng_counter_in: wp.array[wp.int32],  # (1,)
+    # Out:
+    task_kp_out: wp.array2d[float],  # (num_envs, 6)
+    task_kd_out: wp.array2d[float],
+):
+    """An OSC controller's task gains: nominal * U(lo, hi) ("scale") or U(lo, hi) ("abs"), per env and axis, from a
+    stream of their own (keyed by the seed, the draw counter and the env's axis)."""
+    tid = wp.tid()
+    env, k, i = _select(tid, 6, env_ids_in, env_mask_in, task_kp_out.shape[0])
+    if env < 0:
+        return
+    key = wp.randi(wp.rand_init(seed, rng_counter_in[0]))
+    state = wp.rand_init(key, 1000003 + env * 6 + k)
+    for p in range(2):
+        u = wp.randf(state)  # drawn for both, so that one's values do not depend on whether the other is drawn
+        if enabled[p] != 0:
+            x = lo[p] + (hi[p] - lo[p]) * u
+            if mode == MODE_SCALE:
+                x = nominal_in[p, k] * x
+            if p == 0:
+                task_kp_out[env, k] = x
+            else:
+                task_kd_out[env, k] = x
 
 
 class _Unit:
@@ -90,19 +122,7 @@ class _Unit:
     # -- chain parameters (an OSC unit's EE chain; placeholders for joint impedance) ----------------------------------
 
     def chain_params(self) -> dict:
-        m = self.engine.model
-        return {
-            "chain_joint": None,
-            "chain_col": None,
-            "joint_type": m.joint_type,
-            "joint_X_p": m.joint_X_p,
-            "joint_X_c": m.joint_X_c,
-            "joint_axis": m.joint_axis,
-            "joint_q_start": m.joint_q_start,
-            "joint_qd_start": m.joint_qd_start,
-            "env_root": None,
-            "ee_offset": wp.transform_identity(),
-        }
+        return {"chain": ee_chain(self.engine.model)}
 
     def gain_arrays(self) -> tuple[wp.array, wp.array, int]:
         """Where the variable gains go: ``(kp, kd, first column)``."""
@@ -166,13 +186,11 @@ class _Unit:
             fused = self.fused
             params = self.chain_params()
             if fused is not None:
-                chain = fused.chain_args()
-                params.update({k: chain[k] for k in _FUSED_ARGS})
+                params.update(fused.chain_args())
                 row_dof = tuple(int(d) for d in fused.layout.row_dof)
                 kernel = impedance_kernels.torque_kernel(s.osc, self.num_dof, row_dof, fused.kernel_key())
             else:
-                params.update(dict.fromkeys(_FUSED_ARGS))
-                params["num_dofs"] = 0
+                params["art"] = Articulation()  # no fused inertia pass: never read
                 kernel = impedance_kernels.torque_kernel(s.osc, self.num_dof, None, None)
             params.update(
                 gravity_in=eng.model.gravity,
@@ -234,7 +252,7 @@ class _OSCUnit(_Unit, EEPart):
             return
         nominal = wp.array(np.stack([self.spec.stiffness, self.spec.damping]), dtype=wp.float32, device=eng.device)
         wp.launch(
-            impedance_kernels._randomize_task_gains_kernel,
+            _randomize_task_gains_kernel,
             dim=dim,
             inputs=[
                 int(seed),

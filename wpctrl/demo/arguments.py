@@ -1,5 +1,6 @@
-"""The demo's options and every check on them, before anything heavy is imported: the solvers and actuations it
-offers, the combinations that hold the Panda at ManiSkill's gains (and why the others do not), the extras it needs."""
+"""The demo's command-line options and every check on them, before anything heavy is imported: the solvers and
+actuations it offers, the combinations that hold the Panda at ManiSkill's gains (and why the others do not), the extras
+it needs."""
 
 from __future__ import annotations
 

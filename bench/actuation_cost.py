@@ -73,7 +73,7 @@ LABELS = {
 
 def _share_gains(ctrl) -> None:
     """Bind (1, rows) gain arrays, the layout before per-env drive properties (bench-only, engine internals)."""
-    drive = ctrl._engine.part("drive")
+    drive = ctrl._engine.part("drive_properties")
     for name in ("kp", "kd", "force_limit"):
         a = getattr(drive, name)
         setattr(drive, name, wp.array(a.numpy()[:1], dtype=wp.float32, device=a.device))

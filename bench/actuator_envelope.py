@@ -53,7 +53,7 @@ def main(argv=None) -> int:
             PANDA_GRIPPER_JOINTS, -0.01, 0.04, 1e3, 1e2, mimic={"panda_finger_joint2": {"joint": "panda_finger_joint1"}}
         ),
     }
-    ctrl = wpctrl.build_controller(mode, model, 20, 100, "explicit", explicit_pd="stable", track_effort=True)
+    ctrl = wpctrl.build_controller(mode, model, 20, 100, actuation="explicit", explicit_pd="stable", track_effort=True)
     solver = newton.solvers.SolverMuJoCo(model, disable_contacts=True)
     s0, s1, control = model.state(), model.state(), model.control()
     ctrl.reset(s0, control=control)

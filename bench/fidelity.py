@@ -43,8 +43,8 @@ ARM = 7
 # inertia_update: stable PD refreshes r every substep here; None keeps the drive's default (the coupled drive: A every
 # substep)
 OPTIONS = {
-    "implicit": ("implicit", "naive", 1, False, None),
-    "implicit-actclamp": ("implicit", "naive", 1, True, None),
+    "implicit": ("implicit", None, 1, False, None),
+    "implicit-actclamp": ("implicit", None, 1, True, None),
     "naive": ("explicit", "naive", 1, False, None),
     "stable": ("explicit", "stable", 1, False, "substep"),
     "coupled": ("explicit", "coupled", 1, False, None),
@@ -109,7 +109,7 @@ class Rig:
             self.model,
             setup["control_freq"],
             setup["sim_freq"] * mult,
-            actuation,
+            actuation=actuation,
             explicit_pd=explicit_pd,
             inertia_update=inertia_update,
         )

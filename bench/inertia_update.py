@@ -34,9 +34,9 @@ from bench.common import (  # noqa: E402
 
 VARIANTS = (
     # label, drive_mode, actuation, explicit_pd, inertia_update, response path
-    ("force, implicit (no update)", "force", "implicit", "naive", "control", "fused"),
-    ("acceleration, implicit [JointSpaceResponse]", "acceleration", "implicit", "naive", "control", "jsr"),
-    ("acceleration, implicit [fused]", "acceleration", "implicit", "naive", "control", "fused"),
+    ("force, implicit (no update)", "force", "implicit", None, None, "fused"),
+    ("acceleration, implicit [JointSpaceResponse]", "acceleration", "implicit", None, "control", "jsr"),
+    ("acceleration, implicit [fused]", "acceleration", "implicit", None, "control", "fused"),
     ("stable, H per control step [JointSpaceResponse]", "force", "explicit", "stable", "control", "jsr"),
     ("stable, H per control step [fused]", "force", "explicit", "stable", "control", "fused"),
     ("stable, H per substep [fused]", "force", "explicit", "stable", "substep", "fused"),

@@ -18,7 +18,7 @@ class Harness:
         self, config, num_envs: int = 1, actuation: str = "implicit", control_freq=20, sim_freq=100, device="cpu", **kw
     ):
         self.model = build_panda(num_envs, device=device)
-        self.ctrl = wpctrl.build_controller(config, self.model, control_freq, sim_freq, actuation, **kw)
+        self.ctrl = wpctrl.build_controller(config, self.model, control_freq, sim_freq, actuation=actuation, **kw)
         self.state = self.model.state()
         self.control = self.model.control()
         b = self.ctrl._engine.binding

@@ -12,8 +12,10 @@ input is checked against an independent computation first:
 - the Jacobian of an end-effector chain: Newton's ``eval_fk`` body poses and the model's joint frames and axes;
 - randomised drive properties and per-env delays: Warp's RNG draws of the seed and the draw counter (numpy port).
 
-Models: ``"replicated"`` (``build_panda(n)``: the index tables are env 0's plus a stride) or ``"flat"`` (three
-worlds, the second with a free-jointed box before its Panda: per-env index tables), built once per layout and
+Models: ``"replicated"`` (``build_panda(n)``: the index tables are env 0's plus a stride), ``"spaced"`` (the same,
+replicated 1 m x 2 m apart: the grid is centred, no env sits at the origin), ``"floating"`` (ManiSkill's Panda URDF
+on a free joint, spaced: 16 coordinates and 15 DOFs per env, so coordinate and DOF strides differ) or ``"flat"``
+(three worlds, the second with a free-jointed box before its Panda: per-env index tables), built once per layout and
 shared (each controller rewrites the drive arrays of its own joints only; comparisons never read other joints').
 """
 
@@ -27,8 +29,9 @@ import pytest
 import warp as wp
 from conftest import build_panda
 from hypothesis import strategies as st
+from reference_actuators import TABLE_TOL
 from reference_ee import EE_CONFIGS
-from reference_np import WRITE_KEYS, RefCombined, RefRobot, delay_draws, drawn_value, drive_draws
+from reference_np import WRITE_KEYS, RefCombined, RefRobot, delay_draws, drawn_value, drive_draws, param_draws
 
 import wpctrl
 from wpctrl.robots import PANDA_INITIAL_Q, PANDA_JOINTS
@@ -38,6 +41,7 @@ torch = pytest.importorskip("torch", reason="torch is a dev dependency (torch in
 TOL = 1e-6
 EE_TOL = 2e-4  # [rad, m] EE targets: float32 forward kinematics through a damped solve
 DRIVE = ("stiffness", "damping", "force_limit", "friction")
+ACT = ("saturation_effort", "velocity_limit")  # per-env DC-motor parameters (children with a DCMotor)
 _MODELS: dict = {}
 
 
@@ -83,15 +87,32 @@ class Layout:
         self.art = model.joint_articulation.numpy()[self.joint[:, 0]]
         art_dof0 = qd_start[model.articulation_start.numpy()[self.art]]
         self.local = self.dof - art_dof0[:, None]  # each joint's DOF inside its articulation
+        # The TCP: a site (a shape) on panda_link7 in wpctrl's Panda, a body of its own in the URDF's
         shape_world = model.shape_world.numpy()
         tcp = [i for i, s in enumerate(model.shape_label) if s.rsplit("/", 1)[-1] == "panda_hand_tcp"]
-        self.tcp_shape = np.array([next(i for i in tcp if shape_world[i] == w) for w in range(N)])
+        if tcp:
+            self.tcp_shape = np.array([next(i for i in tcp if shape_world[i] == w) for w in range(N)])
+            self.tcp_body = model.shape_body.numpy()[self.tcp_shape]
+            st = model.shape_transform.numpy().astype(np.float64)
+            self.tcp_offset = [(st[i, :3], st[i, 3:]) for i in self.tcp_shape]
+        else:
+            body_world = model.body_world.numpy()
+            bodies = [i for i, b in enumerate(model.body_label) if b.rsplit("/", 1)[-1] == "panda_hand_tcp"]
+            self.tcp_body = np.array([next(i for i in bodies if body_world[i] == w) for w in range(N)])
+            self.tcp_offset = [(np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]))] * N
 
 
 def model_for(kind: str, num_envs: int):
     key = (kind, num_envs)
     if key not in _MODELS:
-        m = build_panda(num_envs) if kind == "replicated" else _flat_model()
+        if kind == "replicated":
+            m = build_panda(num_envs)
+        elif kind in ("spaced", "floating"):
+            from user_models import panda_envs
+
+            m = panda_envs(num_envs, spacing=(1.0, 2.0, 0.0), floating=kind == "floating")
+        else:
+            m = _flat_model()
         _MODELS[key] = (m, Layout(m))
     return _MODELS[key]
 
@@ -138,9 +159,8 @@ class Physics:
         self._child = model.joint_child.numpy()
         self._type = model.joint_type.numpy()
         self._qd_start = model.joint_qd_start.numpy()
-        st = model.shape_transform.numpy().astype(np.float64)
-        self._tcp = [(st[s, :3], st[s, 3:]) for s in layout.tcp_shape]
-        self._tcp_body = model.shape_body.numpy()[layout.tcp_shape]
+        self._tcp = layout.tcp_offset
+        self._tcp_body = layout.tcp_body
 
     def _put(self, joint_q: np.ndarray):
         self.scratch.joint_q.assign(np.asarray(joint_q, np.float32))
@@ -154,8 +174,9 @@ class Physics:
         return np.stack([inv[L.art[e]][np.ix_(L.local[e], L.local[e])] for e in range(len(L.art))])
 
     def jacobian(self, joint_q: np.ndarray, names, ee_link: str) -> np.ndarray:
-        """(N, 6, n) geometric Jacobian [v; w] about the TCP, in the world frame (the replicated and flat worlds'
-        Panda bases sit at the origin, unrotated: the root frame), from eval_fk's body poses."""
+        """(N, 6, n) geometric Jacobian [v; w] about the TCP, in the world frame (every layout's Panda bases are
+        unrotated: the root frame's axes; the Jacobian does not depend on where the base is), from eval_fk's body
+        poses."""
         assert ee_link == "panda_hand_tcp"
         self._put(joint_q)
         newton.eval_fk(self.model, self.scratch.joint_q, self.scratch.joint_qd, self.scratch)
@@ -190,9 +211,38 @@ def _ranged(delay):
     return (delay, delay) if isinstance(delay, int) else tuple(delay)
 
 
+def _effective(children: dict, actuation, explicit_pd, nan_policy, inertia_update, opts: dict):
+    """The drawn options as build_controller takes them: those this mode would ignore are left out (it refuses them,
+    tests/test_options.py): an explicit law with implicit actuation, an inertia update where no inertia is computed
+    (no acceleration drive, neither stable nor coupled PD), a seed where no delay is drawn, target clipping without a
+    position target, a delay or the NaN check where no action is taken. What runs is the same either way."""
+
+    def drive_modes(c):
+        m = getattr(c, "drive_mode", "force")
+        return [m] if isinstance(m, str) else list(m)
+
+    opts = dict(opts)
+    law = explicit_pd if actuation == "explicit" else None
+    accel = any("acceleration" in drive_modes(c) for c in children.values())
+    inertia = inertia_update if (accel or law in ("stable", "coupled")) else None
+    rng = _ranged(opts.get("delay"))
+    if rng is None or rng[0] == rng[1]:
+        opts.pop("seed", None)
+    if not any(isinstance(c, (wpctrl.PDJointPosControllerConfig, *EE_CONFIGS)) for c in children.values()):
+        opts.pop("clip_targets", None)
+    if all(isinstance(c, wpctrl.PassiveControllerConfig) for c in children.values()):
+        opts.pop("delay", None)
+        opts.pop("seed", None)
+        nan_policy = "hold"
+    return law, nan_policy, inertia, opts
+
+
 class Harness:
     def __init__(self, mode, layout, num_substeps, actuation, explicit_pd, nan_policy, inertia_update, draw, opts=None):
-        opts = dict(opts or {})
+        children = {"": mode} if not isinstance(mode, dict) else mode
+        law, nan_policy, inertia, opts = _effective(
+            children, actuation, explicit_pd, nan_policy, inertia_update, opts or {}
+        )
         self.opts = opts
         self.draw = draw
         kind, num_envs = layout
@@ -204,7 +254,7 @@ class Harness:
         self.explicit = actuation == "explicit"
         self.coupled = self.explicit and explicit_pd == "coupled"
         if self.coupled:  # H every substep (its default): H once per control step has its own test in test_coupled.py
-            inertia_update = "substep"
+            inertia_update = inertia = "substep"
         children = {"": mode} if self.single else mode
         self.ee_cols = [
             PANDA_JOINTS.index(n) for c in children.values() if isinstance(c, EE_CONFIGS) for n in c.joint_names
@@ -218,8 +268,8 @@ class Harness:
                 sim_freq=20 * num_substeps,
                 actuation=actuation,
                 nan_policy=nan_policy,
-                explicit_pd=explicit_pd,
-                inertia_update=inertia_update,
+                explicit_pd=law,
+                inertia_update=inertia,
                 **opts,
             )
         self.inertia_update = inertia_update
@@ -242,7 +292,8 @@ class Harness:
             kinematics=self._kinematics,
         )
         self.nominal = {
-            uid: {f: getattr(self.child(uid), f).numpy()[0].copy() for f in DRIVE} for uid in self.ref.children
+            uid: {f: getattr(self.child(uid), f).numpy()[0].copy() for f in DRIVE + self.act_fields(uid)}
+            for uid in self.ref.children
         }
         self.row0 = {}
         r = 0
@@ -339,6 +390,10 @@ class Harness:
     def child(self, uid):
         return self.ctrl if self.single else self.ctrl[uid]
 
+    def act_fields(self, uid) -> tuple[str, ...]:
+        """The per-env actuator-model parameters of child ``uid`` (a DCMotor's), or ()."""
+        return ACT if self.ref.children[uid].actuator.kind == "dc" else ()
+
     def response(self) -> dict:
         """{uid: (N, n) r} as wpctrl last computed it (an input of the reference, checked in :meth:`check`)."""
         out = {}
@@ -377,6 +432,10 @@ class Harness:
                 # tau solves (I + D A) tau = b up to its clamps: relative to |b| + D |A| |tau|, not to tau
                 cols, scale = self.ref.coupled_scale
                 tol[self.layout.dof[:, cols]] += 1e-4 * np.abs(exp[self.layout.dof[:, cols]]) + 1e-5 * scale
+        if key == "f":
+            for rc in self.ref.children.values():
+                if rc.actuator.kind == "table":
+                    tol[self.layout.dof[:, rc.cols]] += TABLE_TOL
         if self.ee_cols:
             idx = self._index(key)[:, self.ee_cols]
             if key == "target_q":
@@ -431,6 +490,10 @@ class Harness:
             w = f"{where}: {uid or 'ctrl'}"
             for f, a in zip(DRIVE, (rc.kp, rc.kd, rc.force_limit, rc.friction)):
                 np.testing.assert_array_equal(getattr(c, f).numpy(), a, err_msg=f"{w}.{f}")
+            for f, a in zip(ACT, (rc.actuator.sat_effort, rc.actuator.vel_limit)):
+                got = getattr(c, f)
+                if rc.actuator.kind is not None or got is not None:  # a mode with actuator models has them per row
+                    np.testing.assert_array_equal(got.numpy(), a, err_msg=f"{w}.{f}")
             if ref.track_effort:
                 for f in ("computed_effort", "applied_effort"):
                     exp = getattr(rc, f)
@@ -439,6 +502,8 @@ class Harness:
                         atol += 1e-4 * np.abs(exp) + 1e-5 * getattr(rc, "effort_scale", 0.0)
                     if isinstance(rc.config, EE_CONFIGS):
                         atol += EE_TOL * (float(rc.kp.max()) + 1.0)
+                    if rc.actuator.kind == "table" and f == "applied_effort":
+                        atol += TABLE_TOL
                     got = getattr(c, f).numpy()
                     ok = np.abs(got - exp) <= atol + 1e-6 * np.abs(exp)
                     assert ok.all(), f"{w}.{f}: got {got[~ok]}, expected {exp[~ok]}"
@@ -571,7 +636,9 @@ class Harness:
         if isinstance(env_ids, list) and not env_ids:
             env_ids = None
         mask = env_mask(env_ids, N)
-        fields = sorted(self.draw(st.sets(st.sampled_from(DRIVE), min_size=1), label="properties"))
+        fields = sorted(
+            self.draw(st.sets(st.sampled_from(DRIVE + self.act_fields(uid)), min_size=1), label="properties")
+        )
         is_mask = isinstance(env_ids, np.ndarray | torch.Tensor) and env_ids.dtype in (np.bool_, torch.bool)
         is_mask = is_mask or (isinstance(env_ids, wp.array) and env_ids.dtype == wp.bool)
         if self.draw(st.booleans(), label="set (or randomise)"):
@@ -580,7 +647,8 @@ class Harness:
             vals = {}
             for f in fields:
                 shape = (n,) if self.draw(st.booleans(), label=f"{f} broadcast") else (sel, n)
-                v = rng.uniform(0.0, 500.0, shape).astype(np.float32)
+                lo, hi = {"saturation_effort": (0.0, 200.0), "velocity_limit": (0.1, 10.0)}.get(f, (0.0, 500.0))
+                v = rng.uniform(lo, hi, shape).astype(np.float32)
                 vals[f] = torch.from_numpy(v) if self.draw(st.booleans(), label=f"{f} as torch") else v
             c.set_drive_properties(env_ids=env_ids, **vals)
             ids = None if env_ids is None or is_mask or isinstance(env_ids, int) else _ids(env_ids)
@@ -598,12 +666,28 @@ class Harness:
         top = 2.0 if mode == "scale" else 100.0
         ranges = {}
         for f in fields:
-            lo = self.draw(st.floats(0.0, top), label=f"{f} lo")
+            least = (0.05 if mode == "scale" else 0.1) if f == "velocity_limit" else 0.0  # a no-load speed > 0
+            lo = self.draw(st.floats(least, top), label=f"{f} lo")
             width = self.draw(st.sampled_from([0.0, 0.5 * top, top]), label=f"{f} width")
             ranges[f] = (lo, lo + width)
         seed = self.draw(st.integers(-(2**31), 2**31 - 1), label="randomise seed")
-        before = {f: getattr(c, f).numpy().copy() for f in DRIVE}
+        before = {f: getattr(c, f).numpy().copy() for f in DRIVE + self.act_fields(uid)}
         c.randomize_drive_properties(env_ids=env_ids, mode=mode, seed=seed, **ranges)
+        if any(f in ranges for f in ACT):  # the actuator parameters draw first, at their own counter value
+            for p, f in enumerate(ACT):
+                got = getattr(c, f).numpy().copy()
+                if f not in ranges:
+                    np.testing.assert_array_equal(got, before[f], err_msg=f"randomize {f}: not drawn")
+                    continue
+                u = param_draws(seed, self.rng_counter, N, self.rows, self.row0[uid], n, 4 + p)
+                nominal = self.nominal[uid][f] if mode == "scale" else None
+                want = np.where(mask[:, None], drawn_value(u, *ranges[f], nominal), before[f])
+                np.testing.assert_allclose(got, want, rtol=1e-6, atol=0, err_msg=f"randomize {f}: Warp's draws")
+                rc.set_drive(f, got, mask)
+            self.rng_counter += 1
+        if not any(f in ranges for f in DRIVE):
+            self.check(f"randomize_drive_properties({ranges}, {mode}, {seed}, {env_ids!r})")
+            return
         u = drive_draws(seed, self.rng_counter, N, self.rows, self.row0[uid], n)
         self.rng_counter += 1
         for p, f in enumerate(DRIVE):

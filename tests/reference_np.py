@@ -34,6 +34,8 @@ Actuation options (issue 10), also written from their description, not from the 
    clamp, and a count of substeps with |law| > limit; reset zeroes them for the reset envs.
 9. ``clip_targets``: position targets set by an action are clamped to the joint limits (commanded joints first, then
    the mimic followers computed from the clamped source and clamped themselves).
+10. Actuator models (``DCMotor``, ``PositionBasedEffortLimit``) replace the explicit clamp to the force limit; ``ema``
+    smooths and ``binary`` picks the commanding joints' targets (``reference_actuators.py``).
 
 Arrays are float32 throughout and every operation is written in ManiSkill's order, so results agree with wpctrl to
 the last bit (up to the compiler's freedom to fuse multiply-adds).
@@ -47,6 +49,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 
 import numpy as np
+from reference_actuators import ActuatorModel, binary, smooth
 
 from wpctrl.config import (
     PassiveControllerConfig,
@@ -134,6 +137,18 @@ def drive_draws(seed: int, counter: int, num_envs: int, total_rows: int, row0: i
         for j in range(n):
             r = WarpRand(key & _M32, e * total_rows + row0 + j)
             out[e, j] = [r.randf() for _ in range(4)]
+    return out
+
+
+def param_draws(seed: int, counter: int, num_envs: int, total_rows: int, row0: int, n: int, stream: int) -> np.ndarray:
+    """(num_envs, n) uniform [0, 1) draws of one actuator-model parameter (DC-motor stall effort: stream 4, no-load
+    speed: stream 5) in ``randomize_drive_properties``: the drive properties' key, offset by the stream, one draw per
+    (env, row of the mode)."""
+    key = WarpRand(seed, counter).randi()
+    out = np.zeros((num_envs, n), F32)
+    for e in range(num_envs):
+        for j in range(n):
+            out[e, j] = WarpRand((key + stream * 7919) & _M32, e * total_rows + row0 + j).randf()
     return out
 
 
@@ -230,6 +245,7 @@ class RefController:
         mode = getattr(config, "drive_mode", "force")  # ManiSkill's passive drive is always "force"
         modes = [mode] * n if isinstance(mode, str) else list(mode)
         self.accel = np.array([m == "acceleration" for m in modes], bool)
+        self.actuator = ActuatorModel(config, num_envs, n)  # DC motor, position table, or ManiSkill's clamp
         self.low = np.zeros(0, F32)
         self.high = np.zeros(0, F32)
         self.normalize = False
@@ -257,8 +273,11 @@ class RefController:
 
     def set_drive(self, name: str, values: np.ndarray, mask: np.ndarray) -> None:
         """Per-env drive property ``name`` (stiffness, damping, force_limit, friction) of the masked envs."""
-        attr = {"stiffness": "kp", "damping": "kd"}.get(name, name)
-        getattr(self, attr)[mask] = np.asarray(values, F32)[mask]
+        if name in ("saturation_effort", "velocity_limit"):
+            target = self.actuator.sat_effort if name == "saturation_effort" else self.actuator.vel_limit
+        else:
+            target = getattr(self, {"stiffness": "kp", "damping": "kd"}.get(name, name))
+        target[mask] = np.asarray(values, F32)[mask]
 
     def reset(self, q: np.ndarray, qd: np.ndarray, mask: np.ndarray, first: bool) -> None:
         q = q[:, self.cols]
@@ -329,13 +348,14 @@ class RefController:
             u = (kp * (e - dt * qdm) + kd * (tqd - qdm)) / (F32(1) + r * dt * (kd + dt * kp))
         else:
             u = kp * e + kd * (tqd - qdm)
-        f = np.clip(u, -self.force_limit, self.force_limit)
+        f, near = self.actuator.apply(u, qm, qdm, self.force_limit)  # ManiSkill's clamp, or the actuator model
         if explicit_pd is not None:
             _write(writes, "f", everyone, self.cols, f)
         if track_effort:
             self.computed_effort = u.astype(F32)
             self.applied_effort = f.astype(F32)
-            self.saturation_count += np.abs(u) > self.force_limit
+            self.saturation_count += (f != u) & ~near
+            self.sat_margin += near
 
     def reset_writes(self, q: np.ndarray, mask: np.ndarray, explicit: bool, writes: dict) -> None:
         """What ``reset(..., control=c)`` writes for the reset envs."""
@@ -408,7 +428,8 @@ class RefPDJointPos(RefController):
         return a
 
     def set_action(self, a, q, good):
-        a = self.preprocess(a)
+        sign = binary(self.config, a, self.low, self.high)
+        a = self.preprocess(a) if sign is None else sign
         self.processed_action[good] = a[good]
         self.step[good] = 0
         qm = q[:, self.cols]
@@ -425,7 +446,8 @@ class RefPDJointPos(RefController):
         return np.clip(t, self.qlimits[idx, 0], self.qlimits[idx, 1]).astype(F32)
 
     def _set_pos_targets(self, a, qm, good):
-        target = self._clamp(self._new_target(a, qm))
+        target = smooth(self.config, self._new_target(a, qm), self.target_qpos, self.qlimits)
+        target = self._clamp(target)
         self.target_qpos[good] = target[good]
 
     def drive_target_q(self):
@@ -466,6 +488,7 @@ class RefPDJointPosMimic(RefPDJointPos):
                 target[:, C] = qm[:, C] + a
         else:
             target[:, C] = a
+        target[:, C] = smooth(c, target[:, C], self.target_qpos[:, C], self.qlimits[C])
         target[:, C] = self._clamp(target[:, C], C)
         M = self.mimic_idx
         target[:, M] = self._clamp(target[:, self.mimic_src] * self.mul + self.off, M)

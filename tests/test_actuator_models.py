@@ -36,7 +36,7 @@ def _random_state(model, rng, qd_scale=4.0):
 
 def _one_substep(cfg, model, rng, track_effort=True, **kw):
     """Build, reset, random state and absolute targets, one substep: (ctrl, state, control, q, qd, target, pd)."""
-    ctrl = wpctrl.build_controller(cfg, model, 100, 100, "explicit", track_effort=track_effort, **kw)
+    ctrl = wpctrl.build_controller(cfg, model, 100, 100, actuation="explicit", track_effort=track_effort, **kw)
     s = _random_state(model, rng)
     c = model.control()
     ctrl.reset(model.state(), control=c)
@@ -126,7 +126,11 @@ def test_position_table_steps_knots_and_ends_equal_newtons_component():
     ]
     for positions, efforts in cases:
         ctrl = wpctrl.build_controller(
-            _arm(wpctrl.PositionBasedEffortLimit(positions, efforts), force_limit=1e9), model, 100, 100, "explicit"
+            _arm(wpctrl.PositionBasedEffortLimit(positions, efforts), force_limit=1e9),
+            model,
+            100,
+            100,
+            actuation="explicit",
         )
         b = ctrl._engine.binding
         s = model.state()
@@ -153,7 +157,7 @@ def test_position_table_steps_knots_and_ends_equal_newtons_component():
 
 def test_zero_range_randomisation_is_bit_identical_and_draws_differ_per_env():
     model = build_panda(E)
-    ctrl = wpctrl.build_controller(_arm(wpctrl.DCMotor(80.0, 3.0)), model, 20, 100, "explicit")
+    ctrl = wpctrl.build_controller(_arm(wpctrl.DCMotor(80.0, 3.0)), model, 20, 100, actuation="explicit")
     s0, v0 = ctrl.saturation_effort.numpy().copy(), ctrl.velocity_limit.numpy().copy()
     np.testing.assert_array_equal(s0, 80.0)
     ctrl.randomize_drive_properties(saturation_effort=(1.0, 1.0), velocity_limit=(1.0, 1.0))
@@ -178,7 +182,7 @@ def test_per_env_dc_parameters_reach_the_torque():
     model = build_panda(2)
     rng = np.random.default_rng(4)
     cfg = _arm(wpctrl.DCMotor(200.0, 1e3), kp=2000.0, force_limit=500.0)
-    ctrl = wpctrl.build_controller(cfg, model, 100, 100, "explicit")
+    ctrl = wpctrl.build_controller(cfg, model, 100, 100, actuation="explicit")
     ctrl.set_drive_properties(saturation_effort=np.array([[200.0] * 7, [5.0] * 7], f32))
     s = model.state()
     c = model.control()
@@ -218,7 +222,7 @@ def test_default_step_is_unchanged_by_the_actuator_fields():
     model = build_panda(E)
     rng = np.random.default_rng(5)
     ctrl, s, c, q, qd, target = _one_substep(_arm(None), model, rng, track_effort=False)
-    assert ctrl._engine.layout.act_model == () and ctrl._engine.part("actuators") is None
+    assert ctrl._engine.layout.act_model == () and ctrl._engine.part("actuator_models") is None
     pd = f32(400.0) * (target - q) + f32(20.0) * (f32(0.0) - qd)
     np.testing.assert_allclose(c.joint_f.numpy()[ctrl._engine.binding.dof_index], np.clip(pd, -60, 60), rtol=1e-6)
 
@@ -235,7 +239,7 @@ def test_joint_effort_controller_writes_the_scaled_action(actuation):
             PANDA_GRIPPER_JOINTS, -0.01, 0.04, 1e3, 1e2, mimic={"panda_finger_joint2": {"joint": "panda_finger_joint1"}}
         ),
     }
-    ctrl = wpctrl.build_controller(mode, model, 20, 100, actuation, delay=None)
+    ctrl = wpctrl.build_controller(mode, model, 20, 100, actuation=actuation, delay=None)
     assert ctrl["arm"].target_qpos is None
     s, c = model.state(), model.control()
     ctrl.reset(s, control=c)
@@ -264,7 +268,7 @@ def test_joint_effort_controller_writes_the_scaled_action(actuation):
 def test_effort_commands_are_delayed_like_targets():
     model = build_panda(1)
     cfg = wpctrl.JointEffortControllerConfig(PANDA_ARM_JOINTS, -10.0, 10.0, normalize_action=False)
-    ctrl = wpctrl.build_controller(cfg, model, 20, 100, "explicit", delay=2)
+    ctrl = wpctrl.build_controller(cfg, model, 20, 100, actuation="explicit", delay=2)
     s, c = model.state(), model.control()
     ctrl.reset(s, control=c)
     dof = ctrl._engine.binding.dof_index[0]
@@ -337,7 +341,7 @@ def test_graph_capture_replays_dc_motor_and_effort_rows_bitwise():
         "arm": _arm(wpctrl.DCMotor(50.0, 2.0), kp=800.0),
         "gripper": wpctrl.JointEffortControllerConfig(PANDA_GRIPPER_JOINTS, -5.0, 5.0),
     }
-    ctrl = wpctrl.build_controller(mode, model, 20, 100, "explicit", track_effort=True)
+    ctrl = wpctrl.build_controller(mode, model, 20, 100, actuation="explicit", track_effort=True)
     rng = np.random.default_rng(8)
     s = _random_state(model, rng)
     c = model.control()
@@ -375,7 +379,7 @@ def test_dc_motor_rollout_on_mujoco_tracks_finite_and_stays_in_the_envelope():
             PANDA_GRIPPER_JOINTS, -0.01, 0.04, 1e3, 1e2, mimic={"panda_finger_joint2": {"joint": "panda_finger_joint1"}}
         ),
     }
-    ctrl = wpctrl.build_controller(mode, model, 20, 100, "explicit", explicit_pd="stable", track_effort=True)
+    ctrl = wpctrl.build_controller(mode, model, 20, 100, actuation="explicit", explicit_pd="stable", track_effort=True)
     solver = newton.solvers.SolverMuJoCo(model, disable_contacts=True)
     s0, s1, c = model.state(), model.state(), model.control()
     ctrl.reset(s0, control=c)

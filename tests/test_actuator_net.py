@@ -72,7 +72,7 @@ def test_mlp_actuator_equals_torch_with_history_and_partial_reset(tmp_path, orde
     cfg = wpctrl.PDJointPosControllerConfig(PANDA_ARM_JOINTS, None, None, 0.0, 0.0, 40.0, normalize_action=False,
                                             actuator=act)  # fmt: skip
     model = build_panda(E)
-    ctrl = wpctrl.build_controller(cfg, model, 100, 100, "explicit", track_effort=True)
+    ctrl = wpctrl.build_controller(cfg, model, 100, 100, actuation="explicit", track_effort=True)
     hist_e = np.zeros((E, 5, J), f32)
     hist_v = np.zeros((E, 5, J), f32)
     rng = np.random.default_rng(0)
@@ -102,7 +102,7 @@ def test_lstm_actuator_equals_torch_with_hidden_state_and_partial_reset(tmp_path
     cfg = wpctrl.PDJointPosControllerConfig(PANDA_ARM_JOINTS, None, None, 0.0, 0.0, 1e9, normalize_action=False,
                                             actuator=act)  # fmt: skip
     model = build_panda(E)
-    ctrl = wpctrl.build_controller(cfg, model, 100, 100, "explicit", track_effort=True)
+    ctrl = wpctrl.build_controller(cfg, model, 100, 100, actuation="explicit", track_effort=True)
     h = torch.zeros(2, E * J, 8)
     c = torch.zeros(2, E * J, 8)
     rng = np.random.default_rng(1)

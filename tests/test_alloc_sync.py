@@ -92,6 +92,10 @@ def _modes():
         "implicit acceleration, r per control step": ({"arm": arm, "fingers": fingers}, {}),
         "coupled": ({"arm": arm, "fingers": fingers}, dict(actuation="explicit", explicit_pd="coupled")),
         "pd_ee_delta_pose": (panda_control_modes()["pd_ee_delta_pose"], {}),
+        "osc_ee_delta_pose, delay, effort": (
+            dict(panda_control_modes()["osc_ee_delta_pose"], balance_passive_force=False),
+            dict(actuation="explicit", delay=(1, 3), track_effort=True),
+        ),
     }
 
 

@@ -98,7 +98,7 @@ def test_unrolled_fused_kernel_matches_the_runtime_loop_kernel():
     # The coupled drive with the unrolled inertia: same torques as with the runtime loops.
     torques = []
     for fc in (loop, unrolled):
-        part = eng.part("coupled")
+        part = eng.part("coupled_drive")
         part._fused, part._launch = fc, None
         s, c, _, _, target = _setup(ctrl, model, np.random.default_rng(5))
         ctrl.set_action(target, s)
@@ -184,7 +184,7 @@ def _coupled_ctrl(model, force_limit, drive_mode="force", gripper_passive=False,
             PANDA_GRIPPER_JOINTS, None, None, kp, kd, force_limit, normalize_action=False, drive_mode=drive_mode
         )
     return wpctrl.build_controller(
-        {"arm": arm, "gripper": grip}, model, 100, 100, "explicit", explicit_pd="coupled", **kw
+        {"arm": arm, "gripper": grip}, model, 100, 100, actuation="explicit", explicit_pd="coupled", **kw
     )
 
 
@@ -216,7 +216,7 @@ def test_coupled_without_active_limits_is_the_linear_implicit_solution():
     # Per-env gains, as (num_envs, rows) arrays (bound at the first substep).
     kp = np.array([[1e3] * 9, [400.0] * 9, [2e3] * 9], np.float32)
     kd = np.array([[1e2] * 9, [40.0] * 9, [50.0] * 9], np.float32)
-    drive = ctrl._engine.part("drive")  # per-env gain arrays (bound at the first substep)
+    drive = ctrl._engine.part("drive_properties")  # per-env gain arrays (bound at the first substep)
     drive.kp = wp.array(kp)
     drive.kd = wp.array(kd)
     s, c, q, qd, target = _setup(ctrl, model, np.random.default_rng(1))
@@ -341,12 +341,12 @@ def test_coupled_fallback_sweeps_match_numpy_when_the_active_set_does_not_settle
     count says so (1 + sweeps + 1)."""
     from newton.actuators import JointSpaceResponse
 
-    from wpctrl.kernels.drive import PGS_SWEEPS
+    from wpctrl.kernels.coupled_drive import PGS_SWEEPS
 
     model = build_panda(E)
     lim = 30.0
     ctrl = _coupled_ctrl(model, lim)
-    ctrl._engine.part("coupled").max_iterations = 1
+    ctrl._engine.part("coupled_drive").max_iterations = 1
     s, c, q, qd, target = _setup(ctrl, model, np.random.default_rng(2), spread=0.5)
     ctrl.set_action(target, s)
     ctrl.before_simulation_step(s, c)
@@ -405,7 +405,9 @@ def test_coupled_reduces_to_stable_on_one_dof(limit):
     cfg = wpctrl.PDJointPosControllerConfig(["hinge"], None, None, 1e3, 1e2, limit, normalize_action=False)
     out = {}
     for pd in ("stable", "coupled"):
-        ctrl = wpctrl.build_controller(cfg, model, 100, 100, "explicit", explicit_pd=pd, inertia_update="substep")
+        ctrl = wpctrl.build_controller(
+            cfg, model, 100, 100, actuation="explicit", explicit_pd=pd, inertia_update="substep"
+        )
         s, c = model.state(), model.control()
         ctrl.reset(s)
         s.joint_q.assign(np.array([0.3], np.float32))
@@ -467,7 +469,7 @@ def test_coupled_inertia_update_control_reuses_the_first_substeps_block(inertia_
     arm = wpctrl.PDJointPosControllerConfig(PANDA_ARM_JOINTS, None, None, 1e3, 1e2, 1e9, normalize_action=False)
     grip = wpctrl.PDJointPosControllerConfig(PANDA_GRIPPER_JOINTS, None, None, 1e3, 1e2, 1e9, normalize_action=False)
     ctrl = wpctrl.build_controller(
-        {"arm": arm, "gripper": grip}, model, 20, 100, "explicit", explicit_pd="coupled",
+        {"arm": arm, "gripper": grip}, model, 20, 100, actuation="explicit", explicit_pd="coupled",
         inertia_update=inertia_update, balance_passive_force=False,
     )  # fmt: skip
     assert ctrl.num_substeps == 5

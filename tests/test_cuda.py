@@ -154,7 +154,7 @@ def test_cuda_fused_inertia_and_coupled_drive_match_cpu():
                     PANDA_GRIPPER_JOINTS, None, None, 1e3, 1e2, 50.0, normalize_action=False
                 ),
             }
-            ctrl = wpctrl.build_controller(cfg, model, 100, 100, "explicit", explicit_pd="coupled")
+            ctrl = wpctrl.build_controller(cfg, model, 100, 100, actuation="explicit", explicit_pd="coupled")
             assert ctrl._engine._fused.unroll == (device != "cpu")
             lo, hi = model.joint_limit_lower.numpy(), model.joint_limit_upper.numpy()
             r = np.random.default_rng(3)

@@ -40,7 +40,7 @@ def _run(device, make_builder, make_mode, actuation, steps, seed, graph=False, *
         builder = newton.ModelBuilder()
         builder.replicate(make_builder(), E)
         model = builder.finalize(device=device)
-        ctrl = wpctrl.build_controller(make_mode(), model, 20, 100, actuation, **kw)
+        ctrl = wpctrl.build_controller(make_mode(), model, 20, 100, actuation=actuation, **kw)
         s, c = model.state(), model.control()
         ctrl.reset(s, control=c)
         rng = np.random.default_rng(seed)

@@ -184,11 +184,11 @@ def test_demo_bad_arguments_exit_2(argv, message, capsys):
 
 
 def test_help_lists_every_control_mode_and_solver(capsys):
-    from wpctrl.controllers.base import _EXPLICIT_PD
+    from wpctrl.config.options import EXPLICIT_PD_LAWS
     from wpctrl.robots import PANDA_CONTROL_MODES
 
     assert list(demo.PANDA_MODES) == list(PANDA_CONTROL_MODES)  # the light copy --help reads is the real list
-    assert sorted(demo.explicit_pd_choices()) == sorted(_EXPLICIT_PD)
+    assert sorted(demo.explicit_pd_choices()) == sorted(EXPLICIT_PD_LAWS)
     with pytest.raises(SystemExit) as e:
         main(["--help"])
     assert e.value.code == 0

@@ -48,10 +48,18 @@ def test_off_in_the_dict_the_arm_sags():
     assert getattr(model.mujoco, "gravcomp", None) is None or not model.mujoco.gravcomp.numpy().any()
 
 
-def test_build_option_overrides_the_dict():
+def test_build_option_applies_and_must_agree_with_the_dict():
+    """The keyword decides for a dict without the entry; given both ways, they must agree (a keyword that would
+    silently win over the mode dict is refused, naming both)."""
+    drift, _ = _zero_action_drift(panda_control_modes()["pd_joint_delta_pos"], balance_passive_force=False)
+    assert drift[1] > 0.1, drift  # the keyword turned it off: joint 2 falls
     mode = dict(panda_control_modes()["pd_joint_delta_pos"], balance_passive_force=False)
-    drift, _ = _zero_action_drift(mode, balance_passive_force=True)
-    assert drift[:7].max() < 1e-3, drift
+    with pytest.raises(
+        wpctrl.ConfigError, match=r"balance_passive_force: expected None or the mode dict's .*False.*True"
+    ):
+        wpctrl.build_controller(mode, build_panda(1), balance_passive_force=True)
+    drift, _ = _zero_action_drift(mode, balance_passive_force=False)  # agreeing: fine
+    assert drift[1] > 0.1, drift
 
 
 def test_only_the_robot_loses_gravity():

@@ -327,7 +327,7 @@ def test_strided_and_flat_index_tables_agree(actuation, interpolate):
     acts = rng.uniform(-1.2, 1.2, (3, 3, 8)).astype(np.float32)
     results = []
     for model in (build_panda(3), _uneven_model()):
-        ctrl = wpctrl.build_controller(_mode(interpolate), model, 20, 100, actuation)
+        ctrl = wpctrl.build_controller(_mode(interpolate), model, 20, 100, actuation=actuation)
         eng = ctrl._engine
         b = eng.binding
         uneven = model.joint_coord_count != 3 * 9

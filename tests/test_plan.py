@@ -37,8 +37,17 @@ def test_plan_needs_no_device_and_picks_the_parts():
     grip = wpctrl.JointEffortControllerConfig(names[3:], -5.0, 5.0)
     b = _binding(names)
     rows = Rows.concat([config_rows(arm, b.qlimits[:3]), config_rows(grip, b.qlimits[3:])])
-    plan = make_plan(rows, b, Options(num_substeps=5, actuation="explicit", delay=(0, 2), track_effort=True))
-    assert plan.parts == ("drive", "effort_command", "actuators", "delay", "effort")
+    plan = make_plan(
+        rows,
+        b,
+        Options(
+            num_substeps=5,
+            actuation=wpctrl.Actuation("explicit"),
+            delay=wpctrl.Delay((0, 2)),
+            diagnostics=wpctrl.Diagnostics(track_effort=True),
+        ),
+    )
+    assert plan.parts == ("drive_properties", "effort_command", "actuator_models", "delay", "effort_readout")
     assert plan.per_substep and plan.writes_joint_f and plan.strided and plan.q_stride == 9
     assert plan.layout.act_model == (1, 1, 1, 0) and plan.layout.kind[3] == wpctrl.config.ROW_EFFORT
     text = str(plan)
@@ -46,4 +55,4 @@ def test_plan_needs_no_device_and_picks_the_parts():
     # implicit, nothing per substep: the substep launch is elided and only the drive part is on
     arm2 = wpctrl.PDJointPosControllerConfig(names, -0.1, 0.1, 100.0, 10.0, use_delta=True)
     plan2 = make_plan(config_rows(arm2, b.qlimits), b, Options(num_substeps=5))
-    assert plan2.parts == ("drive",) and not plan2.per_substep
+    assert plan2.parts == ("drive_properties",) and not plan2.per_substep

@@ -5,8 +5,10 @@ Hypothesis draws the build and then every operation of the stream itself (``st.d
 short stream of simple operations:
 
 - ``test_matches_reference``: a random control mode (1-3 children on disjoint subsets of the Panda's 9 joints, every
-  joint config type and flag, scalar or per-joint parameters, mimic maps, force/acceleration drive modes), the model
-  layout (replicated worlds with 1, 3 or 5 envs, or 3 worlds that differ: per-env index tables), a substep count, the
+  joint config type and flag, scalar or per-joint parameters, mimic maps, force/acceleration drive modes, and on any
+  child an actuator model (DC motor, position table; kept with the explicit naive / stable law), EMA smoothing or a
+  binary command), the model layout (replicated worlds with 1, 3 or 5 envs, 3 worlds that differ: per-env index
+  tables, 3 envs spaced apart, 3 Pandas on floating bases: coordinate and DOF strides differ), a substep count, the
   actuation (implicit; explicit with the naive, stable or coupled PD law), when r = (H^-1)_ii is refreshed, a NaN
   policy, and the actuation options (command delay, effort readout, target clamping, the RNG seed).
 - ``test_panda_modes_match_reference``: ManiSkill's Panda modes, the end-effector ones included, on the same layouts,
@@ -16,7 +18,8 @@ short stream of simple operations:
 Operations: measured states written into the Newton state (also between substeps), actions (in range, out of range,
 NaN/Inf entries; numpy / torch / wp, float32 / float64, strided, 1-D with one env), steps with and without an action
 and past K substeps, resets (ids, masks, torch / wp selections; with or without the Control), ``set_drive_properties``
-and ``randomize_drive_properties`` on a child and an env selection, and ``set_state``.
+and ``randomize_drive_properties`` on a child and an env selection (a DC motor's per-env stall effort and no-load
+speed included), and ``set_state``.
 
 Cost: the random-mode test compiles the two step kernels of each mode it draws (about 0.2 s each on the CPU; Warp's
 kernel cache keeps them for later runs); ``WPCTRL_PROPERTY_EXAMPLES`` sets the examples of the random-mode test (the
@@ -26,6 +29,7 @@ others take a fifth), default 250.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import os
 
 import numpy as np
@@ -41,7 +45,7 @@ from wpctrl.robots import PANDA_JOINTS, panda_control_modes
 torch = pytest.importorskip("torch", reason="torch is a dev dependency (torch inputs are drawn here)")
 
 MAX_EXAMPLES = int(os.environ.get("WPCTRL_PROPERTY_EXAMPLES", "250"))  # raise it for a deeper search
-LAYOUTS = [("replicated", 1), ("replicated", 3), ("replicated", 5), ("flat", 3)]
+LAYOUTS = [("replicated", 1), ("replicated", 3), ("replicated", 5), ("flat", 3), ("spaced", 3), ("floating", 3)]
 
 # ----------------------------------------------------------------------------------------------------------------------
 # Config strategies.
@@ -122,6 +126,21 @@ def drive_modes(draw, n: int):
 
 
 @st.composite
+def actuator(draw, n: int):
+    """Mostly none; a DC motor (per-joint or scalar parameters) or a position table (steps and ends included)."""
+    kind = draw(st.sampled_from([None, None, None, "dc", "table"]))
+    if kind == "dc":
+        return C.DCMotor(draw(per_joint(n, floats(0.0, 200.0))), draw(per_joint(n, floats(0.1, 10.0))))
+    if kind == "table":
+        xs = sorted(draw(st.lists(floats(-3.0, 3.0), min_size=1, max_size=6)))
+        if len(xs) > 1 and draw(st.booleans()):
+            xs[1] = xs[0]  # a step
+        ys = [draw(floats(0.0, 100.0)) for _ in xs]
+        return C.PositionBasedEffortLimit(xs, ys)
+    return None
+
+
+@st.composite
 def child_config(draw, names: list[str], limits: np.ndarray, kind: str | None = None):
     n = len(names)
     kinds = ["pos", "pos", "vel", "posvel", "passive"] + (["mimic", "mimic"] if n >= 2 else [])
@@ -143,6 +162,7 @@ def child_config(draw, names: list[str], limits: np.ndarray, kind: str | None = 
             friction=pj(fric),
             normalize_action=normalize,
             drive_mode=draw(drive_modes(n)),
+            actuator=draw(actuator(n)),
         )
     delta = draw(st.booleans())
     lower, upper = draw(bounds(limits))
@@ -158,7 +178,11 @@ def child_config(draw, names: list[str], limits: np.ndarray, kind: str | None = 
         interpolate=draw(st.booleans()),
         normalize_action=normalize,
         drive_mode=draw(drive_modes(n)),
+        actuator=draw(actuator(n)),
+        ema=draw(st.one_of(st.none(), st.none(), st.just(1.0), floats(0.05, 1.0))),
     )
+    if kind in ("pos", "mimic") and not delta and draw(st.integers(0, 3)) == 0:
+        common["binary"] = True  # absolute targets only
     if kind == "pos":
         return C.PDJointPosControllerConfig(names, **common)
     if kind == "mimic":
@@ -234,8 +258,27 @@ EXPLICIT = st.sampled_from(
     data=st.data(),
 )
 def test_matches_reference(mode, layout, num_substeps, actuation, inertia_update, nan_policy, opts, data):
+    if actuation[0] == "implicit" or actuation[1] == "coupled":  # actuator models need the explicit naive/stable law
+        mode = _without_actuators(mode)
+    if not _builds(mode, layout, actuation):
+        return
     h = Harness(mode, layout, num_substeps, *actuation, nan_policy, inertia_update, data.draw, opts)
     run_stream(h, data.draw)
+
+
+def _without_actuators(mode):
+    strip = lambda c: dataclasses.replace(c, actuator=None) if getattr(c, "actuator", None) is not None else c  # noqa: E731
+    return {k: strip(c) for k, c in mode.items()} if isinstance(mode, dict) else strip(mode)
+
+
+def _builds(mode, layout, actuation) -> bool:
+    """Whether the build is one wpctrl accepts; the refusal (with its reason) is checked where it is not."""
+    if layout[0] == "floating" and actuation == ("explicit", "coupled"):
+        model, _ = model_for(*layout)
+        with pytest.raises(wpctrl.ConfigError, match=r"'coupled' needs a fixed-base articulation"):
+            wpctrl.build_controller(mode, model, actuation="explicit", explicit_pd="coupled")
+        return False
+    return True
 
 
 PANDA_MODES = ["pd_joint_delta_pos", "pd_joint_target_delta_pos", "pd_joint_pos_vel", "pd_ee_delta_pos",
@@ -256,6 +299,8 @@ def test_panda_modes_match_reference(name, layout, num_substeps, actuation, iner
     """ManiSkill's Panda modes, end-effector ones included (one DLS step at the measured state, the Jacobian from
     Newton's forward kinematics)."""
     mode = copy.deepcopy(panda_control_modes()[name])
+    if not _builds(mode, layout, actuation):
+        return
     if name.startswith("pd_ee") and layout[0] == "flat":  # the EE kernels compile one chain layout for all worlds
         with pytest.raises(wpctrl.ConfigError, match="laid out differently across worlds"):
             Harness(mode, layout, num_substeps, *actuation, "hold", inertia_update, data.draw, opts)
@@ -273,6 +318,8 @@ def test_panda_modes_match_reference(name, layout, num_substeps, actuation, iner
 )
 def test_mimic_matches_reference(mode, num_substeps, actuation, data):
     """Mimic maps with several control joints, as the mixed stream above draws them rarely."""
+    if actuation == "implicit":
+        mode = _without_actuators(mode)
     h = Harness(mode, ("replicated", 3), num_substeps, actuation, "naive", "hold", "control", data.draw)
     run_stream(h, data.draw)
 
@@ -299,6 +346,32 @@ def test_strategies_cover_every_config_type():
         "PDJointPosVelControllerConfig",
         "PassiveControllerConfig",
     } <= seen
+
+
+def test_strategies_cover_the_actuator_options():
+    """Some drawn children carry a DC motor, a position table, EMA smoothing or a binary command, also on a child
+    that is not the first of its mode (a guard against a narrowed search)."""
+    seen = set()
+
+    @settings(max_examples=300, deadline=None, database=None, derandomize=True)
+    @given(control_mode(_LIMITS))
+    def collect(mode):
+        children = list(mode.values()) if isinstance(mode, dict) else [mode]
+        for i, c in enumerate(children):
+            where = "later" if i else "first"
+            act = getattr(c, "actuator", None)
+            if act is not None:
+                seen.add((type(act).__name__, where))
+                seen.add((type(act).__name__, type(c).__name__))
+            if getattr(c, "ema", None) is not None:
+                seen.add(("ema", where))
+            if getattr(c, "binary", False):
+                seen.add(("binary", where))
+
+    collect()
+    want = {(k, w) for k in ("DCMotor", "PositionBasedEffortLimit", "ema", "binary") for w in ("first", "later")}
+    want |= {("DCMotor", "PDJointVelControllerConfig"), ("PositionBasedEffortLimit", "PDJointPosMimicControllerConfig")}
+    assert want <= seen, want - seen
 
 
 # ----------------------------------------------------------------------------------------------------------------------

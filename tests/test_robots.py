@@ -259,11 +259,13 @@ MODES = [
     "pd_joint_delta_pos_vel",
 ]
 EE_MODES = ["pd_ee_delta_pos", "pd_ee_delta_pose", "pd_ee_pose", "pd_ee_target_delta_pos", "pd_ee_target_delta_pose"]
+IMPEDANCE_MODES = ["osc_ee_delta_pose", "osc_ee_pose", "joint_impedance_delta_pos"]
 
 
 def test_control_modes_numbers():
     modes = panda_control_modes()
-    assert list(modes) == MODES + EE_MODES  # the EE modes' numbers: tests/test_ee.py
+    # the EE modes' numbers: tests/test_ee.py; the impedance modes': tests/test_impedance.py
+    assert list(modes) == MODES + EE_MODES + IMPEDANCE_MODES
     for mode, children in modes.items():
         assert list(children) == ["arm", "gripper"], mode
         g = children["gripper"]

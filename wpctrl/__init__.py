@@ -6,12 +6,18 @@ Public import path: ``import wpctrl``.
 from typing import TYPE_CHECKING
 
 from .config import (
+    Actuation,
     ActuatorNet,
     ConfigError,
     ControllerConfig,
+    ControllerOptions,
     DCMotor,
+    Delay,
+    Diagnostics,
     JointEffortControllerConfig,
+    JointImpedanceControllerConfig,
     MimicJointError,
+    OperationalSpaceControllerConfig,
     PassiveControllerConfig,
     PDBaseForwardVelControllerConfig,
     PDBaseVelControllerConfig,
@@ -29,6 +35,8 @@ from .config import (
 _LAZY = {
     "BaseController",
     "JointEffortController",
+    "JointImpedanceController",
+    "OperationalSpaceController",
     "CombinedController",
     "PassiveController",
     "PDBaseForwardVelController",
@@ -46,6 +54,8 @@ if TYPE_CHECKING:
     from .controllers import (
         BaseController,
         CombinedController,
+        JointImpedanceController,
+        OperationalSpaceController,
         PassiveController,
         PDBaseForwardVelController,
         PDBaseVelController,
@@ -78,15 +88,23 @@ def __dir__():
 __version__ = "0.1.0"
 
 __all__ = [
+    "Actuation",
     "ActuatorNet",
     "BaseController",
     "CombinedController",
     "ConfigError",
     "ControllerConfig",
+    "ControllerOptions",
     "DCMotor",
+    "Delay",
+    "Diagnostics",
     "JointEffortController",
     "JointEffortControllerConfig",
+    "JointImpedanceController",
+    "JointImpedanceControllerConfig",
     "MimicJointError",
+    "OperationalSpaceController",
+    "OperationalSpaceControllerConfig",
     "PDBaseForwardVelController",
     "PDBaseForwardVelControllerConfig",
     "PDBaseVelController",

@@ -1,24 +1,33 @@
 """Configs: host dataclasses that mirror ManiSkill 3's controller configs, and the per-joint rows they become.
 
-Never touches a device. :mod:`.joint` (joint controllers), :mod:`.ee` (end-effector controllers), :mod:`.rows`
-(validation and the flat per-joint tables one kernel launch handles).
+Never touches a device. :mod:`.errors` (:class:`ConfigError`, :class:`MimicJointError`), :mod:`.joint` (joint
+controllers), :mod:`.mobile_base` (mobile-base controllers), :mod:`.ee` (end-effector controllers),
+:mod:`.impedance` (operational-space and joint-impedance controllers), :mod:`.actuator_models` (actuator models)
+and :mod:`.networks` (actuator network files), :mod:`.options` (the option groups of a control mode),
+:mod:`.validate` (the per-field checks), :mod:`.rows` (the flat per-joint tables one kernel launch handles).
 """
 
-from .actuators import ActuatorNet, DCMotor, PositionBasedEffortLimit
-from .base import PDBaseForwardVelControllerConfig, PDBaseVelControllerConfig
+from .actuator_models import ActuatorNet, DCMotor, PositionBasedEffortLimit
 from .ee import EE_CONFIGS, MAX_EE_DOF, EESpec, PDEEPosControllerConfig, PDEEPoseControllerConfig, ee_rows
+from .errors import ConfigError, MimicJointError
+from .impedance import (
+    IMPEDANCE_CONFIGS,
+    ImpedanceSpec,
+    JointImpedanceControllerConfig,
+    OperationalSpaceControllerConfig,
+    impedance_rows,
+)
 from .joint import (
-    ConfigError,
     ControllerConfig,
-    DriveMode,
     JointEffortControllerConfig,
-    MimicJointError,
     PassiveControllerConfig,
     PDJointPosControllerConfig,
     PDJointPosMimicControllerConfig,
     PDJointPosVelControllerConfig,
     PDJointVelControllerConfig,
 )
+from .mobile_base import PDBaseForwardVelControllerConfig, PDBaseVelControllerConfig
+from .options import Actuation, ControllerOptions, Delay, Diagnostics
 from .rows import (
     FLAG_BINARY,
     FLAG_DELTA,
@@ -35,14 +44,24 @@ from .rows import (
     check_mode_dict,
     config_rows,
 )
+from .validate import DriveMode
 
 __all__ = [
+    "Actuation",
+    "ControllerOptions",
+    "Delay",
+    "Diagnostics",
     "ActuatorNet",
     "DCMotor",
     "EE_CONFIGS",
     "FLAG_BINARY",
     "FLAG_EMA",
     "JointEffortControllerConfig",
+    "IMPEDANCE_CONFIGS",
+    "ImpedanceSpec",
+    "JointImpedanceControllerConfig",
+    "OperationalSpaceControllerConfig",
+    "impedance_rows",
     "PositionBasedEffortLimit",
     "ROW_EFFORT",
     "FLAG_DELTA",

@@ -5,7 +5,8 @@ pd_ee_pose.py``), so a ManiSkill ``pd_ee_*`` control-mode dict ports by changing
 device: :func:`ee_rows` validates a config and returns the joint rows (position rows driven by the EE kernels) plus
 an :class:`EESpec` with the EE-specific parameters.
 
-Units: positions [m], rotations [rad] (Euler XYZ increments, as ManiSkill), joint quantities as in ``config.py``.
+Units: positions [m], rotations [rad] (Euler XYZ increments, as ManiSkill), joint quantities as in
+:mod:`wpctrl.config.joint`.
 """
 
 from __future__ import annotations
@@ -18,7 +19,9 @@ from typing import Literal, Union
 import numpy as np
 
 from . import rows as cfg
-from .joint import ConfigError, ControllerConfig, DriveMode, PDJointPosControllerConfig
+from .errors import ConfigError
+from .joint import ControllerClass, ControllerConfig, PDJointPosControllerConfig
+from .validate import DriveMode
 
 POS_FRAMES = ("root_translation", "body_translation")
 POSE_FRAMES = (
@@ -38,6 +41,8 @@ def _default_solver() -> dict:
 
 @dataclass
 class PDEEPosControllerConfig(ControllerConfig):
+    controller_cls = ControllerClass("wpctrl.controllers.ee", "PDEEPosController")
+
     pos_lower: Union[float, Sequence[float]]
     """Lower bound of the position action [m] (per axis or one value for x, y, z); None: unbounded (-inf)."""
     pos_upper: Union[float, Sequence[float]]
@@ -80,6 +85,8 @@ class PDEEPosControllerConfig(ControllerConfig):
 
 @dataclass
 class PDEEPoseControllerConfig(PDEEPosControllerConfig):
+    controller_cls = ControllerClass("wpctrl.controllers.ee", "PDEEPoseController")
+
     rot_lower: Union[float, Sequence[float]] = None
     """Lower bound of the rotation action [rad]; ManiSkill scales the clipped rotation by this value (see
     ``delta_solver_config["rotation_sign"]``)."""
@@ -139,7 +146,10 @@ def _vec3(c, fname: str, value, allow_none: bool) -> np.ndarray:
             return np.full(3, np.nan)
         raise ConfigError(f"{_name(c)}.{fname}: expected a number or 3 numbers, got None")
     try:
-        a = np.asarray(value, dtype=np.float64)
+        raw = np.asarray(value)
+        if raw.dtype.kind not in "iuf":  # strings ("0.1" would parse), bools, objects
+            raise TypeError(f"dtype {raw.dtype}")
+        a = raw.astype(np.float64)
     except (TypeError, ValueError) as e:
         raise ConfigError(f"{_name(c)}.{fname}: expected a number or 3 numbers, got {value!r}") from e
     if a.ndim > 1 or (a.ndim == 1 and a.shape[0] not in (1, 3)):

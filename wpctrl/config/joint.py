@@ -9,27 +9,31 @@ damping in N·m·s/rad (N·s/m), force limits in N·m (N).
 
 from __future__ import annotations
 
-import logging
+import importlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Literal, Union
+from typing import Union
 
-from .actuators import ActuatorNet, DCMotor, PositionBasedEffortLimit
+from .actuator_models import ActuatorNet, DCMotor, PositionBasedEffortLimit
+from .validate import DriveMode
 
 Actuator = Union[DCMotor, PositionBasedEffortLimit, ActuatorNet]
 
-logger = logging.getLogger("wpctrl")
 
-DriveMode = Literal["force", "acceleration"]
-_DRIVE_MODES = ("force", "acceleration")
+class ControllerClass:
+    """``Config.controller_cls`` of wpctrl's configs: the controller class, named by its module and class and imported
+    on first read. So it is the class itself right after ``import wpctrl`` (the controllers import Newton and load
+    lazily), and the config layer imports nothing of the controller layer. A subclass that assigns its own
+    ``controller_cls`` (as ManiSkill's configs do) replaces it."""
 
+    def __init__(self, module: str, name: str):
+        self.module, self.name = module, name
 
-class ConfigError(ValueError):
-    """A controller config (or its binding to a model) is invalid. The message names the field."""
+    def __get__(self, obj, owner=None):
+        return getattr(importlib.import_module(self.module), self.name)
 
-
-class MimicJointError(ConfigError, TypeError):
-    """A mimic entry names a joint outside ``joint_names`` (ManiSkill raises ``TypeError`` here)."""
+    def __repr__(self) -> str:
+        return f"ControllerClass({self.module}.{self.name})"
 
 
 @dataclass
@@ -37,12 +41,14 @@ class ControllerConfig:
     joint_names: list[str]
     """Names of the joints this controller drives, matched against the Newton model's joint labels."""
 
-    # A class variable (not a dataclass field), as in ManiSkill; set by ``wpctrl.controllers``.
+    # A class variable (not a dataclass field), as in ManiSkill: the controller class this config builds.
     controller_cls = None
 
 
 @dataclass
 class PDJointPosControllerConfig(ControllerConfig):
+    controller_cls = ControllerClass("wpctrl.controllers.joint", "PDJointPosController")
+
     lower: Union[None, float, Sequence[float]]
     """Lower action bound [rad or m] (a delta bound with ``use_delta``); None takes the joint's lower limit."""
     upper: Union[None, float, Sequence[float]]
@@ -81,6 +87,8 @@ class PDJointPosControllerConfig(ControllerConfig):
 
 @dataclass
 class PDJointPosMimicControllerConfig(PDJointPosControllerConfig):
+    controller_cls = ControllerClass("wpctrl.controllers.joint", "PDJointPosMimicController")
+
     mimic: dict[str, dict[str, float]] = field(default_factory=dict)
     """``{mimic_joint: {"joint": control_joint, "multiplier": 1.0, "offset": 0.0}}``: the mimic joint's target is
     ``target[control] * multiplier + offset``. Empty with two joints: the second joint commands the first."""
@@ -88,6 +96,8 @@ class PDJointPosMimicControllerConfig(PDJointPosControllerConfig):
 
 @dataclass
 class PDJointVelControllerConfig(ControllerConfig):
+    controller_cls = ControllerClass("wpctrl.controllers.joint", "PDJointVelController")
+
     lower: Union[float, Sequence[float]]
     """Lower velocity bound [rad/s or m/s]."""
     upper: Union[float, Sequence[float]]
@@ -109,6 +119,8 @@ class PDJointVelControllerConfig(ControllerConfig):
 
 @dataclass
 class PDJointPosVelControllerConfig(PDJointPosControllerConfig):
+    controller_cls = ControllerClass("wpctrl.controllers.joint", "PDJointPosVelController")
+
     vel_lower: Union[float, Sequence[float]] = -1.0
     """Lower velocity-target bound [rad/s or m/s]."""
     vel_upper: Union[float, Sequence[float]] = 1.0
@@ -120,6 +132,8 @@ class JointEffortControllerConfig(ControllerConfig):
     """Direct effort control (not in ManiSkill): the action, clipped and scaled as the joint configs do, is the joint
     effort [N·m or N], written to ``Control.joint_f`` before every substep (clamped to ``force_limit``); the joint's
     built-in drive is off (gains 0, target mode EFFORT) in both actuations."""
+
+    controller_cls = ControllerClass("wpctrl.controllers.joint", "JointEffortController")
 
     lower: Union[float, Sequence[float]]
     """Lower effort bound [N·m or N]."""
@@ -135,6 +149,8 @@ class JointEffortControllerConfig(ControllerConfig):
 
 @dataclass
 class PassiveControllerConfig(ControllerConfig):
+    controller_cls = ControllerClass("wpctrl.controllers.joint", "PassiveController")
+
     damping: Union[float, Sequence[float]]
     """Damping toward a zero velocity target [N·m·s/rad or N·s/m]; stiffness is 0."""
     force_limit: Union[float, Sequence[float]] = 1e10

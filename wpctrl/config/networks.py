@@ -1,5 +1,5 @@
 """Reading an actuator network's weights from TorchScript (or a torch module) into flat float32 arrays. Host only;
-torch is imported here, only when an :class:`~wpctrl.config.actuators.ActuatorNet` is built.
+torch is imported here, only when an :class:`~wpctrl.config.actuator_models.ActuatorNet` is built.
 
 Supported structures, in the order the module registers its layers (the order ``named_modules`` lists them, which is
 the forward order of an ``nn.Sequential`` and of the usual ``lstm`` + ``linear`` actuator modules):
@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .joint import ConfigError
+from .errors import ConfigError
 
 # Activation codes of the network kernel (wpctrl.kernels.actuator_net).
 _ACTIVATIONS = {"Identity": 0, "ReLU": 1, "ELU": 2, "Tanh": 3, "Sigmoid": 4, "Softsign": 5, "LeakyReLU": 6}
@@ -57,7 +57,7 @@ def _type_name(m) -> str:
 
 
 def read_network(spec) -> NetworkWeights:
-    """The weights and structure of ``spec.network`` (an :class:`~wpctrl.config.actuators.ActuatorNet`)."""
+    """The weights and structure of ``spec.network`` (an :class:`~wpctrl.config.actuator_models.ActuatorNet`)."""
     module = _load(spec.network)
     leaves = [m for _, m in module.named_modules() if not list(m.children())]
     flat: list[np.ndarray] = []

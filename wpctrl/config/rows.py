@@ -12,19 +12,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .actuators import ACT_NET, actuator_rows
-from .base import PDBaseForwardVelControllerConfig, PDBaseVelControllerConfig
+from .actuator_models import ACT_NET, actuator_rows
+from .errors import ConfigError, MimicJointError
 from .joint import (
-    ConfigError,
     ControllerConfig,
     JointEffortControllerConfig,
-    MimicJointError,
     PassiveControllerConfig,
     PDJointPosControllerConfig,
     PDJointPosMimicControllerConfig,
     PDJointPosVelControllerConfig,
     PDJointVelControllerConfig,
 )
+from .mobile_base import PDBaseForwardVelControllerConfig, PDBaseVelControllerConfig
 from .validate import (  # noqa: F401  (_f32, _joint_names: used by the EE config and the controller layer)
     _bounds,
     _check_box,
@@ -95,7 +94,7 @@ class Rows:
     base_axis: np.ndarray | None = None  # int32: 0 x, 1 y, -1 none
     bx_col: np.ndarray | None = None  # int32 action column of vx (-1: 0)
     by_col: np.ndarray | None = None  # int32 action column of vy (-1: 0, the forward-only base)
-    # Actuator models and action smoothing (wpctrl.config.actuators): per-row model code and parameters, and the
+    # Actuator models and action smoothing (wpctrl.config.actuator_models): per-row model code and parameters, and the
     # models that carry more than numbers (position tables, networks) as (first row, rows, what).
     act_model: np.ndarray | None = None  # int32, ACT_* (0: the plain clamp to force_limit)
     sat_effort: np.ndarray | None = None  # float32 [N·m or N], DC-motor stall effort (inf: none)
@@ -220,14 +219,14 @@ def _pos_rows(config, qlimits: np.ndarray, *, mimic: bool = False, posvel: bool 
             for role, jn in (("mimic joint", m_name), ("control joint", c_name)):
                 if jn not in names:
                     raise MimicJointError(f"{_name(config)}.mimic: {role} {jn!r} is not in joint_names {names}")
-            try:
-                m = float(entry.get("multiplier", 1.0))
-                o = float(entry.get("offset", 0.0))
-            except (TypeError, ValueError) as e:
+            raw = (entry.get("multiplier", 1.0), entry.get("offset", 0.0))
+            if any(isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, float, np.integer, np.floating))
+                   for x in raw):  # fmt: skip
                 raise ConfigError(
                     f"{_name(config)}.mimic[{m_name!r}]: expected numbers for multiplier and offset, got "
-                    f"{entry.get('multiplier', 1.0)!r}, {entry.get('offset', 0.0)!r}"
-                ) from e
+                    f"{raw[0]!r}, {raw[1]!r}"
+                )
+            m, o = float(raw[0]), float(raw[1])
             # Finite in float32, where they are used (1e39 would become inf).
             if not all(math.isfinite(x) and abs(x) <= float(np.finfo(np.float32).max) for x in (m, o)):
                 raise ConfigError(

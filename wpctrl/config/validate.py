@@ -1,16 +1,23 @@
 """Validation helpers of the config layer: per-joint broadcasting, bounds, joint names, drive modes, mimic maps.
 
-Every error is a :class:`~wpctrl.config.ConfigError` naming the config class, the field and the expected vs. received
-value. Host only.
+Every error is a :class:`~wpctrl.config.errors.ConfigError` naming the config class, the field and the expected vs.
+received value. Host only.
 """
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Mapping, Sequence
+from typing import Literal, get_args
 
 import numpy as np
 
-from .joint import _DRIVE_MODES, ConfigError, logger
+from .errors import ConfigError
+
+logger = logging.getLogger("wpctrl")
+
+DriveMode = Literal["force", "acceleration"]
+_DRIVE_MODES = get_args(DriveMode)
 
 
 def _name(config) -> str:
@@ -65,6 +72,10 @@ def _per_joint(config, field_name: str, value, n: int, *, allow_none: bool = Fal
 
 def _drive_modes(config, n: int) -> np.ndarray:
     mode = getattr(config, "drive_mode", "force")
+    if not isinstance(mode, (str, Sequence)):
+        raise ConfigError(
+            f"{_name(config)}.drive_mode: expected 'force', 'acceleration' or a sequence of {n} of them, got {mode!r}"
+        )
     modes = [mode] * n if isinstance(mode, str) else list(mode)
     if len(modes) != n:
         raise ConfigError(

@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .base import PDJointPosController
 from .inputs import _as_rows_array
+from .joint import PDJointPosController
 
 
 class PDEEPosController(PDJointPosController):

@@ -11,7 +11,7 @@ import weakref
 import numpy as np
 import warp as wp
 
-from ..kernels import pd as K
+from ..kernels.pd import _cast_f64_kernel
 
 
 def _torch():
@@ -106,7 +106,7 @@ def _action_array(action, num_envs: int, dim: int, device, buffer: wp.array, cac
             return a
         if a.dtype == wp.float64:
             if dim:
-                wp.launch(K._cast_f64_kernel, dim=a.shape, inputs=[a, buffer], device=device)
+                wp.launch(_cast_f64_kernel, dim=a.shape, inputs=[a, buffer], device=device)
             return buffer
         raise TypeError(f"action: expected a float32 (or float64) wp.array, got dtype {wp.types.type_repr(a.dtype)}")
     if action is None or isinstance(action, (str, bytes, dict)):

@@ -65,7 +65,7 @@ def main(argv=None) -> int:
         print(
             f"  the simulation went non-finite at t = {summary['diverged_at_s']} s: {summary['solver']} with "
             f"{summary['actuation']} actuation did not hold the Panda's gains at {summary['sim_freq']} Hz; "
-            f"{supported_combinations()} (see the README)",
+            f"{supported_combinations()} (see docs/solvers.md)",
             file=sys.stderr,
         )
     print(f"  wrote {Path(args.out) / 'summary.json'} and {Path(args.out) / 'tracking.png'}")

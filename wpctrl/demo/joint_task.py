@@ -1,6 +1,6 @@
 """What the demo does for a family of control modes: the scripted policy, the tracked quantities, the plotted trace.
 
-:func:`wpctrl.demo.make_task` picks the task for a mode; :class:`JointTask` covers ManiSkill's joint-space modes.
+:func:`wpctrl.demo.run.make_task` picks the task for a mode; :class:`JointTask` covers ManiSkill's joint-space modes.
 """
 
 from __future__ import annotations
@@ -52,7 +52,7 @@ class JointTask:
         m = self.mode
         if m == "pd_joint_pos":
             arm = q_des
-        elif m == "pd_joint_delta_pos":
+        elif m in ("pd_joint_delta_pos", "joint_impedance_delta_pos"):
             arm = (q_des - q[:, :7]) / 0.1
         elif m == "pd_joint_target_delta_pos":
             arm = (q_des - arm_sp.target_qpos.numpy()) / 0.1

@@ -23,6 +23,9 @@ PANDA_MODES = (
     "pd_ee_pose",
     "pd_ee_target_delta_pos",
     "pd_ee_target_delta_pose",
+    "osc_ee_delta_pose",
+    "osc_ee_pose",
+    "joint_impedance_delta_pos",
 )
 """wpctrl.robots.PANDA_CONTROL_MODES' names, spelled out so that --help and argument errors need no heavy import
 (a test keeps the two equal)."""
@@ -39,13 +42,16 @@ ROBOT_MODES = {
         "pd_joint_vel",
         "pd_joint_delta_pos_vel",
         "pd_joint_delta_pos_stiff_body",
+        "osc_ee_delta_pose",
+        "osc_ee_pose",
+        "joint_impedance_delta_pos",
     ),
     "allegro_hand_right": ("pd_joint_delta_pos", "pd_joint_pos", "pd_joint_target_delta_pos"),
     "unitree_g1_simplified_legs": ("pd_joint_pos", "pd_joint_delta_pos"),
 }
 """The robots ``--robot`` offers and their control modes: the built-in Panda, and ManiSkill agents loaded with
-:func:`wpctrl.maniskill.load_robot` (their modes as ManiSkill names them, less those in :data:`ROBOT_MODES_REFUSED`; a
-test keeps the two tables equal to the agents' own)."""
+:func:`wpctrl.maniskill.load_robot` (their modes as ManiSkill names them, less those in :data:`ROBOT_MODES_REFUSED`,
+and the impedance modes ``load_robot`` adds for an arm; a test keeps the two tables equal to ``load_robot``'s)."""
 ROBOT_MODES_REFUSED = {
     ("fetch", "pd_ee_delta_pose_align"): "its frame 'ee_align' is not implemented in ManiSkill 3.0.1 either",
     ("fetch", "pd_joint_pos_vel"): (

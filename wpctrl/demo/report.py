@@ -233,8 +233,9 @@ def plot(path: Path, hist: dict, env_err: np.ndarray, task, summary: dict) -> No
 
     names = task.names
     n = len(names)
-    cols = 3 if n <= 10 else 4 if n <= 18 else 6  # a hand or a humanoid gets more, smaller panels
-    rows = -(-(n + 2) // cols)
+    extra = list(getattr(task, "extra_names", ())) if "extra_applied" in hist else []
+    cols = 3 if n + len(extra) <= 10 else 4 if n + len(extra) <= 18 else 6  # a hand or a humanoid: smaller panels
+    rows = -(-(n + len(extra) + 2) // cols)
     fig, axes = plt.subplots(rows, cols, figsize=(4.4 * cols, 2.75 * rows), constrained_layout=True, squeeze=False)
     t = hist["t"]
     shown = [None] * n  # per column: (unit shown, scale from SI)
@@ -253,6 +254,18 @@ def plot(path: Path, hist: dict, env_err: np.ndarray, task, summary: dict) -> No
         ax.set_ylabel(f"[{unit}]", fontsize=8)
         ax.tick_params(labelsize=7)
     axes.flat[0].legend(fontsize=7)
+    for j, name in enumerate(extra):  # not scored: e.g. the commanded torque and the one applied after the clamp
+        ax = axes.flat[n + j]
+        if len(t):
+            ax.plot(t, hist["extra_commanded"][:, j], color="tab:orange", lw=1, label="commanded")
+            ax.plot(t, hist["extra_applied"][:, j], color="tab:blue", lw=1.5, label="applied (joint_f)")
+        ax.set_title(name, fontsize=9)
+        ax.set_xlabel("t [s]", fontsize=8)
+        ax.set_ylabel(f"[{task.extra_unit}]", fontsize=8)
+        ax.tick_params(labelsize=7)
+    if extra:
+        axes.flat[n].legend(fontsize=7)
+    n += len(extra)
     ax = axes.flat[n]
     finite = env_err[np.isfinite(env_err)]
     first = next(iter(task.groups))

@@ -5,7 +5,8 @@ The Panda's own task (:mod:`.joint_task`, :mod:`.ee_task`) knows a desired traje
 mode the demo cannot, so it asks less: every action column follows its own sinusoid inside the mode's action space
 (absolute, delta, velocity, end-effector or base actions alike), and the score is how closely the solver follows
 what wpctrl asked of each joint — position rows against ``Control.joint_target_q``, velocity rows (velocity and base
-controllers) against ``Control.joint_target_qd``.
+controllers) against ``Control.joint_target_qd``, a joint-impedance arm against its joint targets and an
+operational-space arm by its TCP position against its target pose.
 """
 
 from __future__ import annotations
@@ -48,7 +49,14 @@ class RobotTask:
         self.rows: list[int] = []  # controller row of each tracked column
         self.velocity: list[bool] = []
         self.groups: dict = {}
+        self.tcp: list = []  # (uid, controller) of operational-space children: tracked on their TCP position
+        self.joint_targets: list = []  # (first column, controller) of joint-impedance children: their joint targets
         for uid, child in subs.items():
+            if hasattr(child, "task_stiffness"):  # an OperationalSpaceController: TCP vs its target pose, below
+                self.tcp.append((uid, child))
+                continue
+            if type(child).__name__ == "JointImpedanceController":
+                self.joint_targets.append((len(self.rows), child))
             rows = np.arange(child._rows.start, child._rows.stop)
             vel = type(child.config).__name__ in _VELOCITY_CONFIGS
             kinds: dict[str, list[int]] = {}
@@ -60,9 +68,13 @@ class RobotTask:
                 self.velocity += [vel] * len(members)
                 name = uid if len(kinds) == 1 else f"{uid} [{unit}]"
                 self.groups[name] = (slice(start, len(self.rows)), unit, unit, 1.0)
-        self.rows_a = np.asarray(self.rows)
-        self.velocity_a = np.asarray(self.velocity)
+        self.rows_a = np.asarray(self.rows, np.int64)
+        self.velocity_a = np.asarray(self.velocity, bool)
         self.names = [ctrl.joint_names[r] + (" (vel)" if v else "") for r, v in zip(self.rows, self.velocity)]
+        for uid, _ in self.tcp:
+            start = len(self.names)
+            self.names += [f"{uid} TCP {a}" for a in "xyz"]
+            self.groups[f"{uid} TCP"] = (slice(start, start + 3), "m", "mm", 1e3)
 
     def action(self, t_next: float, state) -> np.ndarray:
         """Action for the control step that ends at ``t_next`` [s] (the state is not needed)."""
@@ -77,4 +89,10 @@ class RobotTask:
         tq, tqd = control.joint_target_q.numpy(), control.joint_target_qd.numpy()
         measured = np.where(self.velocity_a, qd[dof], q[coord])
         target = np.where(self.velocity_a, tqd[dof], tq[coord])
+        for c0, child in self.joint_targets:  # joint impedance: torques, no drive target; the controller's target
+            n = child._rows.stop - child._rows.start
+            target[:, c0 : c0 + n] = child.target_qpos.numpy()
+        if self.tcp:
+            measured = np.concatenate([measured] + [c.fk_jacobian(state)[0].numpy()[:, :3] for _, c in self.tcp], 1)
+            target = np.concatenate([target] + [c.target_pose.numpy()[:, :3] for _, c in self.tcp], 1)
         return measured, target, target

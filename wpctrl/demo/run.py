@@ -23,8 +23,9 @@ def make_task(mode_name: str, ctrl, model, rest, num_envs: int, rng, robot: str 
     interface as :class:`JointTask`: ``groups`` ({name: (columns, SI unit, shown unit, scale)}; the first group also
     feeds the per-env histogram), ``tracking_label``, ``names`` (one per tracked column, for the plot),
     ``action(t_next, state) -> (num_envs, action_dim) float32`` and ``tracked(t, state, control) -> (measured,
-    desired, drive target)``, each (num_envs, len(names)). A robot other than the Panda gets the generic task
-    (robot_task.py)."""
+    desired, drive target)``, each (num_envs, len(names)); optionally ``extra_names``, ``extra_unit`` and
+    ``extra(state, control) -> (applied, commanded)`` for plot panels that are not scored (the impedance modes'
+    torques). A robot other than the Panda gets the generic task (robot_task.py)."""
     if robot != "panda":
         from .robot_task import RobotTask
 
@@ -33,6 +34,11 @@ def make_task(mode_name: str, ctrl, model, rest, num_envs: int, rng, robot: str 
         from .ee_task import EETask
 
         return EETask(mode_name, ctrl, model, rest, num_envs, rng)
+    if mode_name.startswith(("osc_", "joint_impedance")):  # torque-level modes, their torques plotted too
+        from .impedance_task import JointImpedanceTask, OSCTask
+
+        cls = OSCTask if mode_name.startswith("osc_") else JointImpedanceTask
+        return cls(mode_name, ctrl, model, rest, num_envs, rng)
     return JointTask(mode_name, ctrl, model, rest, num_envs, rng)
 
 
@@ -204,6 +210,8 @@ def run(args, ctx=None) -> dict:
 
     steps_per_reset = max(1, args.control_freq)  # a few random envs reset every simulated second
     hist = {"t": [], "measured": [], "desired": [], "target": []}
+    if hasattr(task, "extra"):  # extra plot panels (the impedance modes' torques)
+        hist.update(extra_applied=[], extra_commanded=[])
     err_sq = {g: 0.0 for g in task.groups}
     err_max = {g: 0.0 for g in task.groups}
     err_count = 0
@@ -256,6 +264,10 @@ def run(args, ctx=None) -> dict:
         hist["measured"].append(measured[0].copy())
         hist["desired"].append(desired[0].copy())
         hist["target"].append(target[0].copy())
+        if "extra_applied" in hist:
+            applied, commanded = task.extra(s0, control)
+            hist["extra_applied"].append(applied[0].copy())
+            hist["extra_commanded"].append(commanded[0].copy())
         if progress is not None:
             progress.update(1)
         if bad.any():

@@ -2,8 +2,9 @@
 
 :mod:`.plan` (the host-only plan: rows, index tables, options, active parts, the step kernels' layout), :mod:`.state`
 (the device arrays every mode has, allocation, lookup of kernel arguments by name), :mod:`.parts` (one module per
-option: drive properties, joint-space response and the coupled drive, delay, effort readout, end effectors, gravity
-compensation), :mod:`.core` (:class:`_Engine`: runs the stages), :mod:`.launch` (recorded launches).
+option: drive properties, joint-space response, the coupled drive, delay, effort readout and commands, actuator models,
+end effectors, gravity compensation), :mod:`.core` (:class:`_Engine`: runs the stages), :mod:`.launch` (recorded
+launches).
 """
 
 from .core import _Engine

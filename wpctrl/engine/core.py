@@ -7,13 +7,13 @@ they own into the model (drive properties, gravity compensation, the EE chains, 
 every env from the model's initial pose ends it. :class:`_Engine` then only runs the stages, one launch each:
 
 - ``set_action``: the parts' pre-launch hooks (EE targets, the response update), then the joint kernel of the mode's
-  layout (``kernels/pd_step.py``).
+  layout (:mod:`wpctrl.kernels.pd_step`).
 - ``substep``: the substep kernel, plus the parts' hooks (per-substep response, the coupled drive's launch). A mode
   without per-substep work (implicit actuation, no interpolation, delay, effort readout or per-substep response)
   has drive targets that do not change between substeps: ``set_action`` writes them into the Control it knows (the
   last one given to ``substep`` or ``reset``) and ``substep`` launches nothing, unless it is handed another Control
   (a small write there, which it then knows). The per-env substep counter is then ``step + host_substeps``.
-- ``reset``: one launch (``kernels/pd.py``), plus the parts' hooks.
+- ``reset``: one launch (:mod:`wpctrl.kernels.pd`), plus the parts' hooks.
 
 Launches are recorded once and re-bound only where an argument changed (:class:`~wpctrl.engine.launch._Launch`);
 their arguments are looked up by name among the core arrays and the active parts'
@@ -25,9 +25,9 @@ from __future__ import annotations
 import newton
 import warp as wp
 
-from ..kernels import pd as K
-from ..kernels import pd_step as KS
+from ..kernels import pd_step
 from ..kernels.dims import step_block_dim
+from ..kernels.pd import _reset_kernel, _step_view_kernel, _targets_kernel
 from .launch import _Launch, _Targets
 from .parts import Part, part_classes
 from .plan import Plan
@@ -87,7 +87,7 @@ class _Engine:
         if write_model:
             for part in self.parts:
                 part.build(self, model, solver)
-            self.mode_changed = self._by_name["drive"].mode_changed
+            self.mode_changed = self._by_name["drive_properties"].mode_changed
             if solver is not None:
                 solver.notify_model_changed(self.model_flags())
             # Targets start at the model's initial pose (the first reset() re-initialises every env from the state).
@@ -96,13 +96,13 @@ class _Engine:
     # -- parts ----------------------------------------------------------------------------------------------------
 
     def part(self, name: str):
-        """The active part ``name`` (``"drive"``, ``"response"``, ``"coupled"``, ``"delay"``, ``"effort"``, ``"ee"``,
-        ``"gravity"``, ``"effort_command"``, ``"actuators"``), or None."""
+        """The active part ``name`` (``"drive_properties"``, ``"response"``, ``"coupled_drive"``, ``"delay"``,
+        ``"effort_readout"``, ``"ee"``, ``"gravity"``, ``"effort_command"``, ``"actuator_models"``), or None."""
         return self._by_name.get(name)
 
     @property
     def response_part(self):
-        return self._by_name.get("response") or self._by_name.get("coupled")
+        return self._by_name.get("response") or self._by_name.get("coupled_drive")
 
     @property
     def needs_response(self) -> bool:
@@ -124,11 +124,11 @@ class _Engine:
 
     @property
     def clip_targets(self) -> bool:
-        return self.plan.options.clip_targets
+        return self.plan.clip_targets
 
     @property
-    def inertia_update(self) -> str:
-        return self.plan.options.inertia_update
+    def inertia_update(self) -> str | None:
+        return self.plan.inertia_update
 
     @property
     def sim_dt(self) -> float:
@@ -202,7 +202,7 @@ class _Engine:
                 "joint_target_q_out": None,
                 "joint_target_qd_out": None,
             }
-            kernel = KS.set_action_kernel(self.layout)
+            kernel = pd_step.set_action_kernel(self.layout)
             self._launch_set_action = self._launch(kernel, self.num_envs, per_call, self.block_dim)
         ln = self._launch_set_action
         ln.bind("action_in", action)
@@ -236,7 +236,7 @@ class _Engine:
                 "joint_target_qd_out": control.joint_target_qd,
                 "joint_f_out": joint_f,
             }
-            kernel = KS.substep_kernel(self.layout)
+            kernel = pd_step.substep_kernel(self.layout)
             self._launch_substep = self._launch(kernel, self.num_envs, per_call, self.block_dim)
         ln = self._launch_substep
         ln.bind("joint_q_in", state.joint_q)
@@ -262,7 +262,7 @@ class _Engine:
         """Write every env's current drive targets into ``control`` (one launch) and make it the known Control."""
         if self._launch_targets is None:
             per_call = {"joint_target_q_out": control.joint_target_q, "joint_target_qd_out": control.joint_target_qd}
-            self._launch_targets = self._launch(K._targets_kernel, (self.num_envs, self.num_rows), per_call)
+            self._launch_targets = self._launch(_targets_kernel, (self.num_envs, self.num_rows), per_call)
         ln = self._launch_targets
         ln.bind("joint_target_q_out", control.joint_target_q)
         ln.bind("joint_target_qd_out", control.joint_target_qd)
@@ -280,7 +280,7 @@ class _Engine:
         if self.per_substep:
             return c.step
         wp.launch(
-            K._step_view_kernel, dim=self.num_envs, inputs=[self.host_substeps, c.step, c.step_view], device=self.device
+            _step_view_kernel, dim=self.num_envs, inputs=[self.host_substeps, c.step, c.step_view], device=self.device
         )
         return c.step_view
 
@@ -309,15 +309,15 @@ class _Engine:
             "joint_target_qd_out": None if control is None else control.joint_target_qd,
             "joint_f_out": None if (control is None or not self.writes_joint_f) else control.joint_f,
         }
-        effort = self._by_name.get("effort")
+        effort = self._by_name.get("effort_readout")
         if effort is not None:  # (the coupled drive sets the substep kernel's effort outputs aside, not the reset's)
             per_call["computed_effort_out"] = effort.computed_effort
             per_call["applied_effort_out"] = effort.applied_effort
             per_call["saturation_count_out"] = effort.saturation_count
-        names = [a.label for a in K._reset_kernel.adj.args]
+        names = [a.label for a in _reset_kernel.adj.args]
         inputs = [per_call[n] if n in per_call else self.arrays.lookup(n) for n in names]
         dim = (self.num_envs if env_ids is None else n, self.num_rows)
-        wp.launch(K._reset_kernel, dim=dim, inputs=inputs, device=self.device)
+        wp.launch(_reset_kernel, dim=dim, inputs=inputs, device=self.device)
         for part in self._hooks["after_reset"]:
             part.after_reset(self, state, env_ids, env_mask)
         if write_all:

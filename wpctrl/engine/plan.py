@@ -15,10 +15,11 @@ import numpy as np
 from ..binding import JointBinding
 from ..config import ConfigError
 from ..config import rows as cfg
-from ..config.actuators import ACT_DC_MOTOR, ACT_NET, ACT_NONE, ACT_POSITION_LIMIT
+from ..config.actuator_models import ACT_DC_MOTOR, ACT_NET, ACT_NONE, ACT_POSITION_LIMIT
 from ..config.ee import EESpec
-from ..kernels import actuators as KA
-from ..kernels import pd_step as KS
+from ..config.impedance import ImpedanceSpec
+from ..config.options import Actuation, ControllerOptions, Delay, Diagnostics
+from ..kernels import actuator_models, pd_step
 from .launch import _index_table
 
 EXPLICIT_MODES = {"naive": 1, "stable": 2, "coupled": 3}
@@ -26,17 +27,14 @@ EXPLICIT_MODES = {"naive": 1, "stable": 2, "coupled": 3}
 
 @dataclass(frozen=True)
 class Options:
-    """``build_controller``'s engine options, validated by the controller layer."""
+    """A control mode's options as the engine takes them: the substep count and length, and ``build_controller``'s
+    option groups (each validated on its own when it was made; :func:`make_plan` checks them against the rows)."""
 
     num_substeps: int
-    actuation: str = "implicit"
-    explicit_pd: str = "naive"
-    inertia_update: str = "control"
     sim_dt: float = 0.01
-    delay: tuple[int, int] | None = None
-    track_effort: bool = False
-    clip_targets: bool = False
-    seed: int = 0
+    actuation: Actuation = Actuation()
+    delay: Delay | None = None
+    diagnostics: Diagnostics = Diagnostics()
     balance_passive_force: bool = False
 
 
@@ -53,8 +51,8 @@ class Plan:
     qd_idx: np.ndarray = None
     q_stride: int = 0
     qd_stride: int = 0
-    row_f: np.ndarray = None  # (rows, 8) float32: bounds, mimic coupling, joint limits
-    layout: KS.StepLayout = None
+    row_f: np.ndarray = None  # (rows, ROW_F_WIDTH = 9) float32: bounds, mimic coupling, joint limits, EMA weight
+    layout: pd_step.StepLayout = None
     parts: tuple[str, ...] = ()
 
     # -- derived --------------------------------------------------------------------------------------------------
@@ -73,12 +71,12 @@ class Plan:
 
     @property
     def explicit(self) -> bool:
-        return self.options.actuation == "explicit"
+        return self.options.actuation.explicit
 
     @property
     def explicit_mode(self) -> int:
         """0 implicit, 1 naive, 2 stable, 3 coupled explicit PD."""
-        return EXPLICIT_MODES[self.options.explicit_pd] if self.explicit else 0
+        return EXPLICIT_MODES[self.options.actuation.law] if self.explicit else 0
 
     @property
     def coupled(self) -> bool:
@@ -93,6 +91,41 @@ class Plan:
         """Acceleration drives and stable explicit PD use the joint-space response r = (H^-1)_ii (the coupled drive
         solves with H itself and computes r only for acceleration drives)."""
         return self.has_accel or self.explicit_mode == 2
+
+    @property
+    def computes_inertia(self) -> bool:
+        """Whether the mode computes the articulation's inertia at all (r for acceleration drives and stable PD, H for
+        the coupled drive)."""
+        return self.needs_response or self.coupled
+
+    @property
+    def inertia_update(self) -> str | None:
+        """When the inertia is recomputed (``"control"`` / ``"substep"``: the option, else the drive's default), or
+        None for a mode that computes none."""
+        if not self.computes_inertia:
+            return None
+        return self.options.actuation.inertia_update or ("substep" if self.coupled else "control")
+
+    @property
+    def delay_range(self) -> tuple[int, int] | None:
+        d = self.options.delay
+        return None if d is None else d.range
+
+    @property
+    def track_effort(self) -> bool:
+        return self.options.diagnostics.track_effort
+
+    @property
+    def clip_targets(self) -> bool:
+        return self.options.diagnostics.clip_targets == "joint_limits"
+
+    @property
+    def resolved_options(self) -> ControllerOptions:
+        """The options as they run (the explicit law and inertia update resolved, None where none runs)."""
+        o = self.options
+        law = o.actuation.law
+        actuation = Actuation(o.actuation.mode, law, self.inertia_update)
+        return ControllerOptions(actuation, o.delay, o.diagnostics, o.balance_passive_force)
 
     @property
     def has_effort_rows(self) -> bool:
@@ -117,15 +150,14 @@ class Plan:
         state), interpolation (the target moves), a command delay (the ring buffer shifts), the effort readout (it
         reads the measured state), or a per-substep inertia update. Otherwise the drive targets are constant over the
         control step and the substep launch is elided."""
-        o = self.options
         interpolates = bool((self.rows.flags & cfg.FLAG_INTERPOLATE).any())
-        inertia_per_substep = self.needs_response and o.inertia_update == "substep"
+        inertia_per_substep = self.needs_response and self.inertia_update == "substep"
         return (
             self.explicit
             or self.has_effort_rows
             or interpolates
-            or o.delay is not None
-            or o.track_effort
+            or self.options.delay is not None
+            or self.track_effort
             or inertia_per_substep
         )
 
@@ -134,8 +166,8 @@ class Plan:
         kinds = {cfg.ROW_POS: "pos", cfg.ROW_VEL: "vel", cfg.ROW_PASSIVE: "passive", cfg.ROW_EFFORT: "effort"}
         lines = [
             f"Plan: {self.num_envs} envs x {self.num_rows} rows, action_dim {self.action_dim}, "
-            f"K = {self.options.num_substeps}, {self.options.actuation}"
-            + (f" ({self.options.explicit_pd})" if self.explicit else ""),
+            f"K = {self.options.num_substeps}, {self.options.actuation.mode}"
+            + (f" ({self.options.actuation.law})" if self.explicit else ""),
             f"  layout: {'replicated (stride ' + str(self.q_stride) + ')' if self.strided else 'per-env tables'}; "
             f"per-substep launch: {'yes' if self.per_substep else 'no (elided)'}",
             f"  parts: {', '.join(self.parts) or '-'}",
@@ -159,19 +191,10 @@ def make_plan(rows: cfg.Rows, binding: JointBinding, options: Options, ee_specs:
     """The plan of ``rows`` bound by ``binding`` (host only).
 
     Raises:
-        ConfigError: an actuator model with implicit actuation or with the coupled drive.
+        ConfigError: an option these rows would ignore or cannot honour (:func:`check_options`).
     """
     E, R = binding.num_envs, rows.count
-    models = rows.act_model[rows.act_model != ACT_NONE]
-    if models.size and (options.actuation != "explicit" or options.explicit_pd == "coupled"):
-        name = {ACT_DC_MOTOR: "DCMotor", ACT_POSITION_LIMIT: "PositionBasedEffortLimit", ACT_NET: "ActuatorNet"}
-        what = name[int(models[0])]
-        why = (
-            "the solver's implicit drive cannot apply it (it computes its own PD force inside the solve)"
-            if options.actuation != "explicit"
-            else "explicit_pd='coupled' solves the force limits itself"
-        )
-        raise ConfigError(f"actuator: {what} needs actuation='explicit' with explicit_pd='naive' or 'stable'; {why}")
+    check_options(rows, options, ee_specs)
     # Coordinate / DOF index of every (env, row): env 0's row plus env * stride for a replicated layout, else a flat
     # (num_envs, rows) table; either way no chain of table loads in the kernels.
     q_idx, q_stride = _index_table(binding.coord_index.reshape(E, R))
@@ -188,11 +211,54 @@ def make_plan(rows: cfg.Rows, binding: JointBinding, options: Options, ee_specs:
         qd_idx=qd_idx,
         q_stride=q_stride,
         qd_stride=qd_stride,
-        row_f=KS.row_float_table(rows, binding.qlimits.astype(np.float32).reshape(R, 2)),
+        row_f=pd_step.row_float_table(rows, binding.qlimits.astype(np.float32).reshape(R, 2)),
     )
     plan.parts = _active_parts(plan)
     plan.layout = _layout(plan)
     return plan
+
+
+def check_options(rows: cfg.Rows, options: Options, ee_specs: dict | None = None) -> None:
+    """Refuse an option that the mode's rows would silently ignore, or cannot honour (host only).
+
+    Each option group checked itself when it was made; what is left depends on the joints: an inertia update for a
+    mode that computes no inertia, target clipping without position targets, a delay or the NaN check of a mode that
+    takes no action, an actuator model that the actuation cannot apply.
+    """
+    a, d = options.actuation, options.diagnostics
+    models = rows.act_model[rows.act_model != ACT_NONE]
+    if models.size and (not a.explicit or a.coupled):
+        name = {ACT_DC_MOTOR: "DCMotor", ACT_POSITION_LIMIT: "PositionBasedEffortLimit", ACT_NET: "ActuatorNet"}
+        what = name[int(models[0])]
+        why = (
+            "the solver's implicit drive cannot apply it (it computes its own PD force inside the solve)"
+            if not a.explicit
+            else "explicit_pd='coupled' solves the force limits itself"
+        )
+        raise ConfigError(f"actuator: {what} needs actuation='explicit' with explicit_pd='naive' or 'stable'; {why}")
+    accel = bool(rows.accel.any())
+    if a.inertia_update is not None and not (accel or a.law in ("stable", "coupled")):
+        raise ConfigError(
+            f"actuation.inertia_update: expected None: this mode computes no inertia (no joint has drive_mode "
+            f"'acceleration' and the explicit law is {a.law!r}, not 'stable' or 'coupled'), got {a.inertia_update!r}"
+        )
+    joint_targets = any(isinstance(s, ImpedanceSpec) and not s.osc for _, _, s in (ee_specs or {}).values())
+    if d.clip_targets != "none" and not ((rows.kind == cfg.ROW_POS).any() or joint_targets):
+        raise ConfigError(
+            f"diagnostics.clip_targets: expected 'none': no joint of this mode has a position target (velocity, "
+            f"effort and passive joints only), got {d.clip_targets!r}"
+        )
+    if rows.action_dim == 0:
+        if options.delay is not None:
+            raise ConfigError(
+                f"delay: expected None: this mode takes no action (passive joints only), nothing to delay; got "
+                f"{options.delay!r}"
+            )
+        if d.nan_policy != "hold":
+            raise ConfigError(
+                f"diagnostics.nan_policy: expected 'hold': this mode takes no action (passive joints only), nothing "
+                f"to check; got {d.nan_policy!r}"
+            )
 
 
 def _active_parts(plan: Plan) -> tuple[str, ...]:
@@ -202,8 +268,8 @@ def _active_parts(plan: Plan) -> tuple[str, ...]:
     return tuple(name for name, cls in part_classes().items() if cls.wanted(plan))
 
 
-def _layout(plan: Plan) -> KS.StepLayout:
-    """The step kernels' compile-time layout (one thread per env, rows unrolled: kernels/pd_step.py)."""
+def _layout(plan: Plan) -> pd_step.StepLayout:
+    """The step kernels' compile-time layout (one thread per env, rows unrolled: :mod:`wpctrl.kernels.pd_step`)."""
     rows = plan.rows
     o = plan.options
     base = bool((rows.base_axis >= 0).any())
@@ -212,7 +278,7 @@ def _layout(plan: Plan) -> KS.StepLayout:
         return tuple(int(x) for x in a)
 
     vel_rows = (rows.kind != cfg.ROW_POS) | ((rows.flags & cfg.FLAG_VEL_TARGET) != 0)
-    return KS.StepLayout(
+    return pd_step.StepLayout(
         kind=ints(rows.kind),
         flags=ints(rows.flags),
         act_col=ints(rows.act_col),
@@ -222,11 +288,11 @@ def _layout(plan: Plan) -> KS.StepLayout:
         q_off=ints(plan.q_idx[0]) if plan.strided else None,
         qd_off=ints(plan.qd_idx[0]) if plan.strided else None,
         action_dim=int(rows.action_dim),
-        clip=bool(o.clip_targets),
+        clip=plan.clip_targets,
         explicit=0 if plan.coupled else plan.explicit_mode,
         delay=o.delay is not None,
         delay_vel=o.delay is not None and bool(vel_rows.any()),
-        effort=o.track_effort and not plan.coupled,
+        effort=plan.track_effort and not plan.coupled,
         yaw_row=ints(rows.yaw_row) if base else (),
         base_axis=ints(rows.base_axis) if base else (),
         bx_col=ints(rows.bx_col) if base else (),
@@ -242,5 +308,5 @@ def _limit_tables(rows: cfg.Rows) -> tuple:
     for r0, count, what in rows.extras:
         if isinstance(what, tuple):  # (positions, efforts)
             for r in range(r0, r0 + count):
-                t[r] = KA.table_constants(*what)
+                t[r] = actuator_models.table_constants(*what)
     return tuple(t)

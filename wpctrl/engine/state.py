@@ -90,7 +90,8 @@ class CoreArrays:
         self.bad_action_count = wp.zeros(E, dtype=wp.int32, device=dev)
         self.action_buffer = wp.zeros((E, plan.action_dim), dtype=wp.float32, device=dev)
         # The device RNG (delay draws, drive randomisation): a seed and a draw counter bumped after each draw.
-        self.seed = int(plan.options.seed)
+        delay = plan.options.delay
+        self.seed = 0 if delay is None or delay.seed is None else int(delay.seed)
         self.rng_counter = wp.zeros(1, dtype=wp.int32, device=dev)
         # r = (H^-1)_ii when a part needs it (it replaces this); a (1, rows) placeholder the kernels never read.
         self.response = wp.ones((1, max(R, 1)), dtype=wp.float32, device=dev)

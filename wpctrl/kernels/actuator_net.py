@@ -17,7 +17,7 @@ from typing import NamedTuple
 
 import warp as wp
 
-from . import actuators as _act
+from .actuator_models import dc_motor_clamp
 from .pd import _at
 
 wp.set_module_options({"enable_backward": False})
@@ -200,7 +200,7 @@ def _make_net_kernel(L: NetLayout) -> wp.Kernel:
                 y[o] = _activate(acc, wp.static(DENSE[li][2]), wp.static(DENSE[li][3]))
             x = y
         u = x[0] * torque_scale
-        f = _act.dc_motor_clamp(u, qd, sat, vl, lim)
+        f = dc_motor_clamp(u, qd, sat, vl, lim)
         joint_f_out[di] = f
         if computed_effort_out:
             computed_effort_out[env, r] = u

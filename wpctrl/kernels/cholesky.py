@@ -1,5 +1,5 @@
 """Unrolled float64 Cholesky factorisation of an articulation's n x n joint-space inertia, and the controlled rows'
-block of its inverse, for the fused kernels (:mod:`.inertia_unrolled`, :mod:`.drive`).
+block of its inverse, for the fused kernels (:mod:`.inertia_unrolled`, :mod:`.coupled_drive`).
 
 Private module. :func:`cholesky_funcs` compiles them for a size and the rows' DOFs (compile-time constants, every loop
 unrolled, so the matrices stay in registers on CUDA). Pivots are floored as in Newton's ``JointSpaceResponse`` and

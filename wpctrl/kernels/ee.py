@@ -27,15 +27,15 @@ from .ee_math import (
     _jacobian,
     _log6,
     _measured_q,
+    _pose_action,
     _read_pose,
     _std,
     _store_target,
     _write_pose,
     mat6D,
     vec6,
-    vecD,
 )
-from .pd import _action_finite, _scale
+from .pd import _action_finite
 
 wp.set_module_options({"enable_backward": False})
 
@@ -107,19 +107,7 @@ def _make_set_action_kernel(clik: bool):
         q0 = _measured_q(env, row_q_off, env_q_base, num_dof, joint_q_in)
 
         # Processed action (ManiSkill's _preprocess_action).
-        act = vecD()
-        for k in range(3):
-            act[k] = _scale(action_in[env, col0 + k], act_lo[k], act_hi[k], normalize)
-        if pose != 0:
-            r = wp.vec3(action_in[env, col0 + 3], action_in[env, col0 + 4], action_in[env, col0 + 5])
-            if normalize != 0:
-                nrm = wp.sqrt(r[2] * r[2] + (r[1] * r[1] + r[0] * r[0]))
-                if nrm > 1.0:
-                    r = r * (1.0 / nrm)
-                r = wp.cw_mul(r, rot_scale)
-            act[3] = r[0]
-            act[4] = r[1]
-            act[5] = r[2]
+        act = _pose_action(action_in, env, col0, pose, normalize, act_lo, act_hi, rot_scale)
         for k in range(6):
             if k < 3 + 3 * pose:
                 processed_action_out[env, col0 + k] = act[k]

@@ -9,21 +9,22 @@ from __future__ import annotations
 import newton
 import warp as wp
 
-from ..config import ee as _ce
+from ..config import ee as ee_config
+from .pd import _scale
 
 wp.set_module_options({"enable_backward": False})
 
-MAX_DOF = wp.constant(_ce.MAX_EE_DOF)
-SOLVER_PINV = wp.constant(_ce.SOLVER_PINV)
-FRAME_BODY_TRANS = wp.constant(_ce.FRAME_BODY_TRANS)
-FRAME_BODY_ROT = wp.constant(_ce.FRAME_BODY_ROT)
+MAX_DOF = wp.constant(ee_config.MAX_EE_DOF)
+SOLVER_PINV = wp.constant(ee_config.SOLVER_PINV)
+FRAME_BODY_TRANS = wp.constant(ee_config.FRAME_BODY_TRANS)
+FRAME_BODY_ROT = wp.constant(ee_config.FRAME_BODY_ROT)
 JOINT_PRISMATIC = wp.constant(int(newton.JointType.PRISMATIC))
 JOINT_REVOLUTE = wp.constant(int(newton.JointType.REVOLUTE))
 
-vecD = wp.types.vector(length=_ce.MAX_EE_DOF, dtype=float)
-mat3D = wp.types.matrix(shape=(3, _ce.MAX_EE_DOF), dtype=float)
-mat6D = wp.types.matrix(shape=(6, _ce.MAX_EE_DOF), dtype=float)
-matDD = wp.types.matrix(shape=(_ce.MAX_EE_DOF, _ce.MAX_EE_DOF), dtype=float)
+vecD = wp.types.vector(length=ee_config.MAX_EE_DOF, dtype=float)
+mat3D = wp.types.matrix(shape=(3, ee_config.MAX_EE_DOF), dtype=float)
+mat6D = wp.types.matrix(shape=(6, ee_config.MAX_EE_DOF), dtype=float)
+matDD = wp.types.matrix(shape=(ee_config.MAX_EE_DOF, ee_config.MAX_EE_DOF), dtype=float)
 vec6 = wp.types.vector(length=6, dtype=float)
 mat66 = wp.types.matrix(shape=(6, 6), dtype=float)
 
@@ -109,6 +110,35 @@ def _log6(t: wp.transform):
         beta = 1.0 / t2 - st / (2.0 * theta * (1.0 - ct))
     lin = alpha * p - 0.5 * wp.cross(w, p) + (beta * wp.dot(w, p)) * w
     return vec6(lin[0], lin[1], lin[2], w[0], w[1], w[2])
+
+
+@wp.func
+def _pose_action(
+    action_in: wp.array2d[float],
+    env: int,
+    col0: int,
+    pose: int,
+    normalize: int,
+    act_lo: wp.vec3,
+    act_hi: wp.vec3,
+    rot_scale: wp.vec3,
+):
+    """ManiSkill's processed EE action from columns ``col0..``: the position scaled onto [lo, hi] (clipped to [-1, 1]
+    first when normalised), then for a pose the rotation clipped by its norm and multiplied by ``rot_scale``."""
+    act = vecD()
+    for k in range(3):
+        act[k] = _scale(action_in[env, col0 + k], act_lo[k], act_hi[k], normalize)
+    if pose != 0:
+        r = wp.vec3(action_in[env, col0 + 3], action_in[env, col0 + 4], action_in[env, col0 + 5])
+        if normalize != 0:
+            nrm = wp.sqrt(r[2] * r[2] + (r[1] * r[1] + r[0] * r[0]))
+            if nrm > 1.0:
+                r = r * (1.0 / nrm)
+            r = wp.cw_mul(r, rot_scale)
+        act[3] = r[0]
+        act[4] = r[1]
+        act[5] = r[2]
+    return act
 
 
 # ---------------------------------------------------------------------------------------------------------------------

@@ -10,7 +10,7 @@ Private module. Per env, one thread:
 3. its Cholesky factor ``H = L L^T`` (float64, pivots floored like Newton's ``JointSpaceResponse``), in registers;
 4. for the controlled rows (articulation-local DOFs ``d_r``): ``y_r = L^-1 e_{d_r}``, so that
    ``(H^-1)_{d_r d_c} = y_r . y_c``. The response kernel writes ``r = (H^-1)_{d_r d_r}``; the coupled drive
-   (:mod:`wpctrl.kernels.drive`) uses the whole block ``A = Y Y^T``.
+   (:mod:`wpctrl.kernels.coupled_drive`) uses the whole block ``A = Y Y^T``.
 
 Supported articulations (:func:`chain_layout` checks, else callers fall back to ``JointSpaceResponse``): fixed base
 (the root joint's parent is the world), revolute / prismatic / fixed joints only, at most :data:`MAX_CHAIN_DOFS`
@@ -27,7 +27,7 @@ import numpy as np
 import warp as wp
 
 from .dims import PER_ENV_BLOCK_DIM
-from .inertia_unrolled import unrolled_chain_funcs
+from .inertia_unrolled import h_only, unrolled_chain_funcs
 from .spatial import _FLOAT32_EPS, J_FIXED, J_PRISMATIC, J_REVOLUTE, _body_world_inertia  # noqa: F401
 
 wp.set_module_options({"enable_backward": False})
@@ -157,6 +157,14 @@ def chain_h_func(nj: int, n: int, nr: int, template: tuple | None = None):
     return _chain_funcs(nj, n, nr, template, True)[1]
 
 
+def chain_hg_func(nj: int, n: int, nr: int, template: tuple | None = None):
+    """``chain_hg``: ``chain_h``'s arguments and the gravity vector [m/s^2] in the world frame, last; returns H (as
+    ``chain_h``) and the gravity force ``g(q) = dU/dq`` [N·m or N] of every DOF (float64, length n: the generalized
+    force that holds the articulation static against gravity, ``eval_inverse_dynamics_passive``'s
+    ``gravity_force``), accumulated in the same pass over the bodies; unrolled with ``template``."""
+    return _chain_funcs(nj, n, nr, template, True)[2]
+
+
 def _chain_funcs(nj: int, n: int, nr: int, template: tuple | None, full: bool):
     if template is not None:
         key = (nj, n, nr, template, bool(full))
@@ -167,6 +175,7 @@ def _chain_funcs(nj: int, n: int, nr: int, template: tuple | None, full: bool):
     if key in _funcs_cache:
         return _funcs_cache[key]
     MatN = wp.types.matrix(shape=(n, n), dtype=wp.float64)
+    VecN = wp.types.vector(length=n, dtype=wp.float64)
     MatN3 = wp.types.matrix(shape=(n, 3), dtype=wp.float64)
     MatJ3 = wp.types.matrix(shape=(nj, 3), dtype=float)
     MatJ4 = wp.types.matrix(shape=(nj, 4), dtype=float)
@@ -175,91 +184,106 @@ def _chain_funcs(nj: int, n: int, nr: int, template: tuple | None, full: bool):
     VecR = wp.types.vector(length=nr, dtype=wp.float64)
     eps32 = wp.float64(_FLOAT32_EPS)
 
-    @wp.func
-    def chain_h(
-        num_dofs: int,
-        jb: int,
-        db: int,
-        chain_type: wp.array[wp.int32],
-        chain_parent: wp.array[wp.int32],
-        chain_dof: wp.array[wp.int32],
-        chain_anc: wp.array[wp.int32],
-        row_dof: wp.array[wp.int32],
-        joint_q_start: wp.array[wp.int32],
-        joint_qd_start: wp.array[wp.int32],
-        joint_X_p: wp.array[wp.transform],
-        joint_X_c: wp.array[wp.transform],
-        joint_axis: wp.array[wp.vec3],
-        joint_child: wp.array[wp.int32],
-        joint_armature: wp.array[float],
-        body_mass: wp.array[float],
-        body_com: wp.array[wp.vec3],
-        body_inertia: wp.array[wp.mat33],
-        joint_q: wp.array[float],
-    ):
-        # Loop bounds are read at run time (not unrolled): the fully unrolled triple loop over a 9-DOF chain takes
-        # ~20 s to compile on the CPU backend for no measured gain.
-        nj_rt = chain_type.shape[0]
-        n_rt = num_dofs
-        H = MatN()
-        ax = MatN3()  # DOF axes in world
-        pt = MatN3()  # DOF anchor points in world [m]
-        isrev = MatN3()  # column 0: 1 for a revolute DOF
-        bp = MatJ3()  # child-body world positions
-        bq = MatJ4()  # child-body world rotations (x, y, z, w)
-        for k in range(nj_rt):
-            j = jb + k
-            par = chain_parent[k]
-            Xw = wp.transform_identity()
-            if par >= 0:
-                Xw = wp.transform(
-                    wp.vec3(bp[par, 0], bp[par, 1], bp[par, 2]),
-                    wp.quat(bq[par, 0], bq[par, 1], bq[par, 2], bq[par, 3]),
-                )
-            Xj = Xw * joint_X_p[j]
-            t = chain_type[k]
-            Xm = wp.transform_identity()
-            if t != 0:
-                a = joint_axis[joint_qd_start[j]]
-                qv = joint_q[joint_q_start[j]]
-                d = chain_dof[k]
-                aw = wp.transform_vector(Xj, a)
-                ow = wp.transform_get_translation(Xj)
-                ax[d] = wp.vec3d(wp.float64(aw[0]), wp.float64(aw[1]), wp.float64(aw[2]))
-                pt[d] = wp.vec3d(wp.float64(ow[0]), wp.float64(ow[1]), wp.float64(ow[2]))
-                if t == 1:
-                    Xm = wp.transform(wp.vec3(0.0), wp.quat_from_axis_angle(a, qv))
-                    isrev[d, 0] = wp.float64(1.0)
-                else:
-                    Xm = wp.transform(a * qv, wp.quat_identity())
-            Xb = Xj * Xm * wp.transform_inverse(joint_X_c[j])
-            p = wp.transform_get_translation(Xb)
-            r = wp.transform_get_rotation(Xb)
-            bp[k] = p
-            bq[k] = wp.vec4(r[0], r[1], r[2], r[3])
-            # This body's contribution to H over the DOFs that move it.
-            m, c, Iw = _body_world_inertia(Xb, joint_child[j], body_mass, body_com, body_inertia)
-            mask = chain_anc[k]
-            jv = MatN3()  # COM velocity per unit rate of each DOF that moves this body [m/s]
-            jw = MatN3()  # angular velocity per unit rate [rad/s]
-            for i in range(n_rt):
-                if (mask >> i) & 1:
-                    ai = ax[i]
-                    if isrev[i, 0] > wp.float64(0.0):
-                        jv[i] = wp.cross(ai, c - pt[i])
-                        jw[i] = ai
+    def make_chain_hg(GRAV: bool):
+        """``chain_hg``: H and, with ``GRAV``, the gravity force of every DOF from the same pass (0 without)."""
+
+        @wp.func
+        def chain_hg(
+            num_dofs: int,
+            jb: int,
+            db: int,
+            chain_type: wp.array[wp.int32],
+            chain_parent: wp.array[wp.int32],
+            chain_dof: wp.array[wp.int32],
+            chain_anc: wp.array[wp.int32],
+            row_dof: wp.array[wp.int32],
+            joint_q_start: wp.array[wp.int32],
+            joint_qd_start: wp.array[wp.int32],
+            joint_X_p: wp.array[wp.transform],
+            joint_X_c: wp.array[wp.transform],
+            joint_axis: wp.array[wp.vec3],
+            joint_child: wp.array[wp.int32],
+            joint_armature: wp.array[float],
+            body_mass: wp.array[float],
+            body_com: wp.array[wp.vec3],
+            body_inertia: wp.array[wp.mat33],
+            joint_q: wp.array[float],
+            gravity: wp.vec3,
+        ):
+            # Loop bounds are read at run time (not unrolled): the fully unrolled triple loop over a 9-DOF chain takes
+            # ~20 s to compile on the CPU backend for no measured gain.
+            nj_rt = chain_type.shape[0]
+            n_rt = num_dofs
+            H = MatN()
+            G = VecN()  # with GRAV: the gravity force dU/dq of every DOF [N·m or N]
+            gv = wp.vec3d(wp.float64(gravity[0]), wp.float64(gravity[1]), wp.float64(gravity[2]))
+            ax = MatN3()  # DOF axes in world
+            pt = MatN3()  # DOF anchor points in world [m]
+            isrev = MatN3()  # column 0: 1 for a revolute DOF
+            bp = MatJ3()  # child-body world positions
+            bq = MatJ4()  # child-body world rotations (x, y, z, w)
+            for k in range(nj_rt):
+                j = jb + k
+                par = chain_parent[k]
+                Xw = wp.transform_identity()
+                if par >= 0:
+                    Xw = wp.transform(
+                        wp.vec3(bp[par, 0], bp[par, 1], bp[par, 2]),
+                        wp.quat(bq[par, 0], bq[par, 1], bq[par, 2], bq[par, 3]),
+                    )
+                Xj = Xw * joint_X_p[j]
+                t = chain_type[k]
+                Xm = wp.transform_identity()
+                if t != 0:
+                    a = joint_axis[joint_qd_start[j]]
+                    qv = joint_q[joint_q_start[j]]
+                    d = chain_dof[k]
+                    aw = wp.transform_vector(Xj, a)
+                    ow = wp.transform_get_translation(Xj)
+                    ax[d] = wp.vec3d(wp.float64(aw[0]), wp.float64(aw[1]), wp.float64(aw[2]))
+                    pt[d] = wp.vec3d(wp.float64(ow[0]), wp.float64(ow[1]), wp.float64(ow[2]))
+                    if t == 1:
+                        Xm = wp.transform(wp.vec3(0.0), wp.quat_from_axis_angle(a, qv))
+                        isrev[d, 0] = wp.float64(1.0)
                     else:
-                        jv[i] = ai
+                        Xm = wp.transform(a * qv, wp.quat_identity())
+                Xb = Xj * Xm * wp.transform_inverse(joint_X_c[j])
+                p = wp.transform_get_translation(Xb)
+                r = wp.transform_get_rotation(Xb)
+                bp[k] = p
+                bq[k] = wp.vec4(r[0], r[1], r[2], r[3])
+                # This body's contribution to H over the DOFs that move it.
+                m, c, Iw = _body_world_inertia(Xb, joint_child[j], body_mass, body_com, body_inertia)
+                mask = chain_anc[k]
+                jv = MatN3()  # COM velocity per unit rate of each DOF that moves this body [m/s]
+                jw = MatN3()  # angular velocity per unit rate [rad/s]
+                for i in range(n_rt):
+                    if (mask >> i) & 1:
+                        ai = ax[i]
+                        if isrev[i, 0] > wp.float64(0.0):
+                            jv[i] = wp.cross(ai, c - pt[i])
+                            jw[i] = ai
+                        else:
+                            jv[i] = ai
+                if wp.static(GRAV):  # dU/dq_i = -sum over the bodies moved by DOF i of m gravity . dc/dq_i
+                    for i in range(n_rt):
+                        if (mask >> i) & 1:
+                            G[i] = G[i] - m * wp.dot(gv, jv[i])
+                for i in range(n_rt):
+                    if (mask >> i) & 1:
+                        jvi = jv[i]
+                        Ijwi = Iw * jw[i]
+                        for jj in range(i + 1):
+                            if (mask >> jj) & 1:
+                                H[i, jj] = H[i, jj] + m * wp.dot(jvi, jv[jj]) + wp.dot(Ijwi, jw[jj])
             for i in range(n_rt):
-                if (mask >> i) & 1:
-                    jvi = jv[i]
-                    Ijwi = Iw * jw[i]
-                    for jj in range(i + 1):
-                        if (mask >> jj) & 1:
-                            H[i, jj] = H[i, jj] + m * wp.dot(jvi, jv[jj]) + wp.dot(Ijwi, jw[jj])
-        for i in range(n_rt):
-            H[i, i] = H[i, i] + wp.float64(joint_armature[db + i])
-        return H
+                H[i, i] = H[i, i] + wp.float64(joint_armature[db + i])
+            return H, G
+
+        return chain_hg
+
+    chain_hg = make_chain_hg(True)
+    chain_h = h_only(make_chain_hg(False))
 
     @wp.func
     def chain_rows_factor(
@@ -323,7 +347,7 @@ def _chain_funcs(nj: int, n: int, nr: int, template: tuple | None, full: bool):
                 A[cc, rr] = v
         return A
 
-    out = ((chain_rows_factor, MatR, VecR), chain_h)
+    out = ((chain_rows_factor, MatR, VecR), chain_h, chain_hg)
     _funcs_cache[key] = out
     return out
 

@@ -1,10 +1,10 @@
 """Warp kernels for ManiSkill-style PD joint control over all envs of a Newton model: the shared helpers, reset, the
-Control write of a swapped Control, the step-counter view and the joint-space response / acceleration gains.
+Control write of a swapped Control, the step-counter view and the float64 action cast.
 
-Private module. The per-step kernels (``set_action``, the solver substep) are in ``pd_step.py``, compiled per row
-layout. The kernels here run off the step's hot path (reset, a Control handed over for the first time) and are
-launched over ``dim=(num_envs, rows)``, one thread per (env, row), row fastest (``wp.tid()`` gives (env, row) without
-an integer division).
+Private module. The per-step kernels (``set_action``, the solver substep) are in :mod:`wpctrl.kernels.pd_step`,
+compiled per row layout. The kernels here run off the step's hot path (reset, a Control handed over for the first
+time) and are launched over ``dim=(num_envs, rows)``, one thread per (env, row), row fastest (``wp.tid()`` gives
+(env, row) without an integer division).
 
 State arrays (``(num_envs, rows)`` unless stated): ``start_qpos`` (the measured coordinate at the last accepted
 action, interpolation's start), ``target_qpos`` / ``target_qvel`` (ManiSkill's ``_target_qpos`` / ``_target_qvel``),
@@ -26,16 +26,16 @@ from __future__ import annotations
 
 import warp as wp
 
-from ..config import rows as _cfg
+from ..config import rows as config_rows
 
 wp.set_module_options({"enable_backward": False})
 
-ROW_POS = wp.constant(_cfg.ROW_POS)
-ROW_EFFORT = wp.constant(_cfg.ROW_EFFORT)
-ROW_VEL = wp.constant(_cfg.ROW_VEL)
-ROW_PASSIVE = wp.constant(_cfg.ROW_PASSIVE)
+ROW_POS = wp.constant(config_rows.ROW_POS)
+ROW_EFFORT = wp.constant(config_rows.ROW_EFFORT)
+ROW_VEL = wp.constant(config_rows.ROW_VEL)
+ROW_PASSIVE = wp.constant(config_rows.ROW_PASSIVE)
 
-FLAG_VEL_TARGET = wp.constant(_cfg.FLAG_VEL_TARGET)
+FLAG_VEL_TARGET = wp.constant(config_rows.FLAG_VEL_TARGET)
 
 
 @wp.func
@@ -208,55 +208,6 @@ def _step_view_kernel(
     """ManiSkill's ``_step`` per env: the device part plus the substeps the host counted since the last set_action."""
     env = wp.tid()
     step_out[env] = step_in[env] + host_substeps
-
-
-@wp.kernel
-def _response_kernel(
-    # Rows:
-    row_art_off: wp.array[wp.int32],
-    row_art_dof: wp.array[wp.int32],
-    # Envs:
-    env_art_base: wp.array[wp.int32],
-    # In:
-    inverse_blocks_in: wp.array3d[float],
-    # Out:
-    response_out: wp.array2d[float],
-):
-    """Each row's joint-space response r = (H^-1)_ii [1/(kg m^2) or 1/kg] from the articulation's inverse block."""
-    tid = wp.tid()
-    num_rows = row_art_off.shape[0]
-    env = tid // num_rows
-    r = tid - env * num_rows
-    i = row_art_dof[r]
-    response_out[env, r] = inverse_blocks_in[env_art_base[env] + row_art_off[r], i, i]
-
-
-@wp.kernel
-def _accel_gains_kernel(
-    # Rows:
-    row_accel: wp.array[wp.int32],
-    row_qd_off: wp.array[wp.int32],
-    # Envs:
-    env_qd_base: wp.array[wp.int32],
-    # Gains (1 | num_envs, rows):
-    kp: wp.array2d[float],
-    kd: wp.array2d[float],
-    # In:
-    response_in: wp.array2d[float],
-    # Out:
-    joint_target_ke_out: wp.array[float],
-    joint_target_kd_out: wp.array[float],
-):
-    """Implicit acceleration drive: the solver's per-env gains are Kp / r and Kd / r (r: the joint's response)."""
-    tid = wp.tid()
-    num_rows = row_accel.shape[0]
-    env = tid // num_rows
-    r = tid - env * num_rows
-    if row_accel[r] != 0:
-        di = env_qd_base[env] + row_qd_off[r]
-        resp = response_in[env, r]
-        joint_target_ke_out[di] = kp[_bidx(kp.shape[0], env), r] / resp
-        joint_target_kd_out[di] = kd[_bidx(kd.shape[0], env), r] / resp
 
 
 @wp.kernel

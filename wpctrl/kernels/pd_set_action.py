@@ -1,11 +1,11 @@
 """The ``set_action`` kernel of a control mode, generated for its :class:`~.step_layout.StepLayout` (see
-``pd_step.py`` for what it computes). Private module."""
+:mod:`wpctrl.kernels.pd_step` for what it computes). Private module."""
 
 from __future__ import annotations
 
 import warp as wp
 
-from ..config import rows as _cfg
+from ..config.rows import FLAG_BINARY, FLAG_DELTA, FLAG_EMA, FLAG_NORMALIZE, FLAG_TARGET, ROW_EFFORT, ROW_POS, ROW_VEL
 from .pd import _scale
 from .step_layout import (
     ROW_F_ALPHA,
@@ -26,18 +26,18 @@ def _make_set_action_kernel(L: StepLayout) -> wp.Kernel:
     A = L.action_dim
     KIND, FLAGS, COL, VCOL, SRC = L.kind, L.flags, L.act_col, L.vel_col, L.mimic_src
     CLIP = bool(L.clip)
-    POS, VEL = _cfg.ROW_POS, _cfg.ROW_VEL
-    NORM = tuple(int(f & _cfg.FLAG_NORMALIZE != 0) for f in FLAGS)
-    DELTA = tuple(int(f & _cfg.FLAG_DELTA != 0) for f in FLAGS)
-    TARGET = tuple(int(f & _cfg.FLAG_TARGET != 0) for f in FLAGS)
+    POS, VEL = ROW_POS, ROW_VEL
+    NORM = tuple(int(f & FLAG_NORMALIZE != 0) for f in FLAGS)
+    DELTA = tuple(int(f & FLAG_DELTA != 0) for f in FLAGS)
+    TARGET = tuple(int(f & FLAG_TARGET != 0) for f in FLAGS)
     IS_POS = tuple(int(k == POS) for k in KIND)
-    EMA = tuple(int(f & _cfg.FLAG_EMA != 0) for f in FLAGS)
-    BINARY = tuple(int(f & _cfg.FLAG_BINARY != 0) for f in FLAGS)
+    EMA = tuple(int(f & FLAG_EMA != 0) for f in FLAGS)
+    BINARY = tuple(int(f & FLAG_BINARY != 0) for f in FLAGS)
     # Position rows that own their target (followers take their source's), and those that read the previous one.
     LEAD = tuple(int(KIND[r] == POS and SRC[r] < 0) for r in range(R))
     READ_T = tuple(int(LEAD[r] and (COL[r] < 0 or (DELTA[r] and TARGET[r]) or EMA[r])) for r in range(R))
     # Effort rows (JointEffortController): the scaled action column is the commanded effort.
-    ESRC = tuple(COL[r] if KIND[r] == _cfg.ROW_EFFORT else -1 for r in range(R))
+    ESRC = tuple(COL[r] if KIND[r] == ROW_EFFORT else -1 for r in range(R))
     WRITE_T = tuple(int(IS_POS[r] and not (SRC[r] < 0 and COL[r] < 0)) for r in range(R))
     # Velocity targets: a velocity row's column, or a position-velocity row's second column.
     VSRC = tuple(COL[r] if (KIND[r] == VEL and SRC[r] < 0) else (VCOL[r] if LEAD[r] else -1) for r in range(R))

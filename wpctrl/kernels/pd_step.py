@@ -5,7 +5,7 @@ action columns, mimic source, acceleration-drive flag and (for replicated worlds
 are compile-time constants of the kernel (:class:`StepLayout`, ``wp.static``). So a thread issues all its loads at
 once (its action row, then the measured coordinates of every row, no chain of table loads), checks its action row for
 NaN/Inf once, keeps a mimic source's fresh target in a register for its followers, and runs no branch on row tables.
-What stays a runtime array: the per-row float bounds ``row_f`` (one ``(rows, 8)`` table read uniformly by every
+What stays a runtime array: the per-row float bounds ``row_f`` (one ``(rows, 9)`` table read uniformly by every
 thread, so configs that differ only in bounds share a kernel), the per-env drive properties and Newton's arrays.
 A control mode compiles its two kernels once (Warp's kernel cache keeps them across runs); modes with the same layout
 share them.
@@ -20,7 +20,7 @@ Row float table ``row_f[r]``: ``lo, hi`` (action bounds of the row's position / 
 velocity column of a position-velocity row), ``mimic_mul, mimic_off`` (a follower's coupling), ``qlo, qhi`` (joint
 limits [rad or m], for ``clip_targets`` and EMA), ``alpha`` (the EMA weight).
 
-Semantics are those of ManiSkill's controllers (``kernels/pd.py`` states the state arrays' meaning):
+Semantics are those of ManiSkill's controllers (:mod:`wpctrl.kernels.pd` states the state arrays' meaning):
 
 - ``set_action``: an env whose action holds NaN/Inf is left untouched and counted; its substep counter keeps counting
   (``host_substeps`` carries the substeps the host counted for an elided substep launch). Otherwise every position

@@ -1,13 +1,13 @@
 """The solver-substep kernel of a control mode, generated for its :class:`~.step_layout.StepLayout` (see
-``pd_step.py`` for what it computes). Private module."""
+:mod:`wpctrl.kernels.pd_step` for what it computes). Private module."""
 
 from __future__ import annotations
 
 import warp as wp
 
-from ..config import actuators as _ca
-from ..config import rows as _cfg
-from . import actuators as _act
+from ..config.actuator_models import ACT_DC_MOTOR, ACT_NET, ACT_NONE, ACT_POSITION_LIMIT
+from ..config.rows import FLAG_INTERPOLATE, FLAG_VEL_TARGET, ROW_EFFORT, ROW_PASSIVE, ROW_POS, ROW_VEL
+from .actuator_models import dc_motor_clamp
 from .pd import _bidx, _interp
 from .step_layout import StepLayout, _make_row_indices
 
@@ -15,25 +15,25 @@ from .step_layout import StepLayout, _make_row_indices
 def _make_substep_kernel(L: StepLayout) -> wp.Kernel:
     R = len(L.kind)
     KIND, FLAGS, ACCEL = L.kind, L.flags, L.accel
-    POS, VEL, PASSIVE, EFF = _cfg.ROW_POS, _cfg.ROW_VEL, _cfg.ROW_PASSIVE, _cfg.ROW_EFFORT
+    POS, VEL, PASSIVE, EFF = ROW_POS, ROW_VEL, ROW_PASSIVE, ROW_EFFORT
     IS_POS = tuple(int(k == POS) for k in KIND)
-    VT = tuple(int(k in (VEL, PASSIVE) or (k == POS and (f & _cfg.FLAG_VEL_TARGET) != 0)) for k, f in zip(KIND, FLAGS))
-    INTERP = tuple(int(f & _cfg.FLAG_INTERPOLATE != 0) for f in FLAGS)
+    VT = tuple(int(k in (VEL, PASSIVE) or (k == POS and (f & FLAG_VEL_TARGET) != 0)) for k, f in zip(KIND, FLAGS))
+    INTERP = tuple(int(f & FLAG_INTERPOLATE != 0) for f in FLAGS)
     EXPLICIT, STABLE = L.explicit != 0, L.explicit == 2
     DELAY, DELAY_VEL, EFFORT = bool(L.delay), bool(L.delay_vel), bool(L.effort)
     # Effort rows carry their commanded effort in the target register (so a delay delays it too).
     IS_EFF = tuple(int(k == EFF) for k in KIND)
-    ACT = L.act_model or (_ca.ACT_NONE,) * R
-    # Position tables as compile-time constants (kernels.actuators.table_constants), a placeholder without one.
+    ACT = L.act_model or (ACT_NONE,) * R
+    # Position tables as compile-time constants (kernels.actuator_models.table_constants), a placeholder without one.
     TAB = tuple(t or (0.0, 0.0, 0.0, ()) for t in (L.limit_table or ((),) * R))
     # Rows whose torque this kernel computes: PD rows with explicit actuation or the effort readout (not the rows of
     # an actuator network, whose own launch follows), and effort rows.
-    TAU = tuple(int(IS_EFF[r] or ((EXPLICIT or EFFORT) and ACT[r] != _ca.ACT_NET)) for r in range(R))
-    WRITE_F = tuple(int(IS_EFF[r] or (EXPLICIT and ACT[r] != _ca.ACT_NET)) for r in range(R))
+    TAU = tuple(int(IS_EFF[r] or ((EXPLICIT or EFFORT) and ACT[r] != ACT_NET)) for r in range(R))
+    WRITE_F = tuple(int(IS_EFF[r] or (EXPLICIT and ACT[r] != ACT_NET)) for r in range(R))
     TORQUE = any(TAU)
     RESP = tuple(int(STABLE or ACCEL[r] != 0) for r in range(R))
-    READ_Q = tuple(int(TAU[r] and (IS_POS[r] or ACT[r] == _ca.ACT_POSITION_LIMIT)) for r in range(R))
-    HAS_DC = any(a == _ca.ACT_DC_MOTOR for a in ACT)
+    READ_Q = tuple(int(TAU[r] and (IS_POS[r] or ACT[r] == ACT_POSITION_LIMIT)) for r in range(R))
+    HAS_DC = any(a == ACT_DC_MOTOR for a in ACT)
     vec_r = wp.types.vector(length=max(R, 1), dtype=wp.float32)
     vec_ri = wp.types.vector(length=max(R, 1), dtype=wp.int32)
     row_indices = _make_row_indices(L)
@@ -124,7 +124,7 @@ def _make_substep_kernel(L: StepLayout) -> wp.Kernel:
                     resp[r] = response_in[rb, r]
             if wp.static(HAS_DC):
                 for r in range(wp.static(R)):
-                    if wp.static(TAU[r] and ACT[r] == _ca.ACT_DC_MOTOR):
+                    if wp.static(TAU[r] and ACT[r] == ACT_DC_MOTOR):
                         sate[r] = sat_effort[env, r]
                         vlim[r] = vel_limit[env, r]
         sat = vec_ri()
@@ -199,9 +199,9 @@ def _make_substep_kernel(L: StepLayout) -> wp.Kernel:
                     else:
                         u[r] = kpr * e + kdr * (tqd[r] - qd[r])
                 if wp.static(TAU[r]):
-                    if wp.static(ACT[r] == _ca.ACT_DC_MOTOR):
-                        f[r] = _act.dc_motor_clamp(u[r], qd[r], sate[r], vlim[r], lim[r])
-                    elif wp.static(ACT[r] == _ca.ACT_POSITION_LIMIT):
+                    if wp.static(ACT[r] == ACT_DC_MOTOR):
+                        f[r] = dc_motor_clamp(u[r], qd[r], sate[r], vlim[r], lim[r])
+                    elif wp.static(ACT[r] == ACT_POSITION_LIMIT):
                         # The table at q (end values held outside): the first piece whose right end is >= q, each
                         # piece one multiply-add of constants (slope, intercept) and a select.
                         fl = wp.static(TAB[r][2])

@@ -1,5 +1,5 @@
 """Warp functions and constants shared by the articulation-inertia kernels (:mod:`.inertia`, :mod:`.inertia_unrolled`,
-:mod:`.drive`)."""
+:mod:`.coupled_drive`)."""
 
 from __future__ import annotations
 

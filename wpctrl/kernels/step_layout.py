@@ -1,5 +1,5 @@
 """The compile-time layout of the per-step kernels (:class:`StepLayout`), the per-row float table they read, and
-the row-index function they share. Private module (see ``pd_step.py``)."""
+the row-index function they share. Private module (see :mod:`wpctrl.kernels.pd_step`)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from typing import NamedTuple
 import numpy as np
 import warp as wp
 
-from ..config import rows as _cfg
+from ..config.rows import Rows
 
 # Columns of the row float table ``row_f``.
 ROW_F_LO = wp.constant(0)
@@ -47,13 +47,13 @@ class StepLayout(NamedTuple):
     base_axis: tuple = ()
     bx_col: tuple = ()
     by_col: tuple = ()
-    # Actuator models (substep only): each row's model code (config.actuators.ACT_*) and position table as
-    # compile-time constants (kernels.actuators.table_constants; () for a row without one).
+    # Actuator models (substep only): each row's model code (config.actuator_models.ACT_*) and position table as
+    # compile-time constants (kernels.actuator_models.table_constants; () for a row without one).
     act_model: tuple = ()
     limit_table: tuple = ()
 
 
-def row_float_table(rows: _cfg.Rows, qlimits: np.ndarray) -> np.ndarray:
+def row_float_table(rows: Rows, qlimits: np.ndarray) -> np.ndarray:
     """``(rows, 9)`` float32: the per-row bounds, mimic coupling, joint limits and EMA weight the step kernels
     read."""
     t = np.zeros((rows.count, ROW_F_WIDTH), np.float32)

@@ -38,8 +38,17 @@ import numpy as np
 
 from .assets import active_joint_names, newton_builder, set_joint_positions, set_root_pose
 from .collision import apply_materials, apply_mjcf_friction, filter_srdf_pairs
+from .impedance import add_impedance_modes
 
-__all__ = ["ManiSkillRobot", "active_joint_names", "control_modes", "load_robot", "translate_config", "translate_mode"]
+__all__ = [
+    "ManiSkillRobot",
+    "active_joint_names",
+    "add_impedance_modes",
+    "control_modes",
+    "load_robot",
+    "translate_config",
+    "translate_mode",
+]
 
 
 def _mani_skill():
@@ -183,8 +192,8 @@ def translate_mode(mode):
 
 
 def control_modes(uid_or_agent_class) -> dict:
-    """The agent's control modes as wpctrl configs (what :func:`load_robot` gives as ``control_modes``, without
-    building the robot)."""
+    """The agent's own control modes as wpctrl configs (what :func:`load_robot` gives as ``control_modes``, less the
+    impedance modes it adds, without building the robot)."""
     cls = _agent_class(uid_or_agent_class)
     agent = _agent_instance(cls, active_joint_names(_asset_path(cls)))
     return {name: translate_mode(mode) for name, mode in agent._controller_configs.items()}
@@ -209,14 +218,17 @@ def load_robot(
         **importer_kwargs: Passed to ``ModelBuilder.add_urdf`` / ``add_mjcf``.
 
     Returns:
-        A :class:`ManiSkillRobot`: ``builder`` (one robot), ``control_modes`` (wpctrl configs), ``keyframes``,
-        ``joint_names`` (ManiSkill's active-joint order).
+        A :class:`ManiSkillRobot`: ``builder`` (one robot), ``control_modes`` (wpctrl configs: the agent's modes and,
+        for an arm with an end-effector mode, wpctrl's ``osc_ee_delta_pose``, ``osc_ee_pose`` and
+        ``joint_impedance_delta_pos``: :func:`add_impedance_modes`), ``keyframes``, ``joint_names`` (ManiSkill's
+        active-joint order).
     """
     cls = _agent_class(uid_or_agent_class)
     asset = _asset_path(cls)
     names = active_joint_names(asset)
     agent = _agent_instance(cls, names)
     modes = {name: translate_mode(mode) for name, mode in agent._controller_configs.items()}
+    add_impedance_modes(modes)
     keyframes = {}
     for kname, kf in (getattr(cls, "keyframes", None) or {}).items():
         q = np.asarray(kf.qpos, dtype=np.float64).reshape(-1)

@@ -12,6 +12,7 @@ from ..config import (
     PDJointVelControllerConfig,
 )
 from ..config.ee import PDEEPosControllerConfig, PDEEPoseControllerConfig
+from .impedance_modes import impedance_modes
 from .panda_model import PANDA_ARM_JOINTS, PANDA_GRIPPER_JOINTS
 
 __all__ = ["PANDA_CONTROL_MODES", "panda_control_modes"]
@@ -31,12 +32,14 @@ def panda_control_modes() -> dict[str, dict[str, ControllerConfig]]:
     The joint-space modes first, in ManiSkill's relative order: ``pd_joint_delta_pos`` (the default),
     ``pd_joint_pos``, ``pd_joint_target_delta_pos``, ``pd_joint_vel``, ``pd_joint_pos_vel``, ``pd_joint_delta_pos_vel``;
     then the end-effector modes, in ManiSkill's relative order: ``pd_ee_delta_pos``, ``pd_ee_delta_pose``,
-    ``pd_ee_pose``, ``pd_ee_target_delta_pos``, ``pd_ee_target_delta_pose``.
+    ``pd_ee_pose``, ``pd_ee_target_delta_pos``, ``pd_ee_target_delta_pose``; then wpctrl's torque-level modes
+    (not in ManiSkill): ``osc_ee_delta_pose``, ``osc_ee_pose``, ``joint_impedance_delta_pos``
+    (:func:`wpctrl.robots.impedance_modes.impedance_modes`: the TCP, force limit 100 [N·m]).
     Each is ``{"arm": <arm config>, "gripper": <gripper config>}``, and every config object is a separate copy.
 
-    EE modes (``ee_link="panda_hand_tcp"``, the site :func:`panda` keeps; ``urdf_path=None``: a Panda loaded with
-    ``add_urdf(collapse_fixed_joints=True)`` needs ``urdf_path`` set to its URDF): delta position bounds ±0.1 [m],
-    delta rotation bounds ±0.1 [rad]; ``pd_ee_pose`` takes absolute poses (no bounds, not normalised).
+    EE modes (``ee_link="panda_hand_tcp"``, the site :func:`~wpctrl.robots.panda` keeps; ``urdf_path=None``: a Panda
+    loaded with ``add_urdf(collapse_fixed_joints=True)`` needs ``urdf_path`` set to its URDF): delta position bounds
+    ±0.1 [m], delta rotation bounds ±0.1 [rad]; ``pd_ee_pose`` takes absolute poses (no bounds, not normalised).
 
     Arm: stiffness 1e3 [N·m/rad], damping 1e2 [N·m·s/rad], force limit 100 [N·m]; delta bounds ±0.1 [rad], velocity
     bounds ±1 [rad/s]. Gripper (all modes): a mimic position controller on both fingers, bounds [-0.01, 0.04] [m]
@@ -98,6 +101,10 @@ def panda_control_modes() -> dict[str, dict[str, ControllerConfig]]:
         "pd_ee_target_delta_pos": {"arm": arm_pd_ee_target_delta_pos, "gripper": gripper_pd_joint_pos},
         "pd_ee_target_delta_pose": {"arm": arm_pd_ee_target_delta_pose, "gripper": gripper_pd_joint_pos},
     }
+    for name, children in impedance_modes(
+        arm, gripper_pd_joint_pos, ee_link=_EE_LINK, force_limit=_ARM_FORCE_LIMIT
+    ).items():
+        modes[name] = children
     # As ManiSkill's deepcopy_dict: every value is copied on its own, so no two modes share a config object.
     return {mode: {uid: copy.deepcopy(cfg) for uid, cfg in children.items()} for mode, children in modes.items()}
 

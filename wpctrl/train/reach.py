@@ -19,7 +19,7 @@ import numpy as np
 import warp as wp
 from rsl_rl.env import VecEnv
 
-from . import task_kernels as TK
+from . import task_kernels
 
 GOAL_LO = (0.35, -0.25, 0.15)
 """The goal box in the robot's base frame [m] (reachable by the Panda's TCP from its rest pose)."""
@@ -146,7 +146,7 @@ class ReachEnv(VecEnv):
 
     def _reset_envs(self, mask: wp.array) -> None:
         wp.launch(
-            TK.reset_kernel,
+            task_kernels.reset_kernel,
             dim=self.num_envs,
             inputs=[
                 self.seed,
@@ -164,7 +164,7 @@ class ReachEnv(VecEnv):
             ],
             device=self.wp_device,
         )
-        wp.launch(TK.bump_kernel, dim=1, inputs=[self.counter], device=self.wp_device)
+        wp.launch(task_kernels.bump_kernel, dim=1, inputs=[self.counter], device=self.wp_device)
 
     def _observe(self) -> None:
         """Reward, done flags and episode bookkeeping of the control step just taken (and its observations)."""
@@ -172,7 +172,7 @@ class ReachEnv(VecEnv):
 
         newton.eval_fk(self.model, self.state.joint_q, self.state.joint_qd, self.state)
         wp.launch(
-            TK.observe_kernel,
+            task_kernels.observe_kernel,
             dim=self.num_envs,
             inputs=[
                 self.dofs,
@@ -219,7 +219,7 @@ class ReachEnv(VecEnv):
 
         newton.eval_fk(self.model, self.state.joint_q, self.state.joint_qd, self.state)
         wp.launch(
-            TK.obs_kernel,
+            task_kernels.obs_kernel,
             dim=self.num_envs,
             inputs=[
                 self.dofs,

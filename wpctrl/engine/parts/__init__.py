@@ -10,57 +10,37 @@ and the kernel variant compiled without it).
 
 from __future__ import annotations
 
+from .actuator_models import ActuatorModels
+from .coupled_drive import CoupledDrive
+from .delay import Delay
+from .drive_properties import DriveProperties
+from .ee import EndEffectors
+from .effort_command import EffortCommand
+from .effort_readout import EffortReadout
+from .gravity import BalancePassiveForce
+from .impedance import Impedance
+from .part import Part
+from .response import JointSpaceResponse
 
-class Part:
-    """Base class: every hook does nothing."""
-
-    name = "part"
-    OPTIONAL_ARGS: tuple[str, ...] = ()
-    """Kernel argument names this part provides; ``None`` in the kernels of a mode without it."""
-
-    @staticmethod
-    def wanted(plan) -> bool:
-        """Whether a mode with this plan needs the part (host only: read the plan's rows and options)."""
-        return False
-
-    def kernel_args(self) -> dict:
-        return {}
-
-    def build(self, engine, model, solver) -> None:
-        """After every part is allocated: model writes, first device work."""
-
-    def before_set_action(self, engine, action, state) -> None:
-        """Before the joint set_action launch."""
-
-    def before_substep(self, engine, state, control) -> None:
-        """Before the substep launch (only with per-substep work)."""
-
-    def after_substep(self, engine, state, control) -> None:
-        """After the substep launch."""
-
-    def after_reset(self, engine, state, env_ids, env_mask) -> None:
-        """After the reset launch."""
+PARTS: dict[str, type[Part]] = {
+    cls.name: cls
+    for cls in (
+        DriveProperties,
+        JointSpaceResponse,
+        CoupledDrive,
+        EffortCommand,
+        ActuatorModels,
+        Delay,
+        EffortReadout,
+        EndEffectors,
+        Impedance,
+        BalancePassiveForce,
+    )
+}
+"""The part classes by name, in the order the engine runs their hooks. A new option is a new part: its module, and
+one entry here."""
 
 
 def part_classes() -> dict[str, type[Part]]:
-    """The part classes by name, in the order the engine runs their hooks. A new option is a new part: its module,
-    and one entry here."""
-    from .actuators import ActuatorModels, EffortCommand
-    from .delay import Delay
-    from .drive import DriveProperties
-    from .ee import EndEffectors
-    from .effort import EffortReadout
-    from .gravity import BalancePassiveForce
-    from .response import CoupledDrive, JointSpaceResponse
-
-    return {
-        "drive": DriveProperties,
-        "response": JointSpaceResponse,
-        "coupled": CoupledDrive,
-        "effort_command": EffortCommand,
-        "actuators": ActuatorModels,
-        "delay": Delay,
-        "effort": EffortReadout,
-        "ee": EndEffectors,
-        "gravity": BalancePassiveForce,
-    }
+    """:data:`PARTS` (the part classes by name, in hook order)."""
+    return PARTS

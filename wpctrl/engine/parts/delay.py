@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import warp as wp
 
-from ...config import rows as cfg
-from ...kernels import actuation as KA
-from . import Part
+from ...config.rows import FLAG_VEL_TARGET, ROW_POS
+from ...kernels.env_selection import _bump_counter_kernel
+from .part import Part
 
 
 class Delay(Part):
@@ -23,13 +23,13 @@ class Delay(Part):
         return plan.options.delay is not None
 
     def __init__(self, plan, alloc):
-        lo, hi = plan.options.delay
+        lo, hi = plan.delay_range
         rows = plan.rows
         self.range = (int(lo), int(hi))
         self.delay = wp.full(plan.num_envs, int(lo), dtype=wp.int32, device=alloc.device)
         self.delay_head = alloc.per_env(plan.num_rows, wp.int32)
         self.delay_q = alloc.ring(hi + 1, plan.num_rows)
-        vel_rows = (rows.kind != cfg.ROW_POS) | ((rows.flags & cfg.FLAG_VEL_TARGET) != 0)
+        vel_rows = (rows.kind != ROW_POS) | ((rows.flags & FLAG_VEL_TARGET) != 0)
         # Velocity targets are 0 on plain position rows: no history needed then.
         self.delay_qd = alloc.ring(hi + 1, plan.num_rows) if vel_rows.any() else None
 
@@ -46,4 +46,4 @@ class Delay(Part):
 
     def after_reset(self, engine, state, env_ids, env_mask) -> None:
         if self.range[1] > self.range[0]:  # the reset drew delays: the next draw uses the next counter value
-            wp.launch(KA._bump_counter_kernel, dim=1, inputs=[engine.core.rng_counter], device=engine.device)
+            wp.launch(_bump_counter_kernel, dim=1, inputs=[engine.core.rng_counter], device=engine.device)

@@ -6,8 +6,10 @@ one kernel launch before the joint launch of ``set_action`` (it writes those row
 the joint reset (measured EE pose, and the target pose with ``use_target``).
 
 Root frame: the body ``root_link_name`` when given; otherwise the articulation root: the child of the chain's top
-joint when that joint is free or fixed, or, for a fixed base merged into the world (``collapse_fixed_joints``), the
-world frame of env 0 moved with each env's own base placement (so every env reports poses relative to its base).
+joint when that joint is free or fixed, or, for a fixed base merged into the world (``collapse_fixed_joints``, the
+built-in Panda), the root link's frame as the robot's description (``urdf_path``, or the built-in Panda's) places
+the top joint in it, moved with each env's own base placement (so every env reports poses relative to its base,
+wherever ``replicate`` put it); without a description, env 0's world frame.
 """
 
 from __future__ import annotations
@@ -23,11 +25,11 @@ import warp as wp
 
 from ...config import ConfigError
 from ...config.ee import MAX_EE_DOF, EESpec
-from ...kernels import ee as KE
+from ...kernels import ee as ee_kernels
 from ...kernels.dims import PER_ENV_BLOCK_DIM
 from ..hostmath import qmul, rpy_quat
 from ..launch import _Launch
-from . import Part
+from .part import Part
 
 logger = logging.getLogger("wpctrl")
 
@@ -97,6 +99,48 @@ def _known_frame(link: str, labels, bodies0):
         return None
     p, q = entry[1]
     return cand, wp.transform(wp.vec3(*p), wp.quat(*q))
+
+
+def _joint_rows(spec: EESpec) -> list[tuple]:
+    """``(name, type, parent link, child link, origin xyz, origin rpy)`` of the robot's joints: ``urdf_path``'s, else
+    the built-in Panda's (wpctrl.robots)."""
+    if spec.urdf_path is not None and os.path.exists(spec.urdf_path):
+        try:
+            root = ET.parse(spec.urdf_path).getroot()
+        except (OSError, ET.ParseError):
+            return []
+        rows = []
+        for j in root.findall("joint"):
+            o = j.find("origin")
+            xyz = [float(v) for v in (o.get("xyz", "0 0 0") if o is not None else "0 0 0").split()]
+            rpy = [float(v) for v in (o.get("rpy", "0 0 0") if o is not None else "0 0 0").split()]
+            rows.append((j.get("name"), j.get("type"), j.find("parent").get("link"), j.find("child").get("link"), xyz,
+                         rpy))  # fmt: skip
+        return rows
+    from ...robots.panda_model import _JOINTS
+
+    return [r[:6] for r in _JOINTS]
+
+
+def _design_frame(spec: EESpec, joint: str):
+    """Where ``joint`` (the top of a chain whose root link is merged into the world) sits in the robot's root-link
+    frame before the model placed it: its origin composed through the fixed joints up to the root link, from
+    ``urdf_path`` or the built-in Panda. None when neither describes ``joint``."""
+    rows = _joint_rows(spec)
+    row = next((r for r in rows if r[0] == joint), None)
+    if row is None:
+        return None
+    by_child = {r[3]: r for r in rows}
+    p, q = np.asarray(row[4], np.float64), rpy_quat(row[5])
+    link = row[2]
+    while link in by_child:
+        up = by_child[link]
+        if up[1] != "fixed":
+            return None
+        uq = rpy_quat(up[5])
+        p, q = np.asarray(up[4], np.float64) + _rotate(uq, p), qmul(uq, q)
+        link = up[2]
+    return wp.transform(wp.vec3(*p), wp.quat(*q))
 
 
 def _is_merged_root(spec: EESpec) -> bool:
@@ -260,15 +304,19 @@ class EEPart:
             table = chain0[None, :]
         root = np.tile(np.array([0, 0, 0, 0, 0, 0, 1], np.float32), (world_count, 1))
         if world_top:
-            # env 0's world frame is the root frame; env e's base placement moves it.
+            # The root link is merged into the world: the root frame is where the robot's description puts the top
+            # joint (its URDF origin), so env e's frame is X_design X_p(e)^-1 of its own placement (replicate's
+            # spacing centres the envs: env 0 need not sit at the origin); without a description, env 0's world.
             t0 = jxp[table[0, 0]]
+            x0 = _design_frame(spec, _short(jlabels[table[0, 0]]))
+            if x0 is None:
+                x0 = wp.transform(wp.vec3(*t0[:3]), wp.quat(*t0[3:]))
             for e in range(world_count):
                 te = jxp[table[e, 0]]
-                if np.array_equal(te, t0):
-                    continue
-                x0 = wp.transform(wp.vec3(*t0[:3]), wp.quat(*t0[3:]))
                 xe = wp.transform(wp.vec3(*te[:3]), wp.quat(*te[3:]))
                 r = x0 * wp.transform_inverse(xe)
+                if np.allclose(np.array([*r.p, *r.q]), root[e], rtol=0.0, atol=1e-7):
+                    continue  # the placement the description gives: the world frame is the root frame
                 root[e] = np.array([*r.p, *r.q], np.float32)
         dev = model.device
         self.chain_joint = wp.array(table.astype(np.int32).reshape(world_count, len(chain)), dtype=wp.int32, device=dev)
@@ -320,27 +368,29 @@ class EEPart:
                     "ik_success_out": self.ik_success,
                 }
             )
-            kernel = KE._ee_clik_kernel if s.iterations > 1 else KE._ee_set_action_kernel
+            kernel = ee_kernels._ee_clik_kernel if s.iterations > 1 else ee_kernels._ee_set_action_kernel
             self._launch = _Launch(kernel, eng.num_envs, params, eng.device, block_dim=PER_ENV_BLOCK_DIM)
         self._launch.bind("action_in", action)
         self._launch.bind("joint_q_in", state.joint_q)
         self._launch.launch()
 
-    def reset(self, state, env_ids, env_mask) -> None:
+    def reset(self, state, env_ids, env_mask, use_target: bool | None = None) -> None:
+        """The measured EE pose of the reset envs; with ``use_target`` (default: the spec's) also their target."""
         eng = self.engine
+        use_target = self.spec.use_target if use_target is None else use_target
         dim = eng.num_envs if env_ids is None else env_ids.shape[0]
         if dim == 0:
             return
         p = self._chain_params
         wp.launch(
-            KE._ee_reset_kernel,
+            ee_kernels._ee_reset_kernel,
             dim=dim,
             inputs=[
                 *p.values(),
                 self.row_q_off,
                 eng.env_q_base,
                 self.num_dof,
-                int(self.spec.use_target),
+                int(use_target),
                 env_ids,
                 env_mask,
                 state.joint_q,
@@ -357,7 +407,7 @@ class EEPart:
         pose = wp.zeros((eng.num_envs, 7), dtype=wp.float32, device=eng.device)
         jac = wp.zeros((eng.num_envs, 6, self.num_dof), dtype=wp.float32, device=eng.device)
         wp.launch(
-            KE._ee_fk_jacobian_kernel,
+            ee_kernels._ee_fk_jacobian_kernel,
             dim=eng.num_envs,
             inputs=[*self._chain_params.values(), self.row_q_off, eng.env_q_base, self.num_dof, joint_q, pose, jac],
             device=eng.device,
@@ -373,10 +423,11 @@ class EndEffectors(Part):
 
     @staticmethod
     def wanted(plan) -> bool:
-        return bool(plan.ee_specs)
+        return any(isinstance(v[2], EESpec) for v in plan.ee_specs.values())
 
     def __init__(self, plan, alloc):
-        self.specs = plan.ee_specs  # {first row: (first action column, rows, spec)}
+        # {first row: (first action column, rows, spec)} (the impedance controllers' specs are another part's)
+        self.specs = {r0: v for r0, v in plan.ee_specs.items() if isinstance(v[2], EESpec)}
         self.parts: dict[int, EEPart] = {}
 
     def build(self, engine, model, solver) -> None:

@@ -15,7 +15,7 @@ import numpy as np
 import warp as wp
 
 from ...config import ConfigError
-from . import Part
+from .part import Part
 
 
 def robot_bodies(model: newton.Model, joint_index: np.ndarray) -> np.ndarray:

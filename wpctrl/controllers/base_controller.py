@@ -17,23 +17,21 @@ import warp as wp
 
 from ..binding import bind_joints
 from ..config import ee as cfg_ee
+from ..config import impedance as cfg_imp
 from ..config import rows as cfg
+from ..config.options import Actuation, ControllerOptions, Delay, Diagnostics
 from ..engine.core import _Engine
 from ..engine.parts import gravity
 from ..engine.plan import Options, make_plan
-from .actuation import ActuationMixin, check_actuation_options
+from .drive_properties import DrivePropertiesMixin
 from .inputs import _action_array, _as_rows_array, _claim, _env_selection, _raise_on_nonfinite, _type_name
 
-_ACTUATIONS = ("implicit", "explicit")
-_NAN_POLICIES = ("hold", "raise")
-_EXPLICIT_PD = ("naive", "stable", "coupled")
-_INERTIA_UPDATES = ("control", "substep")
 
-
-class BaseController(ActuationMixin):
+class BaseController(DrivePropertiesMixin):
     """A ManiSkill-style joint controller over all envs of a Newton model.
 
-    Build it with :func:`wpctrl.build_controller` (or ``Config.controller_cls(config, model, ...)``). Per control
+    Build it with :func:`wpctrl.build_controller` (or ``Config.controller_cls(config, model, control_freq, sim_freq,
+    actuation=wpctrl.Actuation(...), ...)``, which takes the option groups as objects only). Per control
     step call :meth:`set_action` once, then :meth:`before_simulation_step` before every solver substep. Drive
     targets are written into the ``Control`` in :meth:`before_simulation_step` (implicit actuation:
     ``joint_target_q``/``joint_target_qd``, the solver's built-in PD acts); explicit actuation also writes
@@ -53,49 +51,31 @@ class BaseController(ActuationMixin):
         control_freq: int = 20,
         sim_freq: int = 100,
         *,
-        actuation: str = "implicit",
+        actuation: Actuation | None = None,
+        delay: Delay | None = None,
+        diagnostics: Diagnostics | None = None,
         solver: Any = None,
-        nan_policy: str = "hold",
-        explicit_pd: str = "naive",
-        inertia_update: str | None = None,
-        delay=None,
-        track_effort: bool = False,
-        clip_targets: str = "none",
-        seed: int = 0,
         balance_passive_force: bool | None = None,
     ):
         self.config = config
         self.control_freq = control_freq
         self.sim_freq = sim_freq
         num_substeps = _num_substeps(control_freq, sim_freq)
-        if actuation not in _ACTUATIONS:
-            raise ValueError(f"actuation: expected one of {_ACTUATIONS}, got {actuation!r}")
-        self.actuation = actuation
-        if nan_policy not in _NAN_POLICIES:
-            raise ValueError(f"nan_policy: expected one of {_NAN_POLICIES}, got {nan_policy!r}")
-        self.nan_policy = nan_policy
-        if explicit_pd not in _EXPLICIT_PD:
-            raise ValueError(f"explicit_pd: expected one of {_EXPLICIT_PD}, got {explicit_pd!r}")
-        if inertia_update is None:  # each drive's default: the coupled drive per substep, the others per control step
-            inertia_update = "substep" if (actuation == "explicit" and explicit_pd == "coupled") else "control"
-        if inertia_update not in _INERTIA_UPDATES:
-            raise ValueError(f"inertia_update: expected one of {_INERTIA_UPDATES}, got {inertia_update!r}")
-        self.explicit_pd = explicit_pd
-        actuation_options = check_actuation_options(delay, track_effort, clip_targets, seed)
-        self.clip_targets = clip_targets
-        balance = True  # ManiSkill's default: a single config counts as on
+        actuation = Actuation() if actuation is None else actuation
+        diagnostics = Diagnostics() if diagnostics is None else diagnostics
+        for name, value, kind in (("actuation", actuation, Actuation), ("diagnostics", diagnostics, Diagnostics)):
+            if not isinstance(value, kind):
+                raise cfg.ConfigError(f"{name}: expected a wpctrl.{kind.__name__}, got {value!r}")
+        if delay is not None and not isinstance(delay, Delay):
+            raise cfg.ConfigError(f"delay: expected a wpctrl.Delay or None, got {delay!r}")
         if isinstance(config, Mapping):
             configs = dict(config)
-            balance = configs.pop("balance_passive_force", True)  # an agent-level option, not a controller
+            balance = configs.pop("balance_passive_force", None)  # an agent-level option, not a controller
             cfg.check_mode_dict(configs)
         else:
-            configs = {"": config}
-        if balance_passive_force is not None:
-            balance = balance_passive_force
-        if not isinstance(balance, (bool, np.bool_)):
-            raise cfg.ConfigError(f"balance_passive_force: expected True or False, got {balance!r}")
-        self.balance_passive_force = bool(balance)
-        if self.balance_passive_force:
+            configs, balance = {"": config}, None
+        balance = _balance_passive_force(balance, balance_passive_force)
+        if balance:
             gravity.check_solver(solver)
         names: list[str] = []
         for c in configs.values():
@@ -111,6 +91,9 @@ class BaseController(ActuationMixin):
             if isinstance(c, cfg_ee.EE_CONFIGS):  # end-effector controllers: position rows + an EE launch
                 rows, spec = cfg_ee.ee_rows(c, binding.qlimits[r0 : r0 + n])
                 ee_specs[r0] = (c0, rows.count, spec)
+            elif isinstance(c, cfg_imp.IMPEDANCE_CONFIGS):  # OSC / joint impedance: effort rows + their launches
+                rows, spec = cfg_imp.impedance_rows(c, binding.qlimits[r0 : r0 + n])
+                ee_specs[r0] = (c0, rows.count, spec)
             else:
                 rows = cfg.config_rows(c, binding.qlimits[r0 : r0 + n])
             parts.append((uid, c, rows))
@@ -119,12 +102,11 @@ class BaseController(ActuationMixin):
         all_rows = cfg.Rows.concat([p[2] for p in parts])
         options = Options(
             num_substeps=num_substeps,
-            actuation=actuation,
-            explicit_pd=explicit_pd,
-            inertia_update=inertia_update,
             sim_dt=1.0 / sim_freq,
-            balance_passive_force=self.balance_passive_force,
-            **actuation_options,
+            actuation=actuation,
+            delay=delay,
+            diagnostics=diagnostics,
+            balance_passive_force=balance,
         )
         # The engine: plan (host) -> device state -> parts' model writes -> the first reset; nothing after it.
         self._engine = _Engine(make_plan(all_rows, binding, options, ee_specs), model, solver)
@@ -138,7 +120,10 @@ class BaseController(ActuationMixin):
         self._cols = slice(0, all_rows.action_dim)
         self._owner = True
         ee = self._engine.part("ee")
-        ee_parts = {} if ee is None else ee.parts  # by first row
+        ee_parts = {} if ee is None else dict(ee.parts)  # by first row
+        imp = self._engine.part("impedance")
+        if imp is not None:
+            ee_parts.update(imp.units)
         self._ee = ee_parts.get(0) if not isinstance(config, Mapping) else None
         self.children: dict[str, BaseController] = {}
         if isinstance(config, Mapping):
@@ -163,11 +148,6 @@ class BaseController(ActuationMixin):
         self.config = config
         self.control_freq = parent.control_freq
         self.sim_freq = parent.sim_freq
-        self.actuation = parent.actuation
-        self.nan_policy = parent.nan_policy
-        self.explicit_pd = parent.explicit_pd
-        self.clip_targets = parent.clip_targets
-        self.balance_passive_force = parent.balance_passive_force
         self._engine = parent._engine
         self._rows = rows_slice
         self._cols = cols_slice
@@ -207,6 +187,48 @@ class BaseController(ActuationMixin):
     def num_substeps(self) -> int:
         """K = sim_freq // control_freq: solver substeps per control step."""
         return self._engine.num_substeps
+
+    # -- the options that run (resolved: what the engine does, not what was asked) ---------------------------------
+
+    @property
+    def options(self) -> ControllerOptions:
+        """The mode's option groups as they run: :class:`wpctrl.Actuation` with the explicit law and the inertia
+        update resolved (None where nothing of the kind runs), :class:`wpctrl.Delay` (or None),
+        :class:`wpctrl.Diagnostics`, and whether gravity is off the robot."""
+        return self._engine.plan.resolved_options
+
+    @property
+    def actuation(self) -> str:
+        """``"implicit"`` or ``"explicit"``: who computes the drive force."""
+        return self.options.actuation.mode
+
+    @property
+    def explicit_pd(self) -> str | None:
+        """The explicit PD law that runs (``"naive"``, ``"stable"``, ``"coupled"``), or None with implicit
+        actuation."""
+        return self.options.actuation.explicit_pd
+
+    @property
+    def inertia_update(self) -> str | None:
+        """When the inertia is recomputed (``"control"`` or ``"substep"``), or None when the mode computes none."""
+        return self.options.actuation.inertia_update
+
+    @property
+    def nan_policy(self) -> str:
+        return self.options.diagnostics.nan_policy
+
+    @property
+    def clip_targets(self) -> str:
+        return self.options.diagnostics.clip_targets
+
+    @property
+    def track_effort(self) -> bool:
+        return self.options.diagnostics.track_effort
+
+    @property
+    def balance_passive_force(self) -> bool:
+        """Whether gravity is off the controlled robot's links (ManiSkill's agent-level switch)."""
+        return self.options.balance_passive_force
 
     @property
     def is_graphable(self) -> bool:
@@ -415,6 +437,20 @@ class BaseController(ActuationMixin):
         return f"{type(self).__name__}(dof={self.action_dim}, num_envs={self.num_envs}, joints=({inner}))"
 
 
+def _balance_passive_force(in_mode_dict, keyword) -> bool:
+    """The one value of ``balance_passive_force``: the keyword or the mode dict's entry (given both ways they must
+    agree), else True (ManiSkill's default)."""
+    for v in (keyword, in_mode_dict):
+        if v is not None and not isinstance(v, (bool, np.bool_)):
+            raise cfg.ConfigError(f"balance_passive_force: expected True or False, got {v!r}")
+    if keyword is not None and in_mode_dict is not None and bool(keyword) != bool(in_mode_dict):
+        raise cfg.ConfigError(
+            f"balance_passive_force: expected None or the mode dict's 'balance_passive_force' entry "
+            f"({bool(in_mode_dict)}), got {keyword!r}"
+        )
+    return bool(True if keyword is None and in_mode_dict is None else (in_mode_dict if keyword is None else keyword))
+
+
 def _num_substeps(control_freq, sim_freq) -> int:
     for name, v in (("control_freq", control_freq), ("sim_freq", sim_freq)):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v <= 0:
@@ -437,63 +473,6 @@ def _batched(space: gym.spaces.Box, num_envs: int) -> gym.spaces.Box:
     if num_envs > 1:
         return gym.vector.utils.batch_space(space, num_envs)
     return space
-
-
-class PDJointPosController(BaseController):
-    """Position targets: absolute, delta from the measured position, or delta on a virtual target."""
-
-    sets_target_qpos = True
-
-
-class PDJointPosMimicController(PDJointPosController):
-    """PDJointPos whose mimic joints follow ``target[control] * multiplier + offset``."""
-
-
-class PDJointVelController(BaseController):
-    """Velocity targets (stiffness 0): ``qd* = action`` once per control step."""
-
-    sets_target_qvel = True
-
-    @property
-    def target_qpos(self):
-        """A velocity controller has no position target (None)."""
-        return None
-
-
-class PDBaseVelController(PDJointVelController):
-    """Ego-centric base velocity (ManiSkill's PDBaseVelController): the action's ``[vx, vy]`` is rotated by the
-    measured yaw (the third joint's position at ``set_action``) into the world frame of the base's x / y joints."""
-
-
-class PDBaseForwardVelController(PDJointVelController):
-    """Forward-only ego-centric base velocity (ManiSkill's PDBaseForwardVelController): action ``[v, w]``, velocity
-    targets ``[v cos(yaw), v sin(yaw), w]`` with the measured yaw."""
-
-
-class PDJointPosVelController(PDJointPosController):
-    """Position targets as PDJointPos plus velocity targets from the second half of the action (never
-    interpolated)."""
-
-    sets_target_qvel = True
-
-
-class JointEffortController(BaseController):
-    """Direct effort control: the scaled action is the joint effort [N·m or N], written to ``Control.joint_f`` before
-    every substep (clamped to ``force_limit``); the built-in drive is off for these joints."""
-
-    @property
-    def target_qpos(self):
-        """An effort controller has no position target (None)."""
-        return None
-
-    @property
-    def target_effort(self) -> wp.array:
-        """(num_envs, n_joints) commanded effort [N·m or N] of the last accepted action (live view)."""
-        return self._view(self._engine.part("effort_command").target_effort)
-
-
-class PassiveController(BaseController):
-    """No action: damping toward zero velocity (stiffness 0) and joint friction."""
 
 
 class CombinedController(BaseController):

@@ -6,16 +6,16 @@ from __future__ import annotations
 
 import warp as wp
 
-from . import Part
+from .part import Part
 
 
 class EffortReadout(Part):
-    name = "effort"
+    name = "effort_readout"
     OPTIONAL_ARGS = ("computed_effort", "applied_effort", "saturation_count")
 
     @staticmethod
     def wanted(plan) -> bool:
-        return plan.options.track_effort
+        return plan.track_effort
 
     def __init__(self, plan, alloc):
         R = plan.num_rows

@@ -1,4 +1,5 @@
-"""Warp functions of the actuator models that limit the PD torque inside the substep kernel (``pd_step.py``).
+"""Warp functions of the actuator models that limit the PD torque inside the substep kernel
+(:mod:`wpctrl.kernels.pd_step`).
 
 Private module. The DC motor's function takes the computed effort ``u`` [N·m or N], the row's measured velocity and
 parameters, and the config's force limit ``lim``, and returns the applied effort. A position table is compiled into

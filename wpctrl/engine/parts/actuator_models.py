@@ -1,11 +1,10 @@
-"""Actuator models (explicit actuation) and commanded efforts, as engine parts.
+"""Actuator models (explicit actuation) as an engine part, with the kernels that set and randomise their per-env
+parameters.
 
-- :class:`EffortCommand`: the ``(num_envs, rows)`` commanded effort of effort rows (JointEffortController), written by
-  ``set_action``, read by the substep kernel (delayed like any target when a delay is on), zeroed by a reset.
-- :class:`ActuatorModels`: per-env DC-motor parameters (``saturation_effort`` / ``velocity_limit``, randomisable like
-  the drive properties) and the actuator networks: each network's rows get one launch after the substep kernel
-  (:mod:`wpctrl.kernels.actuator_net`), and a reset zeroes their history / hidden state. Position tables need no
-  part: they are compiled into the substep kernel.
+:class:`ActuatorModels` holds the per-env DC-motor parameters (``saturation_effort`` / ``velocity_limit``, randomisable
+like the drive properties) and the actuator networks: each network's rows get one launch after the substep kernel
+(:mod:`wpctrl.kernels.actuator_net`), and a reset zeroes their history / hidden state. Position tables need no part:
+they are compiled into the substep kernel (:mod:`wpctrl.kernels.actuator_models`).
 """
 
 from __future__ import annotations
@@ -13,34 +12,75 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from ...config.actuators import ActuatorNet
+from ...config.actuator_models import ActuatorNet
 from ...config.networks import read_network
-from ...kernels import actuation as KA
-from ...kernels import actuator_net as KN
+from ...kernels import actuator_net
+from ...kernels.env_selection import MODE_SCALE, _bump_counter_kernel, _select
 from ..launch import _Launch
-from . import Part
+from .part import Part
+
+wp.set_module_options({"enable_backward": False})
 
 ACTUATOR_FIELDS = ("saturation_effort", "velocity_limit")
 """The per-env actuator-model parameters, in the order of their RNG streams."""
 
 
-class EffortCommand(Part):
-    name = "effort_command"
-    OPTIONAL_ARGS = ("target_effort",)
+@wp.kernel
+def _set_rows_kernel(
+    row0: int,
+    num_rows: int,
+    env_ids_in: wp.array[wp.int32],  # optional
+    env_mask_in: wp.array[wp.bool],  # optional
+    values_in: wp.array2d[float],  # (1 | len(env_ids) | num_envs, num_rows): row 0 broadcasts
+    # Out:
+    param_out: wp.array2d[float],  # (num_envs, rows) a per-env parameter without a model mirror
+):
+    """Copy given values into a per-env parameter (an actuator model's) for the selected envs."""
+    tid = wp.tid()
+    env, rl, i = _select(tid, num_rows, env_ids_in, env_mask_in, param_out.shape[0])
+    if env < 0:
+        return
+    b = 0
+    if values_in.shape[0] > 1:
+        b = i
+        if env_mask_in:
+            b = env
+    param_out[env, row0 + rl] = values_in[b, rl]
 
-    @staticmethod
-    def wanted(plan) -> bool:
-        return plan.has_effort_rows
 
-    def __init__(self, plan, alloc):
-        self.target_effort = alloc.per_env(plan.num_rows)
-
-    def kernel_args(self) -> dict:
-        return {"target_effort": self.target_effort}
+@wp.kernel
+def _randomize_rows_kernel(
+    row0: int,
+    num_rows: int,
+    seed: int,
+    stream: int,  # a stream per parameter: its draws do not depend on which others are drawn
+    mode: int,
+    lo: float,
+    hi: float,
+    env_ids_in: wp.array[wp.int32],  # optional
+    env_mask_in: wp.array[wp.bool],  # optional
+    nominal_in: wp.array[float],  # (rows,) the config's values
+    rng_counter_in: wp.array[wp.int32],  # (1,)
+    # Out:
+    param_out: wp.array2d[float],  # (num_envs, rows)
+):
+    """value = nominal * U(lo, hi) ("scale") or U(lo, hi) ("abs"), as
+    :func:`wpctrl.engine.parts.drive_properties._randomize_drive_kernel`."""
+    tid = wp.tid()
+    env, rl, i = _select(tid, num_rows, env_ids_in, env_mask_in, param_out.shape[0])
+    if env < 0:
+        return
+    r = row0 + rl
+    key = wp.randi(wp.rand_init(seed, rng_counter_in[0]))
+    state = wp.rand_init(key + stream * 7919, env * param_out.shape[1] + r)
+    x = lo + (hi - lo) * wp.randf(state)
+    if mode == MODE_SCALE:
+        x = nominal_in[r] * x
+    param_out[env, r] = x
 
 
 class ActuatorModels(Part):
-    name = "actuators"
+    name = "actuator_models"
     OPTIONAL_ARGS = ("sat_effort", "vel_limit")
 
     @staticmethod
@@ -80,7 +120,7 @@ class ActuatorModels(Part):
         for p, arr in enumerate((self.sat_effort, self.vel_limit)):
             if enabled[p] and dim:
                 wp.launch(
-                    KA._set_rows_kernel,
+                    _set_rows_kernel,
                     dim=dim,
                     inputs=[row0, num_rows, env_ids, env_mask, dev_values[p], arr],
                     device=engine.device,
@@ -95,13 +135,13 @@ class ActuatorModels(Part):
         for p, arr in enumerate((self.sat_effort, self.vel_limit)):
             if enabled[p]:
                 wp.launch(
-                    KA._randomize_rows_kernel,
+                    _randomize_rows_kernel,
                     dim=dim,
                     inputs=[row0, num_rows, int(seed), 4 + p, int(mode_abs), float(lo[p]), float(hi[p]), env_ids,
                             env_mask, self.nominal[p], c.rng_counter, arr],
                     device=engine.device,
                 )  # fmt: skip
-        wp.launch(KA._bump_counter_kernel, dim=1, inputs=[c.rng_counter], device=engine.device)
+        wp.launch(_bump_counter_kernel, dim=1, inputs=[c.rng_counter], device=engine.device)
 
 
 class _NetGroup:
@@ -113,7 +153,7 @@ class _NetGroup:
         E, dev = plan.num_envs, alloc.device
         taps = tuple(int(i) for i in spec.input_idx) if net.kind == "mlp" else ()
         history = (max(taps) + 1) if taps else 0
-        self.layout = KN.NetLayout(
+        self.layout = actuator_net.NetLayout(
             dense=net.dense, lstm=net.lstm, taps=taps, history=history, pos_first=spec.input_order == "pos_vel", rows=n
         )
         self.weights = wp.array(net.weights, dtype=wp.float32, device=dev)
@@ -129,7 +169,7 @@ class _NetGroup:
     def launch(self, engine, state, control) -> None:
         if self._launch is None:
             s = self.spec
-            effort = engine.part("effort")
+            effort = engine.part("effort_readout")
             per_call = {
                 "row0": self.row0,
                 "weights": self.weights,
@@ -149,7 +189,7 @@ class _NetGroup:
                 "applied_effort_out": None if effort is None else effort.applied_effort,
                 "saturation_count_out": None if effort is None else effort.saturation_count,
             }
-            self._launch = engine._launch(KN.net_kernel(self.layout), (engine.num_envs, self.n), per_call)
+            self._launch = engine._launch(actuator_net.net_kernel(self.layout), (engine.num_envs, self.n), per_call)
         ln = self._launch
         ln.bind("joint_q_in", state.joint_q)
         ln.bind("joint_qd_in", state.joint_qd)
@@ -162,7 +202,7 @@ class _NetGroup:
         if dim == 0:
             return
         wp.launch(
-            KN._reset_state_kernel,
+            actuator_net._reset_state_kernel,
             dim=(dim, self.n),
             inputs=[engine.num_envs, self.n, env_ids, env_mask, self.hist_pos, self.hist_vel, self.lstm_h, self.lstm_c],
             device=engine.device,

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .joint import PDJointVelControllerConfig
+from .joint import ControllerClass, PDJointVelControllerConfig
 
 
 @dataclass
@@ -19,8 +19,12 @@ class PDBaseVelControllerConfig(PDJointVelControllerConfig):
     PDJointVel); velocity targets ``[c vx - s vy, s vx + c vy, w, ...]`` with ``c, s = cos, sin`` of the measured yaw
     [rad/s or m/s]."""
 
+    controller_cls = ControllerClass("wpctrl.controllers.mobile_base", "PDBaseVelController")
+
 
 @dataclass
 class PDBaseForwardVelControllerConfig(PDJointVelControllerConfig):
     """Forward-only ego-centric base velocity: action ``[v, w]`` (``lower``/``upper`` broadcast to 2 values);
     velocity targets ``[c v, s v, w]`` of the base's x, y and yaw joints (exactly 3 joints)."""
+
+    controller_cls = ControllerClass("wpctrl.controllers.mobile_base", "PDBaseForwardVelController")

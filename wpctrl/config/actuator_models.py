@@ -20,6 +20,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Literal, Union
 
+import numpy as np
+
+from .errors import ConfigError
+from .validate import _name, _per_joint
+
 Number = Union[float, Sequence[float]]
 
 
@@ -97,11 +102,6 @@ def actuator_rows(config, n: int) -> dict:
     Returns ``{"act_model", "sat_effort", "vel_limit", "ema_alpha", "extras"}``: per-row int32 / float32 arrays, and
     ``extras`` as ``[(first row, rows, actuator)]`` for models that carry more than per-row numbers (tables, nets).
     """
-    import numpy as np
-
-    from .joint import ConfigError
-    from .validate import _name, _per_joint
-
     act = getattr(config, "actuator", None)
     out = {
         "act_model": np.zeros(n, np.int32),
@@ -156,7 +156,7 @@ def actuator_rows(config, n: int) -> dict:
         if (np.diff(pos) < 0).any():
             raise ConfigError(f"{where}.positions: expected non-decreasing positions, got {list(act.positions)}")
         if pos.size > 64:
-            raise ConfigError(f"{where}: expected at most 64 table entries, got {pos.size}")
+            raise ConfigError(f"{where}.positions: expected at most 64 table entries, got {pos.size}")
         out["act_model"][:] = ACT_POSITION_LIMIT
         out["extras"].append((0, n, (pos.astype(np.float32), eff.astype(np.float32))))
     else:
@@ -164,7 +164,7 @@ def actuator_rows(config, n: int) -> dict:
         if act.input_order not in ("pos_vel", "vel_pos"):
             raise ConfigError(f"{where}.input_order: expected 'pos_vel' or 'vel_pos', got {act.input_order!r}")
         idx = list(act.input_idx)
-        if not idx or any(isinstance(i, bool) or not isinstance(i, int) or i < 0 or i > 63 for i in idx):
+        if not idx or any(isinstance(i, bool) or not isinstance(i, (int, np.integer)) or not 0 <= i <= 63 for i in idx):
             raise ConfigError(f"{where}.input_idx: expected substep indices in [0, 63], got {act.input_idx!r}")
         for f in ("pos_scale", "vel_scale", "torque_scale"):
             v = getattr(act, f)

@@ -10,8 +10,8 @@ semi-implicit Euler step, ``qd+ = qd + dt A tau``, ``q+ = q + dt qd+``, each cla
 
     tau = clamp(b - D A tau, -l, l),   b = Kp (q* - q - dt qd) + Kd (qd* - qd),   D = diag(dt Kd + dt^2 Kp)
 
-(the velocity-bias term, Coriolis and gravity, is left out: see the README). Without active limits this is the linear
-system ``(I + D A) tau = b``. With them it is the KKT system of the convex box QP
+(the velocity-bias term, Coriolis and gravity, is left out: see docs/actuation.md). Without active limits this is the
+linear system ``(I + D A) tau = b``. With them it is the KKT system of the convex box QP
 ``min 1/2 tau^T (D^-1 + A) tau - (D^-1 b)^T tau  s.t. |tau| <= l`` (``D^-1 + A`` is SPD). Rows with
 ``Kp = Kd = 0`` get ``tau = 0`` and stay out of the QP (their DOFs still move through ``H``).
 

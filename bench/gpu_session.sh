@@ -8,6 +8,8 @@
 #   STAGE=train bash bench/gpu_session.sh      # PPO on 4,096 reach envs to 95 % success (bench/train_gpu.sh)
 #   STAGE=coupled bash bench/gpu_session.sh    # the coupled drive against MuJoCo-Warp; Nsight Compute of its kernel
 #   STAGE=models  bash bench/gpu_session.sh    # DC motor / position table against the plain step; Nsight Compute
+#   STAGE=tasks   bash bench/gpu_session.sh    # the tasks' CUDA tests and env step (ManiSkill's Panda asset copied to
+#                                              # .gpu/assets, or WPCTRL_MANISKILL_ASSETS set)
 set -uo pipefail
 cd "$(dirname "$0")/.."
 OUT=${OUT:-bench/results/gpu}
@@ -17,6 +19,11 @@ export PYTHONUNBUFFERED=1
 log="$OUT/${STAGE}.log"
 { date -u; nvidia-smi --query-gpu=name,driver_version --format=csv,noheader; git log -1 --format=%h 2>/dev/null; } > "$log" 2>&1
 case "$STAGE" in
+  tasks)
+    export WPCTRL_MANISKILL_ASSETS=${WPCTRL_MANISKILL_ASSETS:-$PWD/.gpu/assets}
+    timeout 280 $PY -m pytest -q -p no:cacheprovider tests/test_tasks_cuda.py 2>&1 | tee -a "$log" | tail -8
+    timeout 280 $PY bench/task_step.py --device cuda:0 --envs "${TASK_ENVS:-4k}" --substeps "${TASK_SUBSTEPS:-16,8,4}" \
+      --out "$OUT" 2>&1 | tee -a "$log" | tail -10 ;;
   tests)
     timeout 560 $PY -m pytest -q -p no:cacheprovider tests/test_cuda.py tests/test_cuda_features.py tests/test_ee_cuda.py \
       "tests/test_actuation.py::test_cuda_captured_randomisation_reaches_mujoco" 2>&1 | tee -a "$log" | tail -30 ;;

@@ -33,6 +33,11 @@ from .run import run
 
 
 def main(argv=None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if any(a == "--task" or a.startswith("--task=") for a in argv):  # ManiSkill's tasks: a demo of their own
+        from . import task_demo
+
+        return task_demo.main(argv)
     parser = _parser()
     args = parser.parse_args(argv)
     _check_args(parser, args)

@@ -103,7 +103,9 @@ def _parser() -> argparse.ArgumentParser:
         prog="wpctrl demo",
         description=__doc__.split("\n\n")[0],
         epilog="control modes (--control-mode) by robot (--robot):\n"
-        + "\n".join(f"  {robot}: {', '.join(modes)}" for robot, modes in ROBOT_MODES.items()),
+        + "\n".join(f"  {robot}: {', '.join(modes)}" for robot, modes in ROBOT_MODES.items())
+        + "\n\nManiSkill's tasks: wpctrl demo --task PushCube-v1|PickCube-v1 [--envs N] [--device D] [--out DIR]"
+        " (wpctrl demo --task PickCube-v1 --help lists its options)",
         formatter_class=_HelpFormatter,
     )
     p.add_argument(

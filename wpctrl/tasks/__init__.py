@@ -37,7 +37,7 @@ CONTROLLER_SEMANTICS = ("physx_cpu", "physx_cuda")
 def _control_modes() -> tuple[str, ...]:
     from ..robots import panda_control_modes
 
-    return tuple(panda_control_modes())
+    return tuple(m for m in panda_control_modes() if m.startswith("pd_"))  # ManiSkill's own, not wpctrl's torque modes
 
 
 CONTROL_MODES = _control_modes()

@@ -104,7 +104,7 @@ class TaskSpec:
     info_keys: tuple[str, ...]
     """``evaluate()``'s keys besides ``success`` (and ``elapsed_steps`` added by ``get_info``)."""
     static_threshold: float = 0.2
-    """``Panda.is_static(0.2)``: max |qvel| of the 7 arm joints [rad/s]."""
+    """``Panda.is_static(0.2)``: the largest absolute velocity of the 7 arm joints [rad/s]."""
     grasp_min_force: float = 0.5
     """``Panda.is_grasping(min_force=0.5, max_angle=85)`` [N]."""
     grasp_max_angle: float = 85.0

@@ -6,11 +6,11 @@ articulation joint limits, implicit drives clamped at their force limit, each pa
 two materials) and MuJoCo (soft constraints, implicit damping, each pair's friction the *larger* of its two geoms')
 differ where a task touches them. What :class:`TaskPhysics` sets, and why:
 
-- **Substeps**: 8 MuJoCo steps of 1.25 ms per 100 Hz physics step. MuJoCo clamps a saturated drive's force but
-  keeps its damping implicit (``dt * kd`` in the mass matrix), so a saturated arm joint moves as if damped harder
-  than PhysX's, by an amount that grows with the step: at one 10 ms step the Panda's TCP lags and sags by 1-1.5 cm
-  in a fast ``pd_ee_delta_pos`` push. PhysX's TGS integrates in 15 sub-iterations; 8 MuJoCo steps bring the arm
-  within a few millimetres. The controller still runs at ManiSkill's rates (100 Hz drive targets, 20 Hz actions).
+- **Substeps**: 16 MuJoCo steps of 0.625 ms per 100 Hz physics step, as PhysX's TGS integrates in 15
+  sub-iterations. MuJoCo clamps a saturated drive's force but keeps its damping implicit (``dt * kd`` in the mass
+  matrix), so a saturated arm joint moves as if damped harder than on PhysX, by an amount that grows with the step: at
+  one 10 ms step the Panda's TCP lags and sags by 1-1.5 cm in a fast ``pd_ee_delta_pos`` push, and a pushed cube
+  ends up centimetres off. The controller still runs at ManiSkill's rates (100 Hz drive targets, 20 Hz actions).
 - **Contacts**: ``contact_solref`` (5 ms, critically damped) and ``contact_solimp`` (0.99-0.999) make contacts
   nearly rigid: with MuJoCo's defaults (20 ms, 0.9-0.95) the gripper's 30 N squeeze pushes the fingers centimetres
   into the 64 g cube and the grasp fails.
@@ -20,8 +20,8 @@ differ where a task touches them. What :class:`TaskPhysics` sets, and why:
   finger-table 1.15, everything else 0.3 (:func:`mujoco_friction`).
 - **Joint limits**: Newton imports URDF limits as force-space gains (ke 1e4, kd 10) that MuJoCo turns into time
   constants of 0.1-2.5 s with a damping ratio near 0.01: a saturated drive carries joint 4 0.24 rad past its limit.
-  ``limit_solref`` (raw MuJoCo ``solreflimit``, 5 ms, critically damped) and ``limit_solimp`` hold it within 3 mrad,
-  as PhysX's hard limits do.
+  ``limit_solref`` (raw MuJoCo ``solreflimit``: two MuJoCo steps, critically damped, the stiffest MuJoCo integrates)
+  and ``limit_solimp`` hold it to hundredths of a milliradian, as PhysX's hard limits do.
 
 ``docs/tasks.md`` has the replay results of these settings and of the alternatives tried.
 """
@@ -54,9 +54,10 @@ class TaskPhysics:
     """MuJoCo ``solref`` of every contact: (time constant [s], damping ratio)."""
     contact_solimp: tuple[float, float, float] = (0.99, 0.999, 0.001)
     """MuJoCo ``solimp`` (dmin, dmax, width [m]) of every contact."""
-    limit_solref: tuple[float, float] | None = (0.005, 1.0)
+    limit_solref: tuple[float, float] | None = (0.00125, 1.0)
     """MuJoCo ``solreflimit`` of every robot joint limit: (time constant [s], damping ratio); None keeps Newton's
-    import (force-space gains ``joint_limit_ke/kd``, soft)."""
+    import (force-space gains ``joint_limit_ke/kd``, soft). 1.25 ms is two MuJoCo steps at 16 substeps, the stiffest
+    limit MuJoCo integrates (it raises a shorter time constant to two steps by itself)."""
     limit_solimp: tuple[float, float, float] = (0.99, 0.999, 0.001)
     friction_combine: str = "average"
     """``"average"`` (PhysX's rule, reproduced per shape: :func:`mujoco_friction`) or ``"max"`` (MuJoCo's own, the

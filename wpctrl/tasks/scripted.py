@@ -47,7 +47,7 @@ def push_cube_policy(obs):
     target[:, 2] = torch.where(~aligned & low, cube[:, 2] + 0.05, target[:, 2])
     pushing = aligned & low
     gain = torch.where(pushing, 0.5, 0.8)[:, None]
-    limit = torch.where(pushing, 0.6, 1.0)[:, None]  # push at up to 6 cm per control step (1.2 m/s peaks otherwise)
+    limit = torch.where(pushing, 0.6, 1.0)[:, None]  # push at up to 6 cm per control step
     arm = torch.maximum(torch.minimum((target - tcp) * (gain / _STEP), limit), -limit)
     return torch.cat([arm, -torch.ones_like(arm[:, :1])], dim=1)
 

@@ -53,7 +53,7 @@ class StateDictMixin:
         return [TABLE.name, "cube", self.spec.goal_name]
 
     def get_state_dict(self) -> dict:
-        """The current state in ManiSkill's layout (new torch tensors on :attr:`device`)."""
+        """The current state in ManiSkill's layout (new torch tensors on the env's device)."""
         torch = self._torch
         sc = self.scene
         n = self.num_envs
@@ -83,8 +83,9 @@ class StateDictMixin:
         """Put ``env_idx``'s envs (None: all) into ``state`` (ManiSkill's layout; each entry ``(N, D)`` with N the
         number of envs set, or ``(D,)`` for all of them). Every entry is checked on the host before anything is
         written. The drive targets of the envs set are reset to their new qpos (then the state's ``"controller"``
-        entry, if any, is restored), their contact forces zeroed, and :meth:`get_obs` / :meth:`evaluate` describe the
-        new state."""
+        entry, if any, is restored), their contact forces zeroed, and
+        :meth:`~wpctrl.tasks.env.TaskEnv.get_obs` / :meth:`~wpctrl.tasks.env.TaskEnv.evaluate` describe the new
+        state."""
         from ._validate import env_mask
 
         torch = self._torch

@@ -10,10 +10,11 @@ Physics, collision shapes, inertials, joints and the controllers are stock.
 
 from __future__ import annotations
 
-import contextlib
 import warnings
 
 import numpy as np
+
+from wpctrl.tasks.maniskill_side import no_visual_loaders
 
 # every agent whose assets ship in the mani-skill 3.0.1 wheel
 AGENTS = [
@@ -34,49 +35,6 @@ CANNOT_RUN = {
     ("floating_panda_gripper", "pd_ee_pose_quat"): "pos_lower=None gives NaN action bounds that gymnasium rejects",
     ("fetch", "pd_joint_pos_vel"): "normalising over infinite joint limits: ManiSkill's targets are NaN",
 }
-
-
-class _Inert:
-    def __init__(self, *args, **kwargs):
-        pass
-
-    def __setattr__(self, name, value):
-        object.__setattr__(self, name, value)
-
-
-@contextlib.contextmanager
-def no_visual_loaders():
-    """ManiSkill's URDF / MJCF loaders without visual shapes or render materials, for the duration."""
-    from mani_skill.utils.building import _mjcf_loader
-    from mani_skill.utils.building.urdf_loader import URDFLoader
-
-    original_build_link = URDFLoader._build_link
-    original_mjcf_init = _mjcf_loader.MJCFLoader.__init__
-    originals = {n: getattr(_mjcf_loader, n) for n in ("RenderMaterial", "RenderTexture2D")}
-
-    def build_link(self, link, *args, **kwargs):
-        visuals = link.visuals
-        link.visuals = []
-        try:
-            return original_build_link(self, link, *args, **kwargs)
-        finally:
-            link.visuals = visuals
-
-    def mjcf_init(self, *args, **kwargs):
-        original_mjcf_init(self, *args, **kwargs)
-        self.visual_groups = []
-
-    URDFLoader._build_link = build_link
-    _mjcf_loader.MJCFLoader.__init__ = mjcf_init
-    for n in originals:
-        setattr(_mjcf_loader, n, _Inert)
-    try:
-        yield
-    finally:
-        URDFLoader._build_link = original_build_link
-        _mjcf_loader.MJCFLoader.__init__ = original_mjcf_init
-        for n, v in originals.items():
-            setattr(_mjcf_loader, n, v)
 
 
 class ManiSkillSide:

@@ -7,52 +7,9 @@ rewards and evaluation are stock.
 
 from __future__ import annotations
 
-import contextlib
-import warnings
+from wpctrl.tasks.maniskill_side import make_maniskill, no_visuals
 
-from maniskill_side import _Inert, no_visual_loaders
-
-_VISUAL_METHODS = ("add_plane_visual", "add_box_visual", "add_capsule_visual", "add_cylinder_visual",
-                   "add_sphere_visual", "add_visual_from_file")  # fmt: skip
-
-
-@contextlib.contextmanager
-def no_visuals():
-    """ManiSkill without visual shapes or render materials, for the duration."""
-    import sapien
-    from sapien.wrapper.actor_builder import ActorBuilder
-
-    originals = {n: getattr(ActorBuilder, n) for n in _VISUAL_METHODS}
-    render = {n: getattr(sapien.render, n) for n in ("RenderMaterial", "RenderTexture2D")}
-
-    def skip(self, *args, **kwargs):
-        return self
-
-    for n in _VISUAL_METHODS:
-        setattr(ActorBuilder, n, skip)
-    for n in render:
-        setattr(sapien.render, n, _Inert)
-    try:
-        with no_visual_loaders():
-            yield
-    finally:
-        for n, v in originals.items():
-            setattr(ActorBuilder, n, v)
-        for n, v in render.items():
-            setattr(sapien.render, n, v)
-
-
-def make_maniskill(env_id: str, control_mode: str, **kwargs):
-    """The real ManiSkill env (gym.make, PhysX CPU, one env, state observations)."""
-    import gymnasium as gym
-    import mani_skill.envs  # noqa: F401  (registers the tasks)
-
-    with warnings.catch_warnings(), no_visuals():
-        warnings.simplefilter("ignore")
-        env = gym.make(env_id, sim_backend="physx_cpu", render_backend="none", num_envs=1, obs_mode="state",
-                       control_mode=control_mode, **kwargs)  # fmt: skip
-        env.reset(seed=0)
-    return env
+__all__ = ["make_maniskill", "no_visuals", "record_episode", "state_dict_lists"]
 
 
 def state_dict_lists(state: dict) -> dict:

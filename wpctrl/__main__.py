@@ -9,6 +9,8 @@ COMMANDS = {
     "demo": ("wpctrl.demo", "run a ManiSkill control mode on Newton Pandas and report tracking (CPU or GPU)"),
     "train": ("wpctrl.train.cli", "train a PPO policy (rsl-rl) through wpctrl on a vectorised Newton task"),
     "replay": ("wpctrl.tasks.replay", "replay ManiSkill's recorded PushCube / PickCube episodes on Newton"),
+    "export": ("wpctrl.train.export", "export a trained PushCube / PickCube policy as TorchScript (and ONNX)"),
+    "evaluate": ("wpctrl.train.evaluate", "evaluate an exported policy in the real ManiSkill or on Newton"),
 }
 
 

@@ -1,4 +1,5 @@
-"""``python -m wpctrl train``: PPO (rsl-rl's ``OnPolicyRunner``) on a vectorised Newton task through wpctrl.
+"""``python -m wpctrl train``: PPO (rsl-rl's ``OnPolicyRunner``) on a vectorised Newton task through wpctrl: the reach
+task (:mod:`wpctrl.train.reach`) or ManiSkill's ``PushCube-v1`` / ``PickCube-v1`` (:mod:`wpctrl.train.task_ppo`).
 
 Writes into ``--out``: ``train.json`` (per iteration: mean episode reward and success rate of the episodes finished in
 it, collection env-steps/s, wall time; the evaluations of the deterministic policy on fresh episodes, periodic with
@@ -10,14 +11,14 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
-import json
-import math
 import sys
 import time
 from pathlib import Path
 
-TASKS = ("reach",)
+MANISKILL_TASKS = ("PushCube-v1", "PickCube-v1")
+TASKS = ("reach",) + MANISKILL_TASKS
 CONTROL_MODES = ("pd_ee_delta_pos", "pd_joint_delta_pos")
+"""The reach task's control modes (the ManiSkill tasks take every Panda mode of :data:`wpctrl.tasks.CONTROL_MODES`)."""
 
 
 def train_cfg(num_steps_per_env: int = 24, seed: int = 0) -> dict:
@@ -72,17 +73,59 @@ class _Help(argparse.HelpFormatter):
 def parse(argv):
     p = argparse.ArgumentParser(
         prog="wpctrl train",
-        description="Train a PPO policy (rsl-rl) through wpctrl on a vectorised Newton task (MuJoCo-Warp physics).",
+        description="Train a PPO policy (rsl-rl) through wpctrl on a vectorised Newton task (MuJoCo-Warp physics): "
+        "the reach task, or ManiSkill's PushCube-v1 / PickCube-v1 (state observations, normalized dense reward, "
+        "ManiSkill's PPO baseline settings).",
         formatter_class=_Help,
     )
     p.add_argument("--task", choices=TASKS, default="reach", help="the task")
-    p.add_argument("--control-mode", choices=CONTROL_MODES, default="pd_ee_delta_pos", help="ManiSkill Panda mode")
+    p.add_argument(
+        "--control-mode",
+        default=None,
+        help="ManiSkill Panda mode (default: pd_ee_delta_pos for reach, pd_joint_delta_pos, as ManiSkill's PPO "
+        "baseline, for the ManiSkill tasks)",
+    )
     p.add_argument("--envs", type=int, default=None, help="parallel envs (default: 4096 on CUDA, 64 on the CPU)")
-    p.add_argument("--iterations", type=int, default=None, help="PPO iterations (default: 200 on CUDA, 20 on the CPU)")
-    p.add_argument("--steps-per-env", type=int, default=24, help="rollout length per iteration")
+    p.add_argument(
+        "--iterations",
+        type=int,
+        default=None,
+        help="PPO iterations (default: reach 200 on CUDA, 20 on the CPU; the ManiSkill tasks 2000 on CUDA, 20 on "
+        "the CPU)",
+    )
+    p.add_argument(
+        "--steps-per-env", type=int, default=None, help="rollout length per iteration (default: reach 24, tasks 4)"
+    )
+    p.add_argument("--epochs", type=int, default=None, help="ManiSkill tasks: PPO epochs per iteration (default: 8)")
+    p.add_argument(
+        "--minibatches", type=int, default=None, help="ManiSkill tasks: mini-batches per epoch (default: 32)"
+    )
+    p.add_argument(
+        "--substeps",
+        type=int,
+        default=None,
+        help="ManiSkill tasks: MuJoCo-Warp steps per 10 ms physics step (default: wpctrl.tasks.TaskPhysics's, 16)",
+    )
+    p.add_argument(
+        "--no-partial-reset",
+        action="store_true",
+        help="ManiSkill tasks: success does not end an episode (every episode runs its 50 steps); default: an episode "
+        "ends at success and that env alone restarts, as ManiSkill's PPO trains",
+    )
     p.add_argument("--device", default=None, help="torch / Warp device (default: cuda:0 if there is one, else cpu)")
-    p.add_argument("--seed", type=int, default=0, help="seeds torch and the envs' start poses and goals")
-    p.add_argument("--eval-episodes", type=int, default=None, help="fresh episodes to evaluate (default: one per env)")
+    p.add_argument("--seed", type=int, default=0, help="seeds torch and the envs' episode draws")
+    p.add_argument(
+        "--eval-episodes",
+        type=int,
+        default=None,
+        help="fresh episodes per evaluation (default: reach one per env; tasks one per evaluation env)",
+    )
+    p.add_argument(
+        "--eval-envs",
+        type=int,
+        default=None,
+        help="ManiSkill tasks: envs of the separate evaluation env (default: --envs, at most 512)",
+    )
     p.add_argument(
         "--eval-every", type=int, default=0, help="also evaluate every N iterations (0: only after training)"
     )
@@ -92,10 +135,18 @@ def parse(argv):
         default=None,
         help="stop training once an evaluation's success rate reaches this (with --eval-every)",
     )
+    p.add_argument(
+        "--time-limit",
+        type=float,
+        default=None,
+        help="ManiSkill tasks: stop training once this many seconds have passed since the command started, then "
+        "evaluate and save (default: no limit)",
+    )
     p.add_argument("--out", default="wpctrl-train", help="output folder")
-    p.add_argument("--no-graph", action="store_true", help="on CUDA, run the env step eagerly (no CUDA graph)")
+    p.add_argument("--no-graph", action="store_true", help="run the env step eagerly (no CUDA / CPU graph)")
     args = p.parse_args(argv)
-    for name in ("envs", "iterations", "steps_per_env", "eval_episodes"):
+    for name in ("envs", "iterations", "steps_per_env", "eval_episodes", "eval_envs", "epochs", "minibatches",
+                 "substeps"):  # fmt: skip
         v = getattr(args, name)
         if v is not None and v < 1:
             p.error(f"--{name.replace('_', '-')}: expected a positive number, got {v}")
@@ -105,6 +156,16 @@ def parse(argv):
         p.error(f"--target-success: expected a success rate in (0, 1], got {args.target_success}")
     if args.target_success is not None and args.eval_every == 0:
         p.error("--target-success: needs --eval-every N (the evaluations that decide when to stop)")
+    if args.time_limit is not None and not args.time_limit > 0:
+        p.error(f"--time-limit: expected a positive number of seconds, got {args.time_limit}")
+    if args.task == "reach":
+        for name in ("epochs", "minibatches", "substeps", "eval_envs", "time_limit"):
+            if getattr(args, name) is not None:
+                p.error(f"--{name.replace('_', '-')}: only for the ManiSkill tasks {list(MANISKILL_TASKS)}")
+        if args.no_partial_reset:
+            p.error(f"--no-partial-reset: only for the ManiSkill tasks {list(MANISKILL_TASKS)}")
+        if args.control_mode is not None and args.control_mode not in CONTROL_MODES:
+            p.error(f"--control-mode: expected one of {list(CONTROL_MODES)} for reach, got {args.control_mode!r}")
     return args
 
 
@@ -120,6 +181,12 @@ def main(argv=None) -> int:
     import warp as wp
 
     wp.config.log_level = wp.LOG_WARNING
+    if args.task in MANISKILL_TASKS:
+        from .task_ppo import train
+
+        return train(args, t_main)
+    args.control_mode = args.control_mode or "pd_ee_delta_pos"
+    args.steps_per_env = args.steps_per_env or 24
     device = args.device or ("cuda:0" if wp.is_cuda_available() else "cpu")
     cuda = device.startswith("cuda")
     envs = args.envs or (4096 if cuda else 64)
@@ -129,6 +196,7 @@ def main(argv=None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     from .reach import ReachEnv
+    from .report import fmt, median, plot, write_json
 
     t0 = time.perf_counter()
     env = ReachEnv(
@@ -173,8 +241,8 @@ def main(argv=None) -> int:
         }
         history.append(row)
         print(
-            f"[{it:4d}] step reward {_fmt(row['mean_step_reward'])} episode reward {_fmt(row['mean_episode_reward'])} "
-            f"success {_fmt(row['success_rate'])} "
+            f"[{it:4d}] step reward {fmt(row['mean_step_reward'])} episode reward {fmt(row['mean_episode_reward'])} "
+            f"success {fmt(row['success_rate'])} "
             f"collect {row['collection_env_steps_per_s']:,.0f} env-steps/s  wall {row['wall_s']:.1f} s",
             flush=True,
         )
@@ -212,7 +280,7 @@ def main(argv=None) -> int:
         "setup_s": setup_s,
         "train_wall_s": train_s,
         "total_s": time.perf_counter() - t_main,
-        "collection_env_steps_per_s_median": _median([h["collection_env_steps_per_s"] for h in history[1:] or history]),
+        "collection_env_steps_per_s_median": median([h["collection_env_steps_per_s"] for h in history[1:] or history]),
         "target_success": target,
         "time_to_target_s": (t_start - t_main + reached[0]["wall_s"]) if reached else None,
         "ppo": cfg,
@@ -220,8 +288,11 @@ def main(argv=None) -> int:
         "evaluations": evaluations,
         "evaluation": last,
     }
-    (out / "train.json").write_text(json.dumps(summary, indent=1, allow_nan=False))
-    _plot(history, evaluations, out / "learning_curve.png", envs, device)
+    write_json(out / "train.json", summary)
+    wall = history[-1]["wall_s"]
+    plot(history, evaluations, out / "learning_curve.png",
+         f"reach, {envs} envs on {device}: {len(history)} iterations in {wall:.0f} s",
+         "success rate (TCP within 2.5 cm)")  # fmt: skip
     print(f"wrote {out / 'train.json'}, {out / 'learning_curve.png'}, {out / 'policy.pt'}", flush=True)
     if reached:
         first = reached[0]
@@ -260,51 +331,3 @@ def evaluate(env, runner, episodes: int) -> dict:
         "mean_episode_reward": rewards / done_eps,
         "eval_s": time.perf_counter() - t,
     }
-
-
-def _median(xs):
-    xs = sorted(xs)
-    return xs[len(xs) // 2] if xs else None
-
-
-def _fmt(x) -> str:
-    return "   –  " if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:6.3f}"
-
-
-def _plot(history, evaluations, path: Path, envs: int, device: str) -> None:
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        print("wpctrl train: matplotlib is not installed: no learning_curve.png", file=sys.stderr)
-        return
-
-    def series(key):
-        return [math.nan if h[key] is None else h[key] for h in history]
-
-    its = [h["iteration"] for h in history]
-    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 3.8))
-    a.plot(its, series("mean_episode_reward"), "-")
-    a.set_xlabel("PPO iteration")
-    a.set_ylabel("mean episode reward")
-    a.grid(alpha=0.3)
-    b.plot(its, series("success_rate"), "-", label="training episodes (stochastic policy)")
-    b.plot(
-        [e["iteration"] for e in evaluations],
-        [e["success_rate"] for e in evaluations],
-        "ko--",
-        ms=4,
-        lw=1,
-        label="evaluation (deterministic, fresh episodes)",
-    )
-    b.set_xlabel("PPO iteration")
-    b.set_ylabel("success rate (TCP within 2.5 cm)")
-    b.set_ylim(-0.02, 1.02)
-    b.legend(loc="lower right", fontsize=8)
-    b.grid(alpha=0.3)
-    wall = history[-1]["wall_s"]
-    fig.suptitle(f"reach, {envs} envs on {device}: {len(history)} iterations in {wall:.0f} s")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)

@@ -1,0 +1,176 @@
+"""``python -m wpctrl evaluate --policy policy.ts --task PickCube-v1 --sim maniskill|newton --episodes N``: an exported
+policy (``wpctrl export``) on fresh episodes of either simulator, with the same metrics.
+
+- ``--sim newton``: :func:`wpctrl.tasks.make`'s env (MuJoCo-Warp, any device), ``--envs`` episodes at a time.
+- ``--sim maniskill``: the real ManiSkill env on its CPU PhysX (one env, its rendering stubbed out:
+  :mod:`wpctrl.tasks.maniskill_side`), one episode after another, ``env.reset(seed=seed + i)`` for episode i.
+
+Every episode runs its 50 control steps (success does not end it, as ManiSkill's PPO evaluates); reported: the
+success rate (success at any step, ManiSkill's ``success_once``), the success rate at the last step
+(``success_at_end``), the mean return of the normalized dense reward and the mean first success step.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+__all__ = ["evaluate_maniskill", "load_policy", "main"]
+
+SIMS = ("maniskill", "newton")
+
+
+class PolicyError(ValueError):
+    """A policy file that cannot drive the requested task (the message says what differs)."""
+
+
+def load_policy(path, task: str | None = None, device="cpu"):
+    """An exported policy (``policy.ts``) and its metadata; checks it against ``task`` (None: the policy's own)."""
+    from wpctrl.tasks import TASKS
+
+    from .export import EXTRA_FILE
+
+    p = Path(path)
+    if not p.is_file():
+        raise PolicyError(f"--policy: no file {str(p)!r} (export a run with `python -m wpctrl export RUN_DIR`)")
+    extra = {EXTRA_FILE: ""}
+    try:
+        module = torch.jit.load(str(p), map_location=device, _extra_files=extra)
+    except Exception as e:  # noqa: BLE001  (torch raises several kinds for a file that is not TorchScript)
+        raise PolicyError(f"--policy: {str(p)!r} is not a TorchScript module ({type(e).__name__})") from e
+    meta = json.loads(extra[EXTRA_FILE]) if extra[EXTRA_FILE] else {}
+    if task is None:
+        task = meta.get("task")
+        if task is None:
+            raise PolicyError(f"--task: {str(p)!r} does not name its task; pass --task")
+    if task not in TASKS:
+        raise PolicyError(f"--task: expected one of {sorted(TASKS)}, got {task!r}")
+    obs_dim = TASKS[task].obs_dim
+    if meta.get("task", task) != task:
+        raise PolicyError(f"--policy: {str(p)!r} was trained on {meta['task']} (observations of {meta['obs_dim']}); "
+                          f"--task is {task} (observations of {obs_dim})")  # fmt: skip
+    if "obs_dim" in meta and int(meta["obs_dim"]) != obs_dim:
+        raise PolicyError(f"--policy: {str(p)!r} takes observations of {meta['obs_dim']}, {task}'s are {obs_dim}")
+    if not meta:  # a foreign module: probe its widths
+        try:
+            with torch.inference_mode():
+                out = module(torch.zeros(1, obs_dim, device=device))
+        except Exception as e:  # noqa: BLE001
+            raise PolicyError(f"--policy: {str(p)!r} does not take {task}'s observations of {obs_dim}: {e}") from e
+        meta = {"task": task, "obs_dim": obs_dim, "num_actions": int(out.shape[-1])}
+    return module, dict(meta, task=task)
+
+
+def evaluate_maniskill(policy, task: str, control_mode: str, episodes: int, seed: int = 0, progress=None) -> dict:
+    """``policy`` on ``episodes`` episodes of the real ManiSkill (PhysX CPU, one env); metrics as
+    :func:`wpctrl.train.task_ppo.evaluate_policy`, plus per-episode records."""
+    from wpctrl.tasks.maniskill_side import make_maniskill
+
+    env = make_maniskill(task, control_mode, reward_mode="normalized_dense")
+    steps = int(env.spec.max_episode_steps or 50)
+    t = time.perf_counter()
+    records = []
+    with torch.inference_mode():
+        for i in range(episodes):
+            obs, _ = env.reset(seed=seed + i)
+            ret, first, success = 0.0, None, False
+            for k in range(steps):
+                obs, reward, _, _, info = env.step(policy(obs.to(torch.float32)).to("cpu"))
+                ret += float(reward[0])
+                success = bool(info["success"][0])
+                if success and first is None:
+                    first = k + 1
+            records.append({"seed": seed + i, "success_once": first is not None, "success_at_end": success,
+                            "return": ret, "first_success_step": first})  # fmt: skip
+            if progress:
+                progress(i + 1, records)
+    env.close()
+    return _summary(records, time.perf_counter() - t)
+
+
+def _summary(records: list, seconds: float) -> dict:
+    n = len(records)
+    firsts = [r["first_success_step"] for r in records if r["first_success_step"] is not None]
+    return {
+        "episodes": n,
+        "success_rate": sum(r["success_once"] for r in records) / n,
+        "success_at_end_rate": sum(r["success_at_end"] for r in records) / n,
+        "mean_episode_reward": sum(r["return"] for r in records) / n,
+        "mean_first_success_step": sum(firsts) / len(firsts) if firsts else None,
+        "eval_s": seconds,
+        "records": records,
+    }
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="python -m wpctrl evaluate",
+        description="Evaluate an exported policy (policy.ts from `wpctrl export`) on fresh episodes of ManiSkill's "
+        "PushCube-v1 / PickCube-v1, in the real ManiSkill (PhysX CPU) or on Newton through wpctrl.",
+    )
+    p.add_argument("--policy", required=True, help="the exported TorchScript policy (policy.ts)")
+    p.add_argument("--task", default=None, help="PushCube-v1 or PickCube-v1 (default: the policy's own)")
+    p.add_argument("--sim", choices=SIMS, required=True, help="the simulator")
+    p.add_argument("--episodes", type=int, default=100, help="episodes to run (default: 100)")
+    p.add_argument("--seed", type=int, default=0, help="episode seeds (ManiSkill: seed + i for episode i)")
+    p.add_argument("--device", default="cpu", help="newton: Warp / torch device (default: cpu)")
+    p.add_argument("--envs", type=int, default=None, help="newton: envs at a time (default: min(episodes, 256))")
+    p.add_argument("--substeps", type=int, default=None, help="newton: MuJoCo-Warp steps per physics step "
+                   "(default: the policy's training value, else wpctrl.tasks.TaskPhysics's)")  # fmt: skip
+    p.add_argument("--out", default=None, help="write the result (with every episode on ManiSkill) as JSON here")
+    return p
+
+
+def main(argv=None) -> int:
+    p = _parser()
+    args = p.parse_args(argv)
+    for name in ("episodes", "envs", "substeps"):
+        v = getattr(args, name)
+        if v is not None and v < 1:
+            p.error(f"--{name}: expected a positive number, got {v}")
+    import warp as wp
+
+    wp.config.log_level = wp.LOG_WARNING
+    device = args.device if args.sim == "newton" else "cpu"
+    try:
+        policy, meta = load_policy(args.policy, args.task, device)
+    except PolicyError as e:
+        print(f"wpctrl evaluate: error: {e}", file=sys.stderr)
+        return 2
+    task, control_mode = meta["task"], meta.get("control_mode", "pd_joint_delta_pos")
+    if not str(device).startswith("cuda"):
+        torch.set_num_threads(1)  # a small network: see wpctrl.train.task_ppo
+    if args.sim == "maniskill":
+
+        def progress(i, records):
+            if i % 10 == 0 or i == args.episodes:
+                ok = sum(r["success_once"] for r in records)
+                print(f"  {i:4d} episodes: {ok} successful", flush=True)
+
+        result = evaluate_maniskill(policy, task, control_mode, args.episodes, args.seed, progress)
+    else:
+        import wpctrl.tasks as T
+
+        from .task_ppo import evaluate_policy
+
+        substeps = args.substeps or meta.get("substeps")
+        physics = T.TaskPhysics(substeps=substeps) if substeps else T.TaskPhysics()
+        env = T.make(task, num_envs=args.envs or min(args.episodes, 256), device=device, control_mode=control_mode,
+                     seed=args.seed, auto_reset=False, ignore_terminations=True, physics=physics)  # fmt: skip
+        result = evaluate_policy(policy, env, args.episodes, seed=args.seed)
+        result["substeps"] = physics.substeps
+        env.close()
+    result = {"task": task, "sim": args.sim, "control_mode": control_mode, "policy": str(args.policy),
+              "seed": args.seed, **result}  # fmt: skip
+    print(f"{task} on {args.sim}: success {100 * result['success_rate']:.1f} % (at the end "
+          f"{100 * result['success_at_end_rate']:.1f} %) over {result['episodes']} episodes, mean return "
+          f"{result['mean_episode_reward']:.2f}")  # fmt: skip
+    if args.out:
+        Path(args.out).write_text(json.dumps(result, indent=1))
+        print(f"wrote {args.out}")
+    return 0

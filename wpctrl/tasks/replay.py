@@ -139,7 +139,7 @@ def replay(source, device="cpu", physics=None, asset_dir: str | None = None, env
     """
     import torch
 
-    from . import make
+    from .factory import make
 
     data = load_episodes(source)
     header, episodes = data["header"], data["episodes"]

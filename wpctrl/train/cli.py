@@ -196,7 +196,7 @@ def main(argv=None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     from .reach import ReachEnv
-    from .report import fmt, median, plot, write_json
+    from .outputs import fmt, median, plot, write_json
 
     t0 = time.perf_counter()
     env = ReachEnv(

@@ -4,7 +4,7 @@ module (``policy.ts``) and, where the ``onnx`` package is importable, an ONNX mo
 Both map ManiSkill's flattened ``obs_mode="state"`` observation ``(batch, obs_dim)`` (float32) to the deterministic
 action ``(batch, num_actions)`` (the Gaussian's mean; ManiSkill's controllers clip it to the action space): rsl-rl's
 running observation normaliser, then the actor's MLP. ``policy.ts`` loads with torch alone
-(``torch.jit.load``); its ``wpctrl.json`` extra file (and ``policy.json`` beside it, and the ONNX model's metadata)
+(``torch.jit.load``); its extra file (``EXTRA_FILE``) (and ``policy.json`` beside it, and the ONNX model's metadata)
 name the task, control mode, observation layout and action bounds.
 """
 

@@ -174,7 +174,7 @@ def train(args, t_main: float) -> int:
 
     import wpctrl.tasks as T
 
-    from .report import fmt, median, plot, write_json
+    from .outputs import fmt, median, plot, write_json
 
     device = args.device or ("cuda:0" if wp.is_cuda_available() else "cpu")
     cuda = device.startswith("cuda")

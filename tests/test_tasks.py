@@ -89,12 +89,36 @@ def test_make_refuses_bad_input_naming_the_field(kwargs, field):
     [("substeps", 0), ("substeps", 1.5), ("integrator", "rk5"), ("cone", "round"), ("impratio", 0.5),
      ("contact_solref", (0.0, 1.0)), ("contact_solref", (0.01,)), ("contact_solimp", (0.9, 0.8, 0.001)),
      ("contact_solimp", (0.9, 1.0, 0.001)), ("limit_solref", (0.02, -1.0)), ("limit_solimp", (0.9, 0.95, 0.0)),
-     ("friction_combine", "min"), ("iterations", 0)],
+     ("friction_combine", "min"), ("iterations", 0), ("contact_gap", -0.001), ("contact_gap", float("inf")),
+     ("contact_gap", "1cm"), ("contact_gap", True)],
 )  # fmt: skip
 def test_task_physics_refuses_values_outside_their_range(field, value):
     with pytest.raises(wpctrl.ConfigError, match=f"TaskPhysics.{field}"):
         T.TaskPhysics(**{field: value})
     T.TaskPhysics()  # the defaults are valid
+
+
+def test_contact_gap_changes_which_pairs_are_tracked_not_the_motion():
+    """Every shape carries TaskPhysics.contact_gap; a narrower envelope tracks fewer pairs and moves nothing else: 25
+    steps of a scripted push from the same state, the cube pushed, are bitwise equal under
+    Newton's default gap (0.1 m) and the tasks' (0.01 m)."""
+    from wpctrl.tasks.scripted import policy_for
+
+    runs = {}
+    for gap in (0.1, T.TaskPhysics().contact_gap):
+        env = T.make("PushCube-v1", num_envs=2, control_mode="pd_ee_delta_pos", auto_reset=False,
+                     physics=T.TaskPhysics(substeps=2, contact_gap=gap))  # fmt: skip
+        assert np.allclose(env.model.shape_gap.numpy(), gap)
+        obs, _ = env.reset(seed=4)
+        cube0 = env.get_state_dict()["actors"]["cube"][:, :3].clone()
+        policy = policy_for("PushCube-v1")
+        for _ in range(25):
+            obs, *_ = env.step(policy(obs))
+        assert ((env.get_state_dict()["actors"]["cube"][:, :3] - cube0).norm(dim=1) > 0.005).all()  # pushed: in contact
+        runs[gap] = (env.state.joint_q.numpy().copy(), int(env.solver.mjw_data.nacon.numpy()[0]))
+    (q_wide, n_wide), (q_narrow, n_narrow) = runs.values()
+    np.testing.assert_array_equal(q_narrow, q_wide)
+    assert n_narrow < n_wide / 3, (n_narrow, n_wide)
 
 
 def test_friction_rule_reproduces_physx_average():

@@ -62,6 +62,11 @@ class TaskPhysics:
     friction_combine: str = "average"
     """``"average"`` (PhysX's rule, reproduced per shape: :func:`mujoco_friction`) or ``"max"`` (MuJoCo's own, the
     materials' coefficients unchanged)."""
+    contact_gap: float = 0.01
+    """How far apart [m] two shapes are already handed to MuJoCo's contact solver (every shape's ``gap``). It changes
+    which pairs are tracked, not the forces: a tracked pair pushes only once it touches. Newton's default, 0.1 m, tracks
+    every link within 10 cm of the table, the cube or another link (about ten times the contacts of 0.01 m, and a
+    step 2.3 times slower on the CPU); 1 cm is eight MuJoCo steps of a 1 m/s approach at the default substeps."""
 
     def __post_init__(self):
         _int_at_least(self, "substeps", 1)
@@ -70,6 +75,10 @@ class TaskPhysics:
         _one_of(self, "integrator", _INTEGRATORS)
         _one_of(self, "cone", _CONES)
         _one_of(self, "friction_combine", ("average", "max"))
+        if isinstance(self.contact_gap, bool) or not isinstance(self.contact_gap, (int, float)) or not (
+            0.0 <= self.contact_gap < float("inf")
+        ):
+            raise ConfigError(f"TaskPhysics.contact_gap: expected a finite number >= 0 [m], got {self.contact_gap!r}")
         if isinstance(self.impratio, bool) or not isinstance(self.impratio, (int, float)) or not self.impratio >= 1.0:
             raise ConfigError(f"TaskPhysics.impratio: expected a number >= 1, got {self.impratio!r}")
         for name in ("contact_solref", "limit_solref"):

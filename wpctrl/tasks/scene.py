@@ -92,6 +92,7 @@ class Scene:
 
 def _panda_builder(urdf: str, physics: TaskPhysics) -> newton.ModelBuilder:
     robot = newton.ModelBuilder()
+    robot.rigid_gap = float(physics.contact_gap)
     newton.solvers.SolverMuJoCo.register_custom_attributes(robot)
     p = PANDA_ROOT_POSE
     robot.add_urdf(
@@ -116,6 +117,7 @@ def build_scene(spec: TaskSpec, num_envs: int, device, physics: TaskPhysics, ass
         physics.friction_combine,
     )
     env = newton.ModelBuilder()
+    env.rigid_gap = float(physics.contact_gap)
     newton.solvers.SolverMuJoCo.register_custom_attributes(env)
     env.add_builder(_panda_builder(urdf, physics))
     bodies = [lb.rsplit("/", 1)[-1] for lb in env.body_label]

@@ -195,8 +195,8 @@ def main(argv=None) -> int:
     torch.manual_seed(args.seed)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    from .reach import ReachEnv
     from .outputs import fmt, median, plot, write_json
+    from .reach import ReachEnv
 
     t0 = time.perf_counter()
     env = ReachEnv(

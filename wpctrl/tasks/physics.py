@@ -75,8 +75,10 @@ class TaskPhysics:
         _one_of(self, "integrator", _INTEGRATORS)
         _one_of(self, "cone", _CONES)
         _one_of(self, "friction_combine", ("average", "max"))
-        if isinstance(self.contact_gap, bool) or not isinstance(self.contact_gap, (int, float)) or not (
-            0.0 <= self.contact_gap < float("inf")
+        if (
+            isinstance(self.contact_gap, bool)
+            or not isinstance(self.contact_gap, (int, float))
+            or not (0.0 <= self.contact_gap < float("inf"))
         ):
             raise ConfigError(f"TaskPhysics.contact_gap: expected a finite number >= 0 [m], got {self.contact_gap!r}")
         if isinstance(self.impratio, bool) or not isinstance(self.impratio, (int, float)) or not self.impratio >= 1.0:

@@ -419,3 +419,26 @@ def test_replay_refuses_bad_files(tmp_path):
     broken["episodes"][0].pop("actions")
     with pytest.raises(wpctrl.ConfigError, match="'actions'"):
         T.replay(broken)
+
+
+def test_replay_command_prints_and_writes_the_report_of_the_api(tmp_path, capsys):
+    """``python -m wpctrl replay FILE --out OUT``: the printed table and the written JSON are ``replay(FILE)``'s; a
+    missing file or one that is not ManiSkill's episode format exits 2 with the reason."""
+    from wpctrl.tasks.replay import main
+
+    data = json.loads((DATA / "PickCube-v1__pd_ee_delta_pos.json").read_text())
+    data["episodes"] = data["episodes"][:2]
+    src = tmp_path / "two.json"
+    src.write_text(json.dumps(data))
+    out = tmp_path / "report.json"
+    assert main([str(src), "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "PickCube-v1 pd_ee_delta_pos: 2 episodes replayed on Newton" in printed
+    written = json.loads(out.read_text())
+    assert written[0]["summary"] == T.replay(data).summary()
+    assert len(written[0]["episodes"]) == 2
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"episodes": []}))
+    for path, reason in ((tmp_path / "missing.json", "no episode file"), (bad, "'header' and 'episodes'")):
+        assert main([str(path)]) == 2
+        assert reason in capsys.readouterr().err

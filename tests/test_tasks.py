@@ -319,6 +319,28 @@ def test_reset_draws_follow_maniskills_distributions(pick_env, push_env):
         torch.testing.assert_close(env.get_state_dict()["actors"]["cube"], a)
 
 
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [({"seed": [1, 2, 3, 4]}, "per-env seed lists"), ({"seed": 1.5}, "seed expected an int"),
+     ({"seed": True}, "seed expected an int"), ({"options": {"env_idx": [0, 4]}}, r"indices must be in \[0, 4\)"),
+     ({"options": {"env_idx": [-1]}}, r"indices must be in \[0, 4\)"),
+     ({"options": {"env_idx": np.array([0.0, 1.0])}}, "integers"),
+     ({"options": {"env_idx": np.array([True, False])}}, r"bool mask must have shape \(4,\)"),
+     ({"options": {"env_idx": torch.tensor([True, False, True])}}, r"bool mask must have shape \(4,\)")],
+)  # fmt: skip
+def test_bad_reset_arguments_are_refused_and_nothing_is_reset(push_env, kwargs, message):
+    push_env.reset(seed=3)
+    push_env.step(torch.full((N, 8), 0.5))
+    before = push_env.get_state_dict()
+    with pytest.raises(wpctrl.ConfigError, match=message):
+        push_env.reset(**kwargs)
+    after = push_env.get_state_dict()
+    for group in ("actors", "articulations"):
+        for name, v in before[group].items():
+            torch.testing.assert_close(after[group][name], v, rtol=0, atol=0)
+    assert push_env.elapsed_steps.tolist() == [1] * N
+
+
 def test_partial_reset_touches_only_the_envs_named(push_env):
     push_env.reset(seed=11)
     for _ in range(2):

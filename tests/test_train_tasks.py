@@ -88,8 +88,9 @@ def test_success_ends_an_episode_only_with_partial_resets(partial_reset):
 
 
 def test_rollout_bootstraps_every_episode_end_with_the_critics_value_of_its_final_observation():
-    """The rewards rsl-rl stores are the env's, plus gamma * V(final observation) where an episode ended (and only
-    there); the done flags are the env's (re-derived from the recorded steps and the same critic)."""
+    """The rewards rsl-rl stores are the env's, plus gamma * V(final observation) where an episode ended, by success
+    or by time-out (and only there); the done flags are the env's (re-derived from the recorded steps and the same
+    critic)."""
     import contextlib
     import io
 
@@ -106,6 +107,10 @@ def test_rollout_bootstraps_every_episode_end_with_the_critics_value_of_its_fina
     lengths = vec.episode_length_buf.clone()
     lengths[2] = vec.max_episode_length - 2  # env 2 times out at the rollout's second step
     vec.episode_length_buf = lengths
+    state = vec.env.get_state_dict()
+    goal = state["actors"][vec.env.spec.goal_name]
+    state["actors"]["cube"][1, :2] = goal[1, :2]  # env 1's cube on its goal: success ends its episode at the first step
+    vec.env.set_state_dict(state)
     recorded = []
     step = vec.step
 
@@ -122,7 +127,8 @@ def test_rollout_bootstraps_every_episode_end_with_the_critics_value_of_its_fina
             expected = reward + alg.gamma * value * done.float()
             np.testing.assert_allclose(alg.storage.rewards[t, :, 0].numpy(), expected.numpy(), rtol=1e-6, atol=1e-7)
             assert alg.storage.dones[t, :, 0].bool().numpy().tolist() == done.numpy().tolist()
-    assert [d.numpy().tolist() for _, d, _ in recorded] == [[False] * 4, [False, False, True, False], [False] * 4]
+    assert [d.numpy().tolist() for _, d, _ in recorded] == [[False, True, False, False], [False, False, True, False],
+                                                           [False] * 4]  # fmt: skip
     assert alg.gamma == 0.8  # ManiSkill's PPO
 
 
@@ -214,6 +220,48 @@ def test_exported_policy_loads_with_torch_alone(exported):
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "(5, 8) PushCube-v1"
+
+
+def test_evaluation_counts_success_at_any_step_and_at_the_last_separately():
+    """ManiSkill's success_once and success_at_end: the scripted pick, its arm shaken over the last five steps (not
+    static: PickCube's success drops). evaluate_policy's rates and first success step against the same episodes rolled
+    by hand, in a case where the two rates differ."""
+    from wpctrl.tasks.scripted import policy_for
+    from wpctrl.train.task_ppo import evaluate_policy
+
+    pick = policy_for("PickCube-v1")
+
+    class Shaken:
+        def __init__(self):
+            self.t = 0
+
+        def __call__(self, obs):
+            a = pick(obs)
+            if self.t % 50 >= 45:
+                a = a.clone()
+                a[:, :3] = 1.0 if self.t % 2 else -1.0
+            self.t += 1
+            return a
+
+    def env():
+        return T.make("PickCube-v1", num_envs=N, control_mode="pd_ee_delta_pos", auto_reset=False,
+                      ignore_terminations=True, physics=T.TaskPhysics(substeps=SUBSTEPS))  # fmt: skip
+
+    e = env()
+    obs, _ = e.reset(seed=2)
+    policy, flags = Shaken(), []
+    for _ in range(50):
+        obs, _, _, _, info = e.step(policy(obs))
+        flags.append(info["success"].clone())
+    flags = torch.stack(flags)
+    once, at_end = flags.any(0), flags[-1]
+    assert (once & ~at_end).any(), "the case must tell the two rates apart"
+    firsts = [int(flags[:, i].float().argmax()) + 1 for i in range(N) if once[i]]
+    r = evaluate_policy(Shaken(), env(), episodes=N, seed=2)
+    assert r["episodes"] == N
+    assert r["success_rate"] == float(once.float().mean())
+    assert r["success_at_end_rate"] == float(at_end.float().mean())
+    assert r["mean_first_success_step"] == pytest.approx(sum(firsts) / len(firsts))
 
 
 def test_evaluate_on_newton_reports_a_hand_rolled_episodes_metrics(smoke_run, exported, tmp_path):

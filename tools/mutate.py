@@ -876,6 +876,35 @@ MUTATIONS: list[Mutation] = [
         "the evaluation averages the success rates of its rounds without their episode counts",
         ("tests/test_reach_success.py",),
     ),
+    # -- PPO on the ManiSkill tasks, export, evaluate -----------------------------------------------------------------
+    M(
+        "rollout_bootstraps_the_next_episode",
+        "wpctrl/train/task_ppo.py",
+        'final = TensorDict({"policy": extras["final_observations"]}, batch_size=[env.num_envs])',
+        'final = TensorDict({"policy": obs}, batch_size=[env.num_envs])',
+        "an episode end is bootstrapped with the value of the next episode's first observation, not its final one",
+        (
+            "tests/test_train_tasks.py::test_rollout_bootstraps_every_episode_end_with_the_critics_value_of_its_final_observation",
+        ),
+    ),
+    M(
+        "rollout_bootstraps_only_time_outs",
+        "wpctrl/train/task_ppo.py",
+        "rewards = rewards + alg.gamma * value * dones.to(value.dtype)",
+        'rewards = rewards + alg.gamma * value * extras["truncated"].to(value.dtype)',
+        "a successful episode's end is not bootstrapped (ManiSkill's PPO bootstraps every end under partial resets)",
+        (
+            "tests/test_train_tasks.py::test_rollout_bootstraps_every_episode_end_with_the_critics_value_of_its_final_observation",
+        ),
+    ),
+    M(
+        "task_evaluation_success_at_end_as_once",
+        "wpctrl/train/task_ppo.py",
+        "once += float(hit[:m].float().sum())",
+        'once += float(info["success"][:m].float().sum())',
+        "a task evaluation's success rate counts success at the last step, not success at any step",
+        ("tests/test_train_tasks.py::test_evaluation_counts_success_at_any_step_and_at_the_last_separately",),
+    ),
     # -- distributed -------------------------------------------------------------------------------------------------
     M(
         "device_from_global_rank",

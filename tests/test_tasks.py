@@ -209,6 +209,52 @@ def test_success_and_reward_on_known_cases(push_env):
     assert (push_env.reward_dense.numpy()[[1, 2]] < 4.0).all()
 
 
+def test_push_place_reward_waits_until_the_tcp_reaches_the_push_point(push_env):
+    """ManiSkill's PushCube: the place terms count only once the TCP is within 1 cm of the push point (behind the
+    cube). The cube is put 3 cm (envs 0, 1) and 5 mm (envs 2, 3) from where the TCP pushes: the first pair earns the
+    reaching term alone, the second the place terms too (numpy re-derivation of the dense reward)."""
+    push_env.reset(seed=1)
+    tcp = push_env.get_obs()[:, 18:21].clone()
+    state = push_env.get_state_dict()
+    state["actors"]["goal_region"][:, :3] = tcp + torch.tensor([0.4, 0.0, 0.0])
+    offsets = torch.tensor([[0.0, 0.03, 0.0], [0.0, 0.0, -0.03], [0.0, 0.005, 0.0], [0.0, 0.0, 0.004]])
+    cube = state["actors"]["cube"]
+    cube[:, :3] = tcp + torch.tensor([0.02 + 0.005, 0.0, 0.0]) + offsets
+    cube[:, 3:] = torch.tensor([1.0, 0, 0, 0, 0, 0, 0, 0, 0, 0])
+    push_env.set_state_dict(state)
+    tcp_p = push_env.get_obs()[:, 18:21].numpy().astype(np.float64)
+    cube_p = cube[:, :3].numpy().astype(np.float64)
+    goal_p = state["actors"]["goal_region"][:, :3].numpy().astype(np.float64)
+    expected = R.push_dense(tcp_p, cube_p, goal_p, np.zeros(N, bool))
+    np.testing.assert_allclose(push_env.reward_dense.numpy(), expected, atol=1e-4)
+    reach_only = 1 - np.tanh(5 * 0.03)
+    np.testing.assert_allclose(push_env.reward_dense.numpy()[:2], reach_only, atol=1e-4)
+    assert (push_env.reward_dense.numpy()[2:] > 1.0).all()  # the place terms on top of reaching (at most 1)
+
+
+def test_pick_success_needs_the_robot_static(pick_env):
+    """ManiSkill's PickCube: success is the cube at the goal (within 2.5 cm) and the arm still (every arm joint
+    slower than 0.2 rad/s); the cube on its goal with an arm joint moving at 0.5 rad/s (env 1) or 0.19 rad/s (env 2,
+    still static) and the fingers alone moving (env 3: the fingers do not count)."""
+    pick_env.reset(seed=1)
+    state = pick_env.get_state_dict()
+    goal = torch.tensor([0.05, -0.02, 0.15])
+    state["actors"]["goal_site"][:, :3] = goal
+    cube = state["actors"]["cube"]
+    cube[:, :3] = goal + torch.tensor([0.0, 0.0, 0.01])
+    cube[:, 3:] = torch.tensor([1.0, 0, 0, 0, 0, 0, 0, 0, 0, 0])
+    qvel = state["articulations"]["panda"][:, 22:31]
+    qvel[:] = 0.0
+    qvel[1, 3] = 0.5
+    qvel[2, 5] = 0.19
+    qvel[3, 7:] = 0.5
+    pick_env.set_state_dict(state)
+    flags = pick_env.evaluate()
+    assert flags["is_obj_placed"].tolist() == [True] * 4
+    assert flags["is_robot_static"].tolist() == [True, False, True, True]
+    assert flags["success"].tolist() == [True, False, True, True]
+
+
 def test_state_dict_obs_mode_is_the_flat_vector_split():
     env = T.make("PickCube-v1", num_envs=2, obs_mode="state_dict", physics=FAST)
     obs, _ = env.reset(seed=5)

@@ -255,6 +255,31 @@ def test_pick_success_needs_the_robot_static(pick_env):
     assert flags["success"].tolist() == [True, False, True, True]
 
 
+def test_pick_dense_reward_while_the_cube_is_held():
+    """PickCube's dense reward with the cube in the gripper (the scripted pick, simulated until the contact sensor
+    reports a grasp): reaching + grasped + place + static terms re-derived in numpy from the state and the flags."""
+    from wpctrl.tasks.scripted import policy_for
+
+    env = T.make("PickCube-v1", num_envs=N, control_mode="pd_ee_delta_pos", auto_reset=False,
+                 ignore_terminations=True, physics=T.TaskPhysics(substeps=8))  # fmt: skip
+    obs, _ = env.reset(seed=2)
+    pick = policy_for("PickCube-v1")
+    for _ in range(40):
+        obs, *_ = env.step(pick(obs))
+        if env.evaluate()["is_grasped"].all():
+            break
+    info = {k: v.numpy() for k, v in env.evaluate().items()}
+    assert info["is_grasped"].all() and not info["success"].any()
+    state = env.get_state_dict()
+    cube_p = state["actors"]["cube"][:, :3].numpy().astype(np.float64)
+    goal_p = state["actors"]["goal_site"][:, :3].numpy().astype(np.float64)
+    qvel = state["articulations"]["panda"][:, 22:31].numpy().astype(np.float64)
+    tcp_p = obs[:, env.spec.obs_slices()["extra"]["tcp_pose"]][:, :3].numpy().astype(np.float64)
+    expected = R.pick_dense(tcp_p, cube_p, goal_p, qvel, info)
+    np.testing.assert_allclose(env.reward_dense.numpy(), expected, atol=1e-4)
+    assert (expected > 2.0).all()  # reaching, grasped and some of place
+
+
 def test_state_dict_obs_mode_is_the_flat_vector_split():
     env = T.make("PickCube-v1", num_envs=2, obs_mode="state_dict", physics=FAST)
     obs, _ = env.reset(seed=5)

@@ -257,7 +257,8 @@ def test_pick_success_needs_the_robot_static(pick_env):
 
 def test_pick_dense_reward_while_the_cube_is_held():
     """PickCube's dense reward with the cube in the gripper (the scripted pick, simulated until the contact sensor
-    reports a grasp): reaching + grasped + place + static terms re-derived in numpy from the state and the flags."""
+    reports a grasp): reaching + grasped + place + static terms re-derived in numpy from the state and the flags. Then
+    a state dict with the cube on the table: no grasp, the held cube's contact forces gone with the state."""
     from wpctrl.tasks.scripted import policy_for
 
     env = T.make("PickCube-v1", num_envs=N, control_mode="pd_ee_delta_pos", auto_reset=False,
@@ -278,6 +279,11 @@ def test_pick_dense_reward_while_the_cube_is_held():
     expected = R.pick_dense(tcp_p, cube_p, goal_p, qvel, info)
     np.testing.assert_allclose(env.reward_dense.numpy(), expected, atol=1e-4)
     assert (expected > 2.0).all()  # reaching, grasped and some of place
+    # a state set from outside starts without contact forces: the held cube's forces do not carry over
+    fresh = T.make("PickCube-v1", num_envs=N, physics=FAST)
+    fresh.reset(seed=3)
+    env.set_state_dict(fresh.get_state_dict())
+    assert not env.evaluate()["is_grasped"].any()
 
 
 def test_state_dict_obs_mode_is_the_flat_vector_split():

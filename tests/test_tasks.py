@@ -452,6 +452,22 @@ def test_episodes_truncate_at_50_steps_and_auto_reset_inside_the_step():
     assert not torch.allclose(obs[:, 18 + 7 : 18 + 10], info["final_observation"][:, 18 + 7 : 18 + 10])
 
 
+def test_without_auto_reset_a_finished_episode_stays_until_reset():
+    """auto_reset=False (ManiSkillVectorEnv's switch): at the time limit the envs report truncation and keep their
+    state and step count; the next reset starts new episodes."""
+    env = T.make("PushCube-v1", num_envs=2, control_mode="pd_joint_delta_pos", auto_reset=False, physics=FAST)
+    env.reset(seed=1)
+    zero = torch.zeros(2, 8)
+    for _ in range(50):
+        obs, _, _, truncated, info = env.step(zero)
+    assert truncated.all() and info["elapsed_steps"].tolist() == [50, 50]
+    before = env.get_state_dict()
+    torch.testing.assert_close(env.get_obs(), obs)
+    env.reset(seed=2)
+    assert env.elapsed_steps.tolist() == [0, 0]
+    assert not torch.allclose(env.get_state_dict()["actors"]["cube"], before["actors"]["cube"])
+
+
 def test_success_terminates_unless_terminations_are_ignored():
     for ignore in (False, True):
         env = T.make("PushCube-v1", num_envs=1, control_mode="pd_joint_delta_pos", ignore_terminations=ignore,

@@ -1111,9 +1111,9 @@ MUTATIONS: list[Mutation] = [
     ),
     M(
         "tasks_auto_reset_always",
-        "wpctrl/tasks/kernels.py",
-        "    reset_mask[e] = d and auto_reset != 0\n",
-        "    reset_mask[e] = d\n",
+        "wpctrl/tasks/env.py",
+        "        if self.auto_reset:\n            self._reset_envs(self.done)\n",
+        "        self._reset_envs(self.done)\n",
         "finished envs are reset even with auto_reset off",
         ("tests/test_tasks.py",),
     ),

@@ -145,7 +145,6 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
         self.terminated = z(wp.bool, n)
         self.truncated = z(wp.bool, n)
         self.done = z(wp.bool, n)
-        self.reset_mask = z(wp.bool, n)
         self._all = wp.ones(n, dtype=wp.bool, device=dev)
         self._fail = torch.zeros(n, dtype=torch.bool, device=self.device)
         self._t = {name: wp.to_torch(a) for name, a in self._torch_views().items()}
@@ -238,8 +237,8 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
             K.episode_kernel,
             dim=self.num_envs,
             inputs=[self.max_episode_steps, self.spec.max_reward, _REWARD_CODE[self.reward_mode],
-                    int(self.ignore_terminations), int(self.auto_reset), self.flags["success"], self.reward_dense],
-            outputs=[self.elapsed, self.reward_buf, self.terminated, self.truncated, self.done, self.reset_mask],
+                    int(self.ignore_terminations), self.flags["success"], self.reward_dense],
+            outputs=[self.elapsed, self.reward_buf, self.terminated, self.truncated, self.done],
             device=self.wp_device,
         )  # fmt: skip
         wp.copy(self.final_obs_buf, self.obs_buf)
@@ -247,7 +246,7 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
         for k, a in self.flags.items():
             wp.copy(self.final_flags[k], a)
         if self.auto_reset:
-            self._reset_envs(self.reset_mask)
+            self._reset_envs(self.done)
 
     # -- the vectorised gymnasium API -------------------------------------------------------------------------------
 

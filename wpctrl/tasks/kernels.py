@@ -233,7 +233,6 @@ def episode_kernel(
     max_reward: float,
     reward_mode: int,
     ignore_terminations: int,
-    auto_reset: int,
     success: wp.array[wp.bool],
     reward_dense: wp.array[float],
     elapsed: wp.array[wp.int32],
@@ -241,11 +240,10 @@ def episode_kernel(
     terminated: wp.array[wp.bool],
     truncated: wp.array[wp.bool],
     done: wp.array[wp.bool],
-    reset_mask: wp.array[wp.bool],
 ):
     """After a step: ``elapsed += 1``, the reward of ``reward_mode`` (0 dense, 1 normalized dense, 2 sparse: success),
     ``terminated = success`` (no ``fail``; False with ``ignore_terminations``), ``truncated = elapsed >= max_steps``,
-    and the envs to reset (``done`` when auto-resetting)."""
+    and ``done`` (either: the envs an auto reset resets)."""
     e = wp.tid()
     n = elapsed[e] + 1
     elapsed[e] = n
@@ -261,4 +259,3 @@ def episode_kernel(
     truncated[e] = trunc
     d = term or trunc
     done[e] = d
-    reset_mask[e] = d and auto_reset != 0

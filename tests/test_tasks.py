@@ -536,6 +536,23 @@ def test_replay_refuses_bad_files(tmp_path):
         T.replay(broken)
 
 
+def test_replay_agreement_counts_maniskills_successes_only():
+    """success_agreement is over ManiSkill's successful episodes; outcome_agreement over all. A recorded success
+    replayed as is, and the same start with the arm left still, recorded as ManiSkill's failure: both agree (2 of 2
+    outcomes), and the one success counted succeeds (1 of 1)."""
+    data = json.loads((DATA / "PickCube-v1__pd_ee_delta_pos.json").read_text())
+    ok = data["episodes"][0]
+    still = json.loads(json.dumps(ok))
+    still["actions"] = [[0.0] * len(a) for a in ok["actions"]]
+    still["info"] = {k: [False] * len(v) for k, v in ok["info"].items()}
+    still["success_at_end"] = False
+    data["episodes"] = [ok, still]
+    report = T.replay(data)
+    assert [e.success_at_end for e in report.episodes] == [True, False]
+    assert report.success_agreement == 1.0
+    assert report.outcome_agreement == 1.0
+
+
 def test_replay_command_prints_and_writes_the_report_of_the_api(tmp_path, capsys):
     """``python -m wpctrl replay FILE --out OUT``: the printed table and the written JSON are ``replay(FILE)``'s; a
     missing file or one that is not ManiSkill's episode format exits 2 with the reason."""

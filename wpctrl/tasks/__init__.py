@@ -5,8 +5,8 @@ the same observations (``obs_mode="state"``: the flattened state vector, entries
 success and evaluation flags, control modes and action spaces, and ManiSkill's state dict, so a ManiSkill state,
 action sequence or policy moves across unchanged. ``replay`` runs ManiSkill's recorded episodes on it.
 
-Needs the ``sim`` extra (MuJoCo-Warp), torch, and ManiSkill's Panda asset (the ``maniskill`` extra, or
-``asset_dir`` / ``WPCTRL_MANISKILL_ASSETS``).
+Needs the ``tasks`` extra (MuJoCo-Warp, Newton's mesh importer, torch) and ManiSkill's Panda asset (the ``maniskill``
+extra, or ``asset_dir`` / ``WPCTRL_MANISKILL_ASSETS``).
 """
 
 from __future__ import annotations

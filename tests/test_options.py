@@ -53,6 +53,37 @@ def _refused(fn, field: str) -> None:
     assert field in str(info.value), str(info.value)
 
 
+@pytest.mark.parametrize("law", ["naive", "stable", "coupled"])
+def test_an_effort_controller_beside_an_explicit_drive_keeps_its_torque(model, law):
+    """An effort gripper next to an explicitly driven arm: its torque (the action times the effort bound) reaches
+    Control.joint_f with the naive and stable laws; the coupled drive solves every row's torque and would overwrite it,
+    so that combination is refused."""
+    from wpctrl.robots import PANDA_GRIPPER_JOINTS
+
+    mode = {
+        "arm": _config("force"),
+        "gripper": wpctrl.JointEffortControllerConfig(list(PANDA_GRIPPER_JOINTS), -10.0, 10.0),
+    }
+
+    def build():
+        return wpctrl.build_controller(mode, model, 20, 100, balance_passive_force=False,
+                                       actuation=wpctrl.Actuation("explicit", law))  # fmt: skip
+
+    if law == "coupled":
+        with pytest.raises(wpctrl.ConfigError, match="would overwrite the torques of this mode's effort rows"):
+            build()
+        return
+    ctrl = build()
+    s, c = model.state(), model.control()
+    ctrl.reset(s, control=c)
+    a = np.zeros((N, ctrl.action_dim), np.float32)
+    a[:, -2:] = [[0.5, -0.25]]
+    ctrl.set_action(a, s)
+    ctrl.before_simulation_step(s, c)
+    f = c.joint_f.numpy().reshape(N, -1)
+    np.testing.assert_allclose(f[:, 7:9], [[5.0, -2.5]] * N, atol=1e-6)
+
+
 # -- Actuation: mode x explicit law x inertia update x drive mode -----------------------------------------------------
 
 ACTUATION_CASES = list(

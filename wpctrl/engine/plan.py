@@ -236,6 +236,12 @@ def check_options(rows: Rows, options: Options, ee_specs: dict | None = None) ->
             else "explicit_pd='coupled' solves the force limits itself"
         )
         raise ConfigError(f"actuator: {what} needs actuation='explicit' with explicit_pd='naive' or 'stable'; {why}")
+    if a.coupled and (rows.kind == ROW_EFFORT).any():
+        raise ConfigError(
+            "explicit_pd: 'coupled' solves every row's drive torque and would overwrite the torques of this mode's "
+            "effort rows (a JointEffortControllerConfig, an impedance controller); use explicit_pd='naive' or "
+            "'stable' (or actuation='implicit') for the drives"
+        )
     accel = bool(rows.accel.any())
     if a.inertia_update is not None and not (accel or a.law in ("stable", "coupled")):
         raise ConfigError(

@@ -77,12 +77,7 @@ class _Unit:
         self.engine = engine
         self.row0, self.col0, self.num_dof = row0, col0, n
         model, dev, E = engine.model, engine.device, engine.num_envs
-        plan = engine.plan
-        if plan.coupled:
-            raise ConfigError(
-                "explicit_pd: 'coupled' solves every row's drive torque and would overwrite the impedance "
-                "controller's torques; use explicit_pd='naive' or 'stable' (or actuation='implicit') for the other rows"
-            )
+        plan = engine.plan  # (a coupled drive is refused with effort rows when the plan is checked)
         b = engine.binding
         up = lambda a: wp.array(np.ascontiguousarray(a, np.int32), dtype=wp.int32, device=dev)  # noqa: E731
         self.row_q_off = up(b.q_off[row0 : row0 + n])

@@ -876,6 +876,14 @@ MUTATIONS: list[Mutation] = [
         "the evaluation averages the success rates of its rounds without their episode counts",
         ("tests/test_reach_success.py",),
     ),
+    M(
+        "coupled_beside_effort_rows_accepted",
+        "wpctrl/engine/plan.py",
+        "    if a.coupled and (rows.kind == ROW_EFFORT).any():\n",
+        "    if a.coupled and False:\n",
+        "the coupled drive is accepted beside an effort controller, whose torques it then overwrites",
+        ("tests/test_options.py::test_an_effort_controller_beside_an_explicit_drive_keeps_its_torque",),
+    ),
     # -- PPO on the ManiSkill tasks, export, evaluate -----------------------------------------------------------------
     M(
         "rollout_bootstraps_the_next_episode",
@@ -1124,6 +1132,14 @@ MUTATIONS: list[Mutation] = [
         "            pass\n",
         "reset(options={'env_idx': ...}) resets every env",
         ("tests/test_tasks.py",),
+    ),
+    M(
+        "tasks_contact_gap_ignored",
+        "wpctrl/tasks/scene.py",
+        "    env.rigid_gap = float(physics.contact_gap)\n",
+        "",
+        "TaskPhysics.contact_gap does not reach the table and the cube (Newton's 10 cm envelope stays there)",
+        ("tests/test_tasks.py::test_contact_gap_changes_which_pairs_are_tracked_not_the_motion",),
     ),
     M(
         "tasks_replay_agreement_all_episodes",

@@ -89,13 +89,42 @@ def test_make_refuses_bad_input_naming_the_field(kwargs, field):
     [("substeps", 0), ("substeps", 1.5), ("integrator", "rk5"), ("cone", "round"), ("impratio", 0.5),
      ("contact_solref", (0.0, 1.0)), ("contact_solref", (0.01,)), ("contact_solimp", (0.9, 0.8, 0.001)),
      ("contact_solimp", (0.9, 1.0, 0.001)), ("limit_solref", (0.02, -1.0)), ("limit_solimp", (0.9, 0.95, 0.0)),
-     ("friction_combine", "min"), ("iterations", 0), ("contact_gap", -0.001), ("contact_gap", float("inf")),
+     ("friction_combine", "min"), ("iterations", 0), ("ls_iterations", 0), ("contact_gap", -0.001), ("contact_gap", float("inf")),
      ("contact_gap", "1cm"), ("contact_gap", True)],
 )  # fmt: skip
 def test_task_physics_refuses_values_outside_their_range(field, value):
     with pytest.raises(wpctrl.ConfigError, match=f"TaskPhysics.{field}"):
         T.TaskPhysics(**{field: value})
     T.TaskPhysics()  # the defaults are valid
+
+
+INSIDE = dict(substeps=1, integrator="implicit", cone="pyramidal", impratio=1.0, iterations=1, ls_iterations=1,
+              contact_solref=(1e-4, 1e-3), contact_solimp=(0.5, 0.5, 1e-4), limit_solref=(1e-4, 1e-3),
+              limit_solimp=(0.5, 0.5, 1e-4), friction_combine="max", contact_gap=0.0)  # fmt: skip
+"""Every TaskPhysics field at (or just inside) the edge of its range, none at its default."""
+
+
+def test_task_physics_values_at_the_edge_reach_mujoco():
+    """Each field just inside its range is accepted and lands where MuJoCo reads it, in every env's copy: the
+    solver options, every geom's solref / solimp / gap / friction and every robot joint's limit solref / solimp."""
+    physics = T.TaskPhysics(**INSIDE)
+    assert all(getattr(physics, k) != getattr(T.TaskPhysics(), k) for k in INSIDE)
+    env = T.make("PushCube-v1", num_envs=3, physics=physics, graph=False)
+    m, mw = env.solver.mj_model, env.solver.mjw_model
+    assert (m.opt.integrator, m.opt.cone) == (2, 0)  # mjINT_IMPLICIT, mjCONE_PYRAMIDAL
+    assert (m.opt.impratio, m.opt.iterations, m.opt.ls_iterations) == (1.0, 1, 1)
+    assert round(env.dt, 9) == 0.01
+    solref, solimp = mw.geom_solref.numpy(), mw.geom_solimp.numpy()
+    np.testing.assert_allclose(solref, np.broadcast_to(INSIDE["contact_solref"], solref.shape), rtol=1e-6)
+    np.testing.assert_allclose(solimp[..., :3], np.broadcast_to(INSIDE["contact_solimp"], solimp[..., :3].shape))
+    np.testing.assert_allclose(env.model.shape_gap.numpy(), 0.0)
+    limited = m.jnt_limited.astype(bool)
+    np.testing.assert_allclose(mw.jnt_solref.numpy()[:, limited], np.broadcast_to(INSIDE["limit_solref"],
+                                                                                 (3, limited.sum(), 2)))  # fmt: skip
+    np.testing.assert_allclose(mw.jnt_solimp.numpy()[:, limited, :3],
+                               np.broadcast_to(INSIDE["limit_solimp"], (3, limited.sum(), 3)))  # fmt: skip
+    # friction "max": the materials' own coefficients (finger pads 2.0, the rest 0.3), not PhysX's averages
+    np.testing.assert_allclose(np.unique(mw.geom_friction.numpy()[..., 0]), [0.3, 2.0], rtol=1e-6)
 
 
 def test_contact_gap_changes_which_pairs_are_tracked_not_the_motion():

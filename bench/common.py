@@ -328,6 +328,30 @@ def measure_interleaved(
     return out
 
 
+def task_step_parts(env):
+    """Two callables that split one control step of a :func:`wpctrl.tasks.make` env the way ``TaskEnv`` runs it:
+    ``physics`` (the K x substeps MuJoCo-Warp steps, the contacts and the contact sensor of the last one, no
+    controller) and ``controller`` (``set_action`` and the K ``before_simulation_step`` calls, no physics)."""
+    ctrl, solver = env.ctrl, env.solver
+    steps = ctrl.num_substeps * env.physics.substeps
+
+    def physics():
+        src, dst = env.state, env._other
+        for i in range(steps):
+            last = i == steps - 1
+            solver.step(src, dst, env.control, env._contacts if last else None, env.dt,
+                        observables=env._observables if last else None)  # fmt: skip
+            src, dst = dst, src
+        env._sensor.update(None, env._contacts, observables=env._observables)
+
+    def controller():
+        ctrl.set_action(env.action_buf, env.state)
+        for _ in range(ctrl.num_substeps):
+            ctrl.before_simulation_step(env.state, env.control)
+
+    return physics, controller
+
+
 def load_average() -> list[float]:
     try:
         return list(os.getloadavg())

@@ -36,6 +36,7 @@ from bench.common import (  # noqa: E402
     measure,
     meta_markdown,
     parse_envs,
+    task_step_parts,
     write_results,
 )
 
@@ -56,22 +57,7 @@ def bench_one(task: str, n: int, device, substeps: int, control_mode: str) -> di
     dev = wp.get_device(device)
     action = torch.zeros((n, env.ctrl.action_dim), device=env.device)
     action[:, -1] = 1.0  # gripper open: the arm holds its pose, the cube rests on the table
-    ctrl, solver = env.ctrl, env.solver
-
-    def physics():
-        src, dst = env.state, env._other
-        total = ctrl.num_substeps * env.physics.substeps
-        for i in range(total):
-            last = i == total - 1
-            solver.step(src, dst, env.control, env._contacts if last else None, env.dt,
-                        observables=env._observables if last else None)  # fmt: skip
-            src, dst = dst, src
-        env._sensor.update(None, env._contacts, observables=env._observables)
-
-    def controller():
-        ctrl.set_action(env.action_buf, env.state)
-        for _ in range(ctrl.num_substeps):
-            ctrl.before_simulation_step(env.state, env.control)
+    physics, controller = task_step_parts(env)
 
     def task_kernels():
         env._bookkeep()

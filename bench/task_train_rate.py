@@ -38,7 +38,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import warp as wp  # noqa: E402
 
-from bench.common import machine_info, md_table, meta_markdown, write_results  # noqa: E402
+from bench.common import machine_info, md_table, meta_markdown, task_step_parts, write_results  # noqa: E402
 from bench.train_rate import _host_time, _time, collection_rate  # noqa: E402
 
 ROLLOUT = "MuJoCo-Warp rollout (5 x substeps solver steps)"
@@ -81,22 +81,8 @@ def main(argv=None) -> int:
         if cuda:
             torch.cuda.synchronize()
 
-    ctrl, solver = env.ctrl, env.solver
-    steps = ctrl.num_substeps * env.physics.substeps
-
-    def physics():
-        src, dst = env.state, env._other
-        for i in range(steps):
-            last = i == steps - 1
-            solver.step(src, dst, env.control, env._contacts if last else None, env.dt,
-                        observables=env._observables if last else None)  # fmt: skip
-            src, dst = dst, src
-        env._sensor.update(None, env._contacts, observables=env._observables)
-
-    def ctrl_calls():
-        ctrl.set_action(env.action_buf, env.state)
-        for _ in range(ctrl.num_substeps):
-            ctrl.before_simulation_step(env.state, env.control)
+    physics, ctrl_calls = task_step_parts(env)
+    steps = env.ctrl.num_substeps * env.physics.substeps
 
     fns = {}
     for name, f in ((ROLLOUT, physics), (CONTROLLER, ctrl_calls)):

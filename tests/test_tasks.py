@@ -1,7 +1,7 @@
 """wpctrl.tasks on Newton (CPU): the env API, ManiSkill's state dict, observations and rewards against numpy
 re-derivations of ManiSkill's definitions (tests/reference_tasks.py) and ManiSkill's recorded observations, reset
-draws, auto reset, bad input, joint limits on MuJoCo-Warp, and the open-loop replay of ManiSkill's recorded episodes
-(tests/data/tasks: real ManiSkill 3.0.1 / PhysX CPU episodes)."""
+draws, auto reset, bad input, joint limits on MuJoCo-Warp (the replay of ManiSkill's episodes:
+tests/test_tasks_replay.py)."""
 
 from __future__ import annotations
 
@@ -89,8 +89,8 @@ def test_make_refuses_bad_input_naming_the_field(kwargs, field):
     [("substeps", 0), ("substeps", 1.5), ("integrator", "rk5"), ("cone", "round"), ("impratio", 0.5),
      ("contact_solref", (0.0, 1.0)), ("contact_solref", (0.01,)), ("contact_solimp", (0.9, 0.8, 0.001)),
      ("contact_solimp", (0.9, 1.0, 0.001)), ("limit_solref", (0.02, -1.0)), ("limit_solimp", (0.9, 0.95, 0.0)),
-     ("friction_combine", "min"), ("iterations", 0), ("ls_iterations", 0), ("contact_gap", -0.001), ("contact_gap", float("inf")),
-     ("contact_gap", "1cm"), ("contact_gap", True)],
+     ("friction_combine", "min"), ("iterations", 0), ("ls_iterations", 0), ("contact_gap", -0.001),
+     ("contact_gap", float("inf")), ("contact_gap", "1cm"), ("contact_gap", True)],
 )  # fmt: skip
 def test_task_physics_refuses_values_outside_their_range(field, value):
     with pytest.raises(wpctrl.ConfigError, match=f"TaskPhysics.{field}"):
@@ -531,75 +531,3 @@ def test_joint_limits_hold_as_physx_does():
         overshoot[name] = worst - (-0.0698)
     assert overshoot["tasks"] < 1e-3, overshoot
     assert overshoot["newton"] > 0.05, overshoot
-
-
-# -- replay ------------------------------------------------------------------------------------------------------------
-
-
-@pytest.mark.parametrize(
-    "name, max_median",
-    [("PushCube-v1__pd_joint_delta_pos.json", 0.01), ("PickCube-v1__pd_ee_delta_pos.json", 0.02)],
-)
-def test_recorded_episodes_replay_to_maniskills_outcome(name, max_median):
-    """ManiSkill's recorded episodes replayed open-loop on Newton: every successful episode succeeds, the cube's final
-    position within 1 cm (PushCube) / 2 cm (PickCube) in the median, and (PickCube) the grasp flag agrees with
-    ManiSkill's on most steps."""
-    report = T.replay(DATA / name)
-    assert report.success_agreement == 1.0, report.format()
-    assert report.median_final_cube_error <= max_median, report.format()
-    for e in report.episodes:
-        if e.is_grasped is not None:
-            agree = np.mean(np.asarray(e.is_grasped) == np.asarray(e.is_grasped_recorded))
-            assert agree >= 0.9, (e.seed, agree)
-
-
-def test_replay_refuses_bad_files(tmp_path):
-    with pytest.raises(FileNotFoundError):
-        T.replay(tmp_path / "missing.json")
-    data = _episodes("PushCube-v1__pd_joint_delta_pos.json")
-    with pytest.raises(wpctrl.ConfigError, match="header"):
-        T.replay({"episodes": data["episodes"]})
-    broken = {"header": data["header"], "episodes": [dict(data["episodes"][0])]}
-    broken["episodes"][0].pop("actions")
-    with pytest.raises(wpctrl.ConfigError, match="'actions'"):
-        T.replay(broken)
-
-
-def test_replay_agreement_counts_maniskills_successes_only():
-    """success_agreement is over ManiSkill's successful episodes; outcome_agreement over all. A recorded success
-    replayed as is, and the same start with the arm left still, recorded as ManiSkill's failure: both agree (2 of 2
-    outcomes), and the one success counted succeeds (1 of 1)."""
-    data = json.loads((DATA / "PickCube-v1__pd_ee_delta_pos.json").read_text())
-    ok = data["episodes"][0]
-    still = json.loads(json.dumps(ok))
-    still["actions"] = [[0.0] * len(a) for a in ok["actions"]]
-    still["info"] = {k: [False] * len(v) for k, v in ok["info"].items()}
-    still["success_at_end"] = False
-    data["episodes"] = [ok, still]
-    report = T.replay(data)
-    assert [e.success_at_end for e in report.episodes] == [True, False]
-    assert report.success_agreement == 1.0
-    assert report.outcome_agreement == 1.0
-
-
-def test_replay_command_prints_and_writes_the_report_of_the_api(tmp_path, capsys):
-    """``python -m wpctrl replay FILE --out OUT``: the printed table and the written JSON are ``replay(FILE)``'s; a
-    missing file or one that is not ManiSkill's episode format exits 2 with the reason."""
-    from wpctrl.tasks.replay import main
-
-    data = json.loads((DATA / "PickCube-v1__pd_ee_delta_pos.json").read_text())
-    data["episodes"] = data["episodes"][:2]
-    src = tmp_path / "two.json"
-    src.write_text(json.dumps(data))
-    out = tmp_path / "report.json"
-    assert main([str(src), "--out", str(out)]) == 0
-    printed = capsys.readouterr().out
-    assert "PickCube-v1 pd_ee_delta_pos: 2 episodes replayed on Newton" in printed
-    written = json.loads(out.read_text())
-    assert written[0]["summary"] == T.replay(data).summary()
-    assert len(written[0]["episodes"]) == 2
-    bad = tmp_path / "bad.json"
-    bad.write_text(json.dumps({"episodes": []}))
-    for path, reason in ((tmp_path / "missing.json", "no episode file"), (bad, "'header' and 'episodes'")):
-        assert main([str(path)]) == 2
-        assert reason in capsys.readouterr().err

@@ -1034,7 +1034,7 @@ MUTATIONS: list[Mutation] = [
         "rflag = _grasping(finger_force[2 * e + 1, 0], -wp.quat_rotate(",
         "rflag = _grasping(finger_force[2 * e + 1, 0], wp.quat_rotate(",
         "is_grasped tests the right finger's force against +y instead of its opening direction -y",
-        ("tests/test_tasks.py",),
+        ("tests/test_tasks.py", "tests/test_tasks_replay.py"),
     ),
     M(
         "tasks_obs_quaternion_xyzw",
@@ -1147,7 +1147,7 @@ MUTATIONS: list[Mutation] = [
         "        ok = [e for e in self.episodes if e.success_at_end_recorded]\n",
         "        ok = self.episodes\n",
         "the replay's success agreement counts ManiSkill's failed episodes too",
-        ("tests/test_tasks.py",),
+        ("tests/test_tasks.py", "tests/test_tasks_replay.py"),
     ),
 ]
 

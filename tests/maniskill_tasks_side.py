@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from wpctrl.tasks.maniskill_side import make_maniskill, no_visuals
 
-__all__ = ["make_maniskill", "no_visuals", "record_episode", "state_dict_lists"]
+__all__ = ["IKFeasible", "make_maniskill", "no_visuals", "record_episode", "state_dict_lists"]
 
 
 def state_dict_lists(state: dict) -> dict:
@@ -17,11 +17,46 @@ def state_dict_lists(state: dict) -> dict:
     return {g: {k: v[0].tolist() for k, v in d.items()} for g, d in state.items() if g in ("actors", "articulations")}
 
 
+class IKFeasible:
+    """The recordings' guard on ``pd_ee_delta_pos`` actions: where ManiSkill's IK would fail for the TCP step (the
+    controller then holds the arm where it is, and the outcome hangs on the IK solver's failure behaviour), the step
+    is halved and checked again, at most 6 times, else the arm's action is 0. The check repeats what ManiSkill's
+    ``PDEEPosController.set_action`` does on the CPU (target = ``Pose(p=0.1 * a) * ee_pose_at_base``, pinocchio IK
+    seeded with the current qpos) with a ``Kinematics`` of its own, so the controller is not touched."""
+
+    def __init__(self, env):
+        from mani_skill.agents.controllers.utils.kinematics import Kinematics
+
+        arm = env.unwrapped.agent.controller.controllers["arm"]
+        self.arm = arm
+        self.kinematics = Kinematics(arm.config.urdf_path, arm.config.ee_link, arm.articulation,
+                                     arm.active_joint_indices)  # fmt: skip
+
+    def __call__(self, action):
+        import torch
+        from mani_skill.utils.structs.pose import Pose
+
+        action = action.clone()
+        arm = self.arm
+        q0 = arm.articulation.get_qpos()
+        step = action[:, :3].clamp(-1.0, 1.0)
+        for _ in range(7):
+            target = Pose.create_from_pq(p=0.1 * step) * arm.ee_pose_at_base
+            if self.kinematics.compute_ik(target, q0) is not None:
+                action[:, :3] = step
+                return action
+            step = step * 0.5
+        action[:, :3] = torch.zeros_like(step)
+        return action
+
+
 def record_episode(env, policy, seed: int, steps: int = 50) -> dict:
     """One episode of ``policy`` (a function of the flattened observation) on the real ManiSkill env, in the format
-    of ManiSkill's recordings that :func:`wpctrl.tasks.replay` reads."""
+    of ManiSkill's recordings that :func:`wpctrl.tasks.replay` reads. In ``pd_ee_delta_pos`` the actions pass
+    :class:`IKFeasible` first, as in ManiSkill's recordings (their ``header.policy``)."""
     obs, info = env.reset(seed=seed)
     base = env.unwrapped
+    guard = IKFeasible(env) if base.control_mode == "pd_ee_delta_pos" else None
     ep = {"seed": seed, "init_state_dict": state_dict_lists(base.get_state_dict()), "actions": [],
           "info": {"success": [bool(info["success"][0])]}, "cube_pose": [], "obs": [obs[0].tolist()]}  # fmt: skip
     cube = base.obj if hasattr(base, "obj") else base.cube
@@ -30,6 +65,8 @@ def record_episode(env, policy, seed: int, steps: int = 50) -> dict:
         ep["info"]["is_grasped"] = [bool(info["is_grasped"][0])]
     for _ in range(steps):
         action = policy(obs)
+        if guard is not None:
+            action = guard(action)
         obs, _, _, _, info = env.step(action)
         ep["actions"].append(action[0].tolist())
         ep["obs"].append(obs[0].tolist())

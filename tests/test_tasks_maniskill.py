@@ -186,13 +186,14 @@ def test_one_control_step_from_the_same_state_lands_where_maniskills_does(pair):
 
 
 def test_scripted_maniskill_episodes_replay_on_newton(pair):
-    """Episodes the real ManiSkill generates with the scripted policy (closed loop on PhysX), replayed open-loop on
-    Newton: every successful one succeeds; the cube ends within 2 cm (PickCube) in the median. These PushCube
-    episodes push in bursts of 6 cm steps with the TCP a few mm above the table for 20-30 steps, and the cube ends 2-4
-    cm from PhysX's in the median (measured over several sets of episodes; the bound here is 5 cm): the arm's TCP
-    drifts ~0.5 mm lower per fast step than on PhysX (MuJoCo's implicit damping of a saturated drive, see
-    docs/tasks.md) and the cube leaves the fingers faster at each burst. ManiSkill's recorded pushes replay within
-    1 cm (tests/test_tasks.py)."""
+    """Episodes the real ManiSkill generates with the scripted policy (closed loop on PhysX, actions guarded against
+    IK failure as in ManiSkill's recordings), replayed open-loop on Newton: every successful one succeeds on Newton
+    and the cube ends within 1 cm (PushCube) / 2 cm (PickCube) of PhysX's in the median.
+
+    Measured with the default physics (pd_ee_delta_pos, the PushCube solve of ManiSkill's recordings: push at 3 cm
+    height at up to 8 cm per control step): these seeds give 0.61 cm (PushCube) and 0.39 cm (PickCube); three more
+    sets of 10 PushCube seeds gave 0.86, 1.11 and 1.00 cm (0.93 cm over all 36 episodes, max 5.9 cm: a cube struck at
+    full speed that veers sideways on one simulator and not on the other), all successes kept."""
     task, ms, _ = pair
     policy = policy_for(task)
     episodes = [record_episode(ms, policy, seed) for seed in (10, 11, 12, 13, 14, 15)]
@@ -200,4 +201,4 @@ def test_scripted_maniskill_episodes_replay_on_newton(pair):
     data = {"header": {"task": task, "control_mode": "pd_ee_delta_pos"}, "episodes": episodes}
     report = T.replay(data)
     assert report.success_agreement == 1.0, report.format()
-    assert report.median_final_cube_error <= (0.05 if task == "PushCube-v1" else 0.02), report.format()
+    assert report.median_final_cube_error <= (0.01 if task == "PushCube-v1" else 0.02), report.format()

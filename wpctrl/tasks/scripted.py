@@ -12,10 +12,14 @@ from __future__ import annotations
 
 from .definitions import PICK_CUBE, PUSH_CUBE, TaskSpec
 
-__all__ = ["pick_cube_policy", "policy_for", "push_cube_policy"]
+__all__ = ["pick_cube_policy", "policy_for", "push_cube_low_policy", "push_cube_policy"]
 
 _STEP = 0.1
 """pd_ee_delta_pos: metres of TCP motion per unit action."""
+_PUSH_HOVER_Z = 0.08
+"""PushCube: TCP height [m] above the table top while moving behind the cube."""
+_PUSH_Z = 0.03
+"""PushCube: TCP height [m] above the table top while pushing (the fingertips clear the table)."""
 
 
 def _fields(spec: TaskSpec, obs):
@@ -28,8 +32,34 @@ def _towards(target, tcp, gain: float = 1.0):
 
 
 def push_cube_policy(obs):
-    """PushCube-v1: close the gripper, hover behind the cube, go down to the cube's centre height, push it along +x
-    (at most 6 cm per control step) until its centre is 4 cm past the goal's (well inside the 10 cm goal radius)."""
+    """PushCube-v1, the solve of ManiSkill's recorded PushCube episodes, gripper closed throughout: move the TCP to
+    5 cm behind the cube (-x) at 8 cm height; once within 1 cm of that point in xy, lower it to 3 cm (4.5 cm behind
+    the cube's centre); once lower than 3.6 cm, push along +x at ``6 * (goal x - cube x)`` (1 to 8 cm per control
+    step), keeping the TCP at the cube's y and 3 cm height; when the cube's centre is within 1.5 cm (in x) of the
+    goal's, hold (zero action). The fingertips stay clear of the table (compare :func:`push_cube_low_policy`)."""
+    import torch
+
+    tcp, cube, goal = _fields(PUSH_CUBE, obs)
+    hover = torch.stack([cube[:, 0] - 0.05, cube[:, 1], torch.full_like(cube[:, 2], _PUSH_HOVER_Z)], dim=1)
+    lower = torch.stack([cube[:, 0] - 0.045, cube[:, 1], torch.full_like(cube[:, 2], _PUSH_Z)], dim=1)
+    # lowering: within 1 cm (xy) of the hover point, or already on the way down near the lowering line
+    over = ((tcp[:, :2] - hover[:, :2]).norm(dim=1) < 0.01) | (
+        (tcp[:, 2] < _PUSH_HOVER_Z - 0.003) & ((tcp[:, :2] - lower[:, :2]).norm(dim=1) < 0.01))  # fmt: skip
+    low = tcp[:, 2] < _PUSH_Z + 0.006
+    pushing = low & (tcp[:, 0] < cube[:, 0])
+    arm = torch.where(over[:, None], _towards(lower, tcp), _towards(hover, tcp))
+    push = torch.stack([(6.0 * (goal[:, 0] - cube[:, 0])).clamp(0.1, 0.8), (cube[:, 1] - tcp[:, 1]) / _STEP,
+                        (_PUSH_Z - tcp[:, 2]) / _STEP], dim=1).clamp(-1.0, 1.0)  # fmt: skip
+    arm = torch.where(pushing[:, None], push, arm)
+    arm = torch.where((goal[:, 0] - cube[:, 0] < 0.015)[:, None], torch.zeros_like(arm), arm)
+    return torch.cat([arm, -torch.ones_like(arm[:, :1])], dim=1)
+
+
+def push_cube_low_policy(obs):
+    """PushCube-v1 pushed low: close the gripper, hover behind the cube, go down to the cube's centre height (the
+    fingertips a few millimetres above the table, touching it at times), push the cube along +x in bursts of up to
+    6 cm per control step until its centre is 4 cm past the goal's. Its episodes exercise the fingertip-table
+    contact, where MuJoCo and PhysX differ (docs/tasks.md)."""
     import torch
 
     tcp, cube, goal = _fields(PUSH_CUBE, obs)

@@ -17,6 +17,7 @@ import time
 
 import torch
 
+from .ppo_config import runner_cfg
 from .task_env import TaskVecEnv
 
 __all__ = ["Collector", "checkpoint_infos", "evaluate_policy", "maniskill_init", "maniskill_ppo_cfg", "train"]
@@ -40,13 +41,10 @@ def maniskill_ppo_cfg(
     normaliser; ManiSkill feeds them raw): the exported policy carries the normaliser.
     """
     mlp = {"class_name": "MLPModel", "hidden_dims": [256, 256, 256], "activation": "tanh", "obs_normalization": True}
-    return {
-        "seed": seed,
-        "num_steps_per_env": num_steps_per_env,
-        "save_interval": 10**9,
-        "obs_groups": {"actor": ["policy"], "critic": ["policy"]},
-        "algorithm": {
-            "class_name": "PPO",
+    return runner_cfg(
+        seed=seed,
+        num_steps_per_env=num_steps_per_env,
+        algorithm={
             "num_learning_epochs": num_learning_epochs,
             "num_mini_batches": num_mini_batches,
             "learning_rate": 3.0e-4,
@@ -61,10 +59,9 @@ def maniskill_ppo_cfg(
             "clip_param": 0.2,
             "normalize_advantage_per_mini_batch": True,
         },
-        "actor": dict(mlp, distribution_cfg={"class_name": "GaussianDistribution", "init_std": 1.0, "std_type": "log"}),
-        "critic": dict(mlp),
-        "check_for_nan": False,
-    }
+        mlp=mlp,
+        distribution={"init_std": 1.0, "std_type": "log"},
+    )
 
 
 def maniskill_init(model, last_gain: float) -> None:

@@ -16,6 +16,9 @@ that takes a bundled argument or the engine's accessors:
   through the unrolled kernel; a 1 x 32 LSTM through the tiled kernel), the same torch weights in both trees (torch
   seeded), explicit actuation.
 
+``--quick`` drops the 16k sizes (each case at 4k, the joint cases also at 1M: the sizes the step's speed is judged at),
+about half the time.
+
 ``--outputs FILE`` also writes, per case, what a fixed sequence of actions and states produces at 64 envs
 (``Control.joint_f`` / ``joint_target_q`` / ``joint_target_qd``, the controller's targets and readouts) to an ``.npz``,
 for ``ab_kernels_compare.py`` to check that the two trees compute the same bits.
@@ -222,6 +225,7 @@ def main(argv=None):
     p.add_argument("--out", required=True)
     p.add_argument("--tag", required=True)
     p.add_argument("--outputs", default=None, help="also write the fixed sequence's outputs to this .npz")
+    p.add_argument("--quick", action="store_true", help="CUDA sizes without 16k (4k, and 1M for the joint cases)")
     args = p.parse_args(argv)
     wp.init()
     device = wp.get_device(args.device)
@@ -232,8 +236,10 @@ def main(argv=None):
     result = Path(args.out, f"ab_kernels_{args.tag}.json")
     t0 = time.perf_counter()
     for case in [c.strip() for c in args.cases.split(",") if c.strip()]:
-        sizes = args.envs or CASES[case][0 if device.is_cuda else 1]
-        for n in parse_envs(sizes):
+        sizes = parse_envs(args.envs or CASES[case][0 if device.is_cuda else 1])
+        if args.quick and device.is_cuda:
+            sizes = [n for n in sizes if n != 16384]
+        for n in sizes:
             try:
                 r = time_case(case, n, device, sync, args.repeats, models)
             except (RuntimeError, MemoryError, NotImplementedError) as e:

@@ -8,7 +8,8 @@
 #
 # Results in $OUT (or bench/results): ab_kernels.md and ab_kernels.tar. ROUNDS (default 2), REPEATS (default 7),
 # DEVICE (default cuda:0), CASES (default: all of bench/ab_kernels.py), BUDGET_S (default 560: no round starts
-# after it, so the summary is written inside a 10-minute call). About 6 minutes on a fresh H100 / H200 (the first
+# after it, so the summary is written inside a 10-minute call), QUICK=1 (no 16k sizes: ab_kernels.py --quick), A_LABEL /
+# B_LABEL (the trees' names in the summary, for trees without git metadata). About 6 minutes on a fresh H100 / H200 (the first
 # round compiles each tree's kernels).
 set -uo pipefail
 OLD=$(cd "$1" && pwd)
@@ -31,11 +32,13 @@ for round in $(seq 1 "$ROUNDS"); do
     if [ "$left" -lt 60 ]; then echo "[budget] stopping before round $round $side (${left} s left)"; break 2; fi
     tree=$OLD; [ "$side" = B ] && tree=$NEW
     extra=""; [ "$round" = 1 ] && extra="--outputs $WORK/$side.npz"
+    [ "${QUICK:-0}" = 1 ] && extra="$extra --quick"
     # the script from NEW, the wpctrl (and bench.common) of the tree under test
     (cd "$tree" && PYTHONPATH="$tree${PYTHONPATH:+:$PYTHONPATH}" timeout "$left" $PY "$SCRIPT" --device "$DEVICE" --cases "$CASES" \
       --repeats "$REPEATS" --out "$WORK" --tag "${side}_${round}" $extra) 2>&1 | grep -E "^\[" || true
   done
 done
-$PY "$NEW/bench/ab_kernels_summary.py" "$WORK" > "$OUT/ab_kernels.md"
+$PY "$NEW/bench/ab_kernels_summary.py" "$WORK" ${A_LABEL:+--label-a "$A_LABEL"} ${B_LABEL:+--label-b "$B_LABEL"} \
+  > "$OUT/ab_kernels.md"
 cat "$OUT/ab_kernels.md"
 (cd "$WORK" && tar -cf "$OUT/ab_kernels.tar" ./*.json ./*.npz 2>/dev/null)

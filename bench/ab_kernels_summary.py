@@ -1,27 +1,30 @@
 """Summarise ``bench/ab_kernels.sh``: per case and size, the median over rounds of A and of B (graph replay and eager
 µs) and B / A; and whether the two trees' outputs on the fixed sequence are the same bits.
 
-    python bench/ab_kernels_summary.py WORK_DIR      # reads ab_kernels_{A,B}_<round>.json and A.npz / B.npz
+    python bench/ab_kernels_summary.py WORK_DIR [--label-a A --label-b B]   # reads ab_kernels_{A,B}_<round>.json,
+                                                                            # A.npz / B.npz
+
+The labels name the trees where their recorded commit cannot (a tree without git metadata reads its parent's).
 """
 
 from __future__ import annotations
 
+import argparse
 import glob
 import json
 import os
 import statistics
-import sys
 
 import numpy as np
 
 
-def timing(work: str) -> list[str]:
+def timing(work: str, labels: dict[str, str] | None = None) -> list[str]:
     runs: dict[tuple, dict[str, dict[str, list[float]]]] = {}
     commits = {}
     for path in sorted(glob.glob(os.path.join(work, "ab_kernels_*.json"))):
         side = os.path.basename(path)[len("ab_kernels_") :].split("_")[0]
         data = json.load(open(path))
-        commits[side] = data.get("meta", {}).get("wpctrl_commit")
+        commits[side] = (labels or {}).get(side) or data.get("meta", {}).get("wpctrl_commit")
         for r in data["rows"]:
             by = runs.setdefault((r["case"], r["envs"]), {}).setdefault(side, {"graph_us": [], "eager_us": []})
             by["graph_us"].append(r["graph_us"])
@@ -69,5 +72,14 @@ def outputs(work: str) -> list[str]:
     return [head + f"{len(differ)} differ, {len(missing)} missing:"] + [f"- {d}" for d in differ + missing]
 
 
+def main(argv=None) -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("work")
+    p.add_argument("--label-a", default=None)
+    p.add_argument("--label-b", default=None)
+    args = p.parse_args(argv)
+    print("\n".join(timing(args.work, {"A": args.label_a, "B": args.label_b}) + outputs(args.work)))
+
+
 if __name__ == "__main__":
-    print("\n".join(timing(sys.argv[1]) + outputs(sys.argv[1])))
+    main()

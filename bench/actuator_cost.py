@@ -12,14 +12,18 @@ One control step = ``set_action`` + K x ``before_simulation_step`` (K = 5), Mani
 * ``lstm``: ``wpctrl.ActuatorNet`` of a 2-layer, 8-unit LSTM with a linear head (random weights), default kernel;
 * ``mlp_tiled`` / ``lstm_tiled``: the same networks with ``kernel="tiled"`` (weights staged in shared memory, rows in
   64-row tiles, each layer a ``wp.tile_matmul``);
-* ``torch_mlp`` / ``torch_lstm`` (CUDA): the same control step with the network's substep written in torch on the same
+* ``torch_mlp`` / ``torch_lstm``: the same control step with the network's substep written in torch on the same
   rows (bench/torch_actuator_net.py: cuBLAS / cuDNN, Isaac Lab's ``ActuatorNetMLP`` / ``ActuatorNetLSTM`` code
-  path), wpctrl's launches and the torch ops captured in one CUDA graph;
+  path). On CUDA, wpctrl's launches and the torch ops are captured in one CUDA graph, or, where that capture fails,
+  as a Warp graph and a torch graph replayed back to back on one stream (the ``torch_capture`` field says which); on
+  the CPU the step is timed eagerly only (torch's ops are no Warp launches to capture);
 * ``newton_dc``: the plain step plus Newton 1.8's ``ClampingDCMotor`` applied to ``joint_f`` after every substep
   (its own launch over every DOF): what the same DC-motor envelope costs as Newton's component.
 
-Graph-captured replay (and eager with ``--eager``), round-robin. Before timing, on CUDA, each torch variant's first
-control step is checked against the matching wpctrl one (the ``check`` field: max |joint_f| difference). Run
+Graph-captured replay (and eager with ``--eager``), round-robin. Before timing, each torch variant's first control
+step is checked against the matching wpctrl one (``check_max_abs_joint_f``: max |joint_f| difference), and on CUDA one
+replay of its graph from the same start against that eager step (``replay_check_max_abs_joint_f``). A variant that
+cannot be built, run or captured is reported (``failures`` in the results) and the others are still timed. Run
 ``python bench/actuator_cost.py --help``; results go to ``<out>/actuator_cost_<device>.{json,md}``.
 """
 
@@ -64,8 +68,8 @@ LABELS = {
     "lstm": "ActuatorNet (LSTM 2x8)",
     "mlp_tiled": "ActuatorNet (MLP, tiled kernel)",
     "lstm_tiled": "ActuatorNet (LSTM, tiled kernel)",
-    "torch_mlp": "MLP in torch (CUDA graph)",
-    "torch_lstm": "LSTM in torch (CUDA graph)",
+    "torch_mlp": "MLP in torch",
+    "torch_lstm": "LSTM in torch",
     "newton_dc": "plain + Newton ClampingDCMotor",
 }
 
@@ -138,7 +142,7 @@ def _torch_net(ctrl, state, control, lstm_cells: bool = False):
 
 def _setup_variant(args, name, n_envs, model, small_model, sync, device, first_f, checks, lstm_cells):
     """Build variant ``name``, run its first control step (recorded in ``first_f``; a torch baseline's difference to
-    the matching network kernel's in ``checks``) and capture it: ``(replay function, eager step)``."""
+    the matching network kernel's in ``checks``) and capture it: ``(replay function or None, eager step)``."""
     kw = {"actuation": "explicit", "control_freq": 20, "sim_freq": 100}
     mode = _mode(name, args.mode)
     su = real_setup(mode, model, **kw) if model is not None else synthetic_setup(mode, small_model, n_envs, **kw)
@@ -158,14 +162,12 @@ def _setup_variant(args, name, n_envs, model, small_model, sync, device, first_f
                 comp.modify_forces(control.joint_f, scratch, state.joint_q, state.joint_qd, idx, idx)
 
     inner = step
-    if tnet is not None:  # eager: Warp's launches on torch's current stream, so that the two stay in order
-        import torch
+    cuda = wp.get_device(device).is_cuda
+    if tnet is not None and cuda:  # eager: Warp's launches and torch's ops on one stream, so that they stay in order
+        from bench.torch_actuator_net import run_on_shared_stream
 
-        wstream = wp.stream_from_torch(torch.cuda.current_stream(torch.device("cuda", wp.get_device(device).ordinal)))
-
-        def step(inner=inner, wstream=wstream):
-            with wp.ScopedStream(wstream):
-                inner()
+        def step(inner=inner, device=device):
+            run_on_shared_stream(inner, device)
 
     sync()
     step()
@@ -176,50 +178,73 @@ def _setup_variant(args, name, n_envs, model, small_model, sync, device, first_f
     if base != name and base in first_f:
         checks[name] = float(np.abs(first_f[name] - first_f[base]).max())
         print(f"[{fmt_envs(n_envs)}] {name}: max |joint_f - {base}'s| after one step = {checks[name]:.3g}")
-    if tnet is not None:
-        from bench.torch_actuator_net import capture, capture_apart
-
-        try:
-            graph = capture(inner, device)
-            checks[name + ":capture"] = "one graph"
-            return (lambda g=graph, keep=(su, action, tnet): g.replay()), step
-        except Exception as e:  # noqa: BLE001 - the two-graph fallback below
-            print(f"[{fmt_envs(n_envs)}] {name}: one graph failed ({type(e).__name__}: {e}); two graphs on one stream")
-        group = ctrl._engine.part("actuator_models").nets[0]
-        group.launch = lambda engine, state, control: None
-        replay = capture_apart(inner, tnet, ctrl.num_substeps, device)
-        checks[name + ":capture"] = "two graphs"
-        return (lambda r=replay, keep=(su, action, tnet): r()), step
-    else:
+    if tnet is None:
         with wp.ScopedCapture(device=device) as cap:
             step()
         # the graph replays into these arrays: keep them alive with it (a freed one would be reused or unmapped)
         return (lambda g=cap.graph, keep=(su, action, extra): wp.capture_launch(g)), step
+    if not cuda:  # torch's ops are no Warp launches: on the CPU the torch baseline is timed eagerly only
+        replay, how = step, "eager (CPU)"
+    else:
+        from bench.torch_actuator_net import capture_apart, capture_joint
+
+        try:
+            replay = capture_joint(inner, device)
+            how = "one graph"
+        except Exception as e:  # noqa: BLE001 - the two-graph fallback below
+            print(f"[{fmt_envs(n_envs)}] {name}: one graph failed ({type(e).__name__}: {e}); trying two graphs")
+            checks[name + ":one graph error"] = f"{type(e).__name__}: {e}"
+            sync()
+            group = ctrl._engine.part("actuator_models").nets[0]
+            group.launch = lambda engine, state, control: None
+            replay = capture_apart(inner, tnet, ctrl.num_substeps, device)
+            how = "two graphs"
+    checks[name + ":capture"] = how
+    # a replay from the same start must give the eager first step's joint_f (and so agree with the kernel's)
+    sync()
+    ctrl.reset(state)
+    tnet.reset()
+    sync()
+    replay()
+    sync()
+    got = control.joint_f.numpy()
+    checks[name + ":replay"] = float(np.abs(got - first_f[name]).max())
+    if base in first_f:
+        checks[name + ":replay_vs_kernel"] = float(np.abs(got - first_f[base]).max())
+    print(f"[{fmt_envs(n_envs)}] {name}: {how}; max |joint_f| of a replay from the start - the first step's = "
+          f"{checks[name + ':replay']:.3g}")  # fmt: skip
+    if not cuda:
+        return None, step
+    return (lambda r=replay, keep=(su, action, tnet): r()), step
 
 
-def run_one(args, n_envs, model, small_model, sync, device) -> list[dict]:
+def run_one(args, n_envs, model, small_model, sync, device, failures: list) -> list[dict]:
+    """Time every variant at ``n_envs``. A variant that cannot be built, run or captured is printed and appended to
+    ``failures``; the others are still timed."""
     fns = {}
     checks = {}
     first_f = {}
     for name in args.variants:
-        if name.startswith("torch_") and not wp.get_device(device).is_cuda:
-            print(f"[{fmt_envs(n_envs)}] {name}: skipped (the torch baseline is a CUDA graph)", flush=True)
-            continue
         tries = (False, True) if name == "torch_lstm" else (False,)
+        got = None
         for cells in tries:  # the torch LSTM through cuDNN, else (a batch cuDNN refuses) as cell equations
             try:
                 got = _setup_variant(args, name, n_envs, model, small_model, sync, device, first_f, checks, cells)
                 break
-            except Exception as e:  # noqa: BLE001 - a torch baseline that cannot run is reported, the rest goes on
-                if not name.startswith("torch_"):
-                    raise
-                print(f"[{fmt_envs(n_envs)}] {name} (lstm cells: {cells}): failed ({type(e).__name__}: {e})")
-                got = None
+            except Exception as e:  # noqa: BLE001 - reported, the other variants go on
+                label = f"{name} (lstm cells)" if cells else name
+                print(f"[{fmt_envs(n_envs)}] {label}: failed ({type(e).__name__}: {e})", flush=True)
+                failures.append({"envs": n_envs, "variant": label, "error": f"{type(e).__name__}: {e}"})
+                try:
+                    sync()
+                except Exception:  # noqa: BLE001, S110 - a sticky device error shows in the next variant's failure
+                    pass
         if got is None:
             continue
         graph_fn, step = got
-        fns[name + ":graph"] = graph_fn
-        if args.eager:
+        if graph_fn is not None:
+            fns[name + ":graph"] = graph_fn
+        if args.eager or graph_fn is None:
             fns[name + ":eager"] = step
     times = measure_interleaved(
         fns, sync, repeats=args.repeats, min_time=args.min_time, warmup=args.warmup, clock=args.clock
@@ -241,6 +266,9 @@ def run_one(args, n_envs, model, small_model, sync, device) -> list[dict]:
                 "clock": args.clock,
                 "check_max_abs_joint_f": checks.get(name),
                 "torch_capture": checks.get(name + ":capture"),
+                "torch_one_graph_error": checks.get(name + ":one graph error"),
+                "replay_check_max_abs_joint_f": checks.get(name + ":replay"),
+                "replay_vs_kernel_max_abs_joint_f": checks.get(name + ":replay_vs_kernel"),
             }
         )
     return rows
@@ -267,14 +295,30 @@ def markdown(meta: dict, rows: list[dict], args) -> str:
     if any(r["layout"] == "synthetic" for r in rows):
         out.append("\n\\* synthetic layout (bench/common.py): a small model's layout tiled to N envs.\n")
     if any(r.get("torch_capture") == "two graphs" for r in rows):
-        out.append("\n† wpctrl's step and the torch network as two graphs replayed on one stream (one graph of both "
-                   "could not be captured).\n")  # fmt: skip
-    checks = [r for r in rows if r.get("check_max_abs_joint_f") is not None and r["replay"] == "graph"]
+        out.append("\n† wpctrl's step and the torch network as two graphs replayed back to back on one stream (one "
+                   "graph of both could not be captured).\n")  # fmt: skip
+    checks = {(r["envs"], r["variant"]): r for r in rows if r.get("check_max_abs_joint_f") is not None}.values()
     if checks:
-        each = [f"{fmt_envs(r['envs'])} {r['variant']} {r['check_max_abs_joint_f']:.2g} N·m" for r in checks]
-        out.append(f"\nTorch baseline against the network kernel, max |joint_f| difference after the first control "
-                   f"step: {'; '.join(each)}.\n")  # fmt: skip
+        each = []
+        for r in checks:
+            txt = f"{fmt_envs(r['envs'])} {r['variant']} {_g(r['check_max_abs_joint_f'])}"
+            if r.get("replay_check_max_abs_joint_f") is not None:
+                txt += (
+                    f" (a replay from the start: {_g(r['replay_vs_kernel_max_abs_joint_f'])} against the kernel, "
+                    f"{_g(r['replay_check_max_abs_joint_f'])} against the eager step; {r['torch_capture']})"
+                )
+            each.append(txt)
+        out.append(f"\nTorch baseline against the network kernel, max |joint_f| difference (N·m) after the first "
+                   f"control step: {'; '.join(each)}.\n")  # fmt: skip
+    failures = meta.get("failures") or []
+    if failures:
+        out.append("\nNot timed: " + "; ".join(f"{fmt_envs(f['envs'])} {f['variant']}: {f['error']}" for f in failures)
+                   + ".\n")  # fmt: skip
     return "".join(out)
+
+
+def _g(x) -> str:
+    return "n/a" if x is None else f"{x:.2g}"
 
 
 def main(argv=None):
@@ -287,6 +331,7 @@ def main(argv=None):
     args = parse_run_args(p, argv)
     device, sync, meta = start_run(p, args, cpu_envs="1,64,1k", cuda_envs="1,1k,4k,64k,1M")
     rows = []
+    failures = meta.setdefault("failures", [])
     small_model = None
     t0 = time.perf_counter()
     for n in parse_envs(args.envs):
@@ -294,7 +339,7 @@ def main(argv=None):
         if model is None and small_model is None:
             small_model = build_panda_model(2, device)
         try:
-            got = run_one(args, n, model, small_model, sync, device)
+            got = run_one(args, n, model, small_model, sync, device, failures)
         except (RuntimeError, MemoryError) as e:
             print(f"[{fmt_envs(n)}] skipped: {type(e).__name__}: {e}", flush=True)
             break

@@ -2,24 +2,31 @@
 # The actuator networks on the first CUDA GPU in one go, from the repository root, results in $OUT:
 #
 #   OUT=/tmp/nets bash bench/nets_gpu.sh
+#   OUT=/tmp/nets NETS_VARIANTS=plain,mlp,lstm,torch_mlp,torch_lstm STAGES=bench bash bench/nets_gpu.sh
 #
 #   nets_gpu.log                  the machine, versions, each stage's output (the bench's per-variant lines, the
-#                                 torch baseline's check against the network kernels, the CUDA tests' summary)
-#   actuator_cost_cuda.{json,md}  bench/actuator_cost.py at NETS_ENVS (default 4k,1M): plain step, DCMotor, position
-#                                 table, MLP and LSTM networks (default and tiled kernels), the torch baseline
+#                                 torch baseline's checks against the network kernels and how it was captured, the
+#                                 CUDA tests' summary)
+#   actuator_cost_cuda.{json,md}  bench/actuator_cost.py at NETS_ENVS (default 4k,64k,1M): plain step, DCMotor,
+#                                 position table, MLP and LSTM networks (default and tiled kernels), the torch baseline
+#                                 (one CUDA graph with wpctrl's launches, else two graphs back to back: the
+#                                 torch_capture field); a variant that fails is listed under "failures", the rest timed
 #   ncu_net_4k.txt, ncu_net_1M.txt
 #                                 Nsight Compute's details of one launch of each network kernel (bench/ncu_net.py):
 #                                 speed of light, compute and memory workload, occupancy, warp stalls, scheduler
 #
 # STAGES (default bench,ncu,tests) picks the stages and NETS_VARIANTS the bench's variants (default: all but
-# newton_dc); each stage runs under its own time limit (BENCH_LIMIT 240 s, NCU_LIMIT 75 s per size, TESTS_LIMIT
-# 120 s). PYTHON: the interpreter (python3). Measured: 2 min 10 s on an H100 with an empty kernel cache.
+# newton_dc); each stage runs under its own time limit (BENCH_LIMIT 300 s, NCU_LIMIT 60 s per size, TESTS_LIMIT
+# 100 s). PYTHON: the interpreter (python3); DEVICE: the bench's device (cuda:0; cpu for a dry run of the bench stage
+# at NETS_ENVS=64, the torch baseline then eager). Expected on an H100: the bench stage ~2 min with a warm kernel cache
+# (Warp compiles first with an empty one: ~1 min more), all three stages ~3.5 min.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 OUT=${OUT:-bench/results}
 mkdir -p "$OUT"
 OUT=$(cd "$OUT" && pwd)
 PY=${PYTHON:-python3}
+DEVICE=${DEVICE:-cuda:0}
 NCU=${NCU:-ncu}
 STAGES=${STAGES:-bench,ncu,tests}
 LOG="$OUT/nets_gpu.log"
@@ -27,23 +34,24 @@ export PYTHONUNBUFFERED=1
 t0=$(date +%s)
 {
   date -u
-  nvidia-smi --query-gpu=name,driver_version,clocks.max.sm,clocks.max.mem --format=csv,noheader
+  [[ $DEVICE == cuda* ]] && nvidia-smi --query-gpu=name,driver_version,clocks.max.sm,clocks.max.mem --format=csv,noheader
   $PY -c "import warp, torch; print('warp', warp.__version__, 'torch', torch.__version__)"
   git rev-parse --short HEAD 2>/dev/null | sed 's/^/wpctrl commit /'
 } 2>&1 | tee "$LOG"
 
 if [[ $STAGES == *bench* ]]; then
   echo "=== bench (+$(( $(date +%s) - t0 ))s)" | tee -a "$LOG"
-  timeout "${BENCH_LIMIT:-240}" $PY bench/actuator_cost.py --device cuda:0 --envs "${NETS_ENVS:-4k,1M}" \
+  timeout "${BENCH_LIMIT:-300}" $PY bench/actuator_cost.py --device "$DEVICE" --envs "${NETS_ENVS:-4k,64k,1M}" \
     --variants "${NETS_VARIANTS:-plain,dc_motor,position_limit,mlp,lstm,mlp_tiled,lstm_tiled,torch_mlp,torch_lstm}" \
     --out "$OUT" 2>&1 \
     | grep -v "^Module " | tee -a "$LOG"
+  echo "bench: exit ${PIPESTATUS[0]}" | tee -a "$LOG"
 fi
 
-if [[ $STAGES == *ncu* ]]; then
+if [[ $STAGES == *ncu* && $DEVICE == cuda* ]]; then
   for n in 4k 1M; do
     echo "=== ncu $n (+$(( $(date +%s) - t0 ))s)" | tee -a "$LOG"
-    timeout "${NCU_LIMIT:-75}" "$NCU" --profile-from-start off --clock-control none \
+    timeout "${NCU_LIMIT:-60}" "$NCU" --profile-from-start off --clock-control none \
       --kernel-name regex:wpctrl_actuator_net --section SpeedOfLight --section ComputeWorkloadAnalysis \
       --section MemoryWorkloadAnalysis --section Occupancy --section WarpStateStats --section SchedulerStats \
       --section LaunchStats --page details $PY bench/ncu_net.py --envs "$n" > "$OUT/ncu_net_$n.txt" 2>&1
@@ -53,7 +61,7 @@ fi
 
 if [[ $STAGES == *tests* ]]; then
   echo "=== CUDA tests (+$(( $(date +%s) - t0 ))s)" | tee -a "$LOG"
-  timeout "${TESTS_LIMIT:-120}" $PY -m pytest tests/test_actuator_net.py -k cuda -q -p no:cacheprovider 2>&1 \
+  timeout "${TESTS_LIMIT:-100}" $PY -m pytest tests/test_actuator_net.py -k cuda -q -p no:cacheprovider 2>&1 \
     | tail -25 | tee -a "$LOG"
 fi
 echo "=== done (+$(( $(date +%s) - t0 ))s)" | tee -a "$LOG"

@@ -4,9 +4,9 @@ What a user would write without wpctrl's network kernel, following Isaac Lab's `
 ``ActuatorNetLSTM.compute``: gather the rows' ``joint_q`` / ``joint_qd`` / ``joint_target_q``, roll the histories (or
 run ``nn.LSTM`` on the stored hidden and cell state), evaluate the same ``torch.nn`` module (cuBLAS, cuDNN for the
 LSTM), clip by the DC-motor envelope and the force limit, and scatter into ``joint_f``. Everything is written in
-place into buffers allocated once, so the step can be captured in a CUDA graph (``capture``) together with wpctrl's
-own ``set_action`` / substep launches: the same control step as wpctrl's network variant, with the network kernel's
-launch replaced by these torch ops.
+place into buffers allocated once, so the step can be captured in a CUDA graph together with wpctrl's own
+``set_action`` / substep launches (``capture_joint``; ``capture_apart`` when one graph of both fails): the same
+control step as wpctrl's network variant, with the network kernel's launch replaced by these torch ops.
 
 Bench-only: it reads wpctrl internals (the engine's network group, binding and per-env arrays).
 """
@@ -111,52 +111,102 @@ class TorchActuatorNet:
         lo = torch.clamp(self.sat * (-1.0 - s), min=-self.lim, max=self.lim)
         self.jf.index_copy_(0, self.di, torch.minimum(torch.maximum(u, lo), hi))
 
+    def reset(self) -> None:
+        """Zero the histories (MLP) or the hidden and cell state (LSTM), as at construction."""
+        for t in (self.he, self.hv) if self.lstm is None else (self.h, self.c):
+            t.zero_()
 
-def capture(step, device):
-    """A CUDA graph of ``step`` (wpctrl launches and torch ops together), as Warp's own torch-interop tests capture
-    one: a torch stream that Warp also launches on (``wp.stream_from_torch``), entered before torch opens the capture,
-    and Warp told of that capture (``wp.capture_begin(external=True)``). Returns the graph (``graph.replay()``)."""
+
+# ----------------------------------------------------------------------------------------------------------------------
+# Capture. Warp and torch must put their work on one stream, and that stream must stay known to Warp for as long as
+# it is used: Warp keeps one record per CUDA stream handle, created by every ``wp.Stream`` that wraps the handle
+# (``wp.stream_from_torch``) and erased when any such wrapper is garbage-collected. A temporary wrapper of the capture
+# stream therefore makes the capture's own wrapper unknown ("Warp error: unknown stream"), and torch hands out its
+# streams from a small pool, so a stream made later can be a handle an earlier wrapper still names. Hence one torch
+# stream per device and its one Warp wrapper, made once and kept for the process.
+
+_STREAMS: dict[int, tuple] = {}
+
+
+def shared_stream(device):
+    """``(torch stream, Warp stream)``: the one CUDA stream that the torch baseline's eager steps, warm-ups, captures
+    and replays all run on, as torch's and as Warp's stream object (the same handle)."""
+    ordinal = wp.get_device(device).ordinal
+    if ordinal not in _STREAMS:
+        ts = torch.cuda.Stream(device=torch.device("cuda", ordinal))
+        _STREAMS[ordinal] = (ts, wp.stream_from_torch(ts))
+    return _STREAMS[ordinal]
+
+
+def run_on_shared_stream(fn, device) -> None:
+    """Call ``fn`` with Warp's launches and torch's ops both on :func:`shared_stream`, after the work queued on Warp's
+    current stream."""
+    ts, ws = shared_stream(device)
+    with wp.ScopedStream(ws), torch.cuda.stream(ts):
+        fn()
+
+
+def capture_joint(step, device):
+    """One CUDA graph of ``step``, wpctrl's launches and torch's ops together: returns its replay function.
+
+    As Warp's torch-interop tests capture: the step is warmed up twice on the shared stream (modules loaded, cuBLAS
+    and cuDNN workspaces and the caching allocator's blocks made for that stream), torch opens the capture on that
+    stream (its graph's private memory pool takes torch's allocations) and Warp joins it as an external capture, so
+    that its own allocations and frees are graph-aware. Warp's stream is entered before the capture opens: entering
+    it during the capture would make the capturing stream wait on uncaptured work (CUDA error 905)."""
+    ts, ws = shared_stream(device)
     dev = torch.device("cuda", wp.get_device(device).ordinal)
-    torch_stream = torch.cuda.Stream(device=dev)
-    warp_stream = wp.stream_from_torch(torch_stream)
     torch.cuda.synchronize(dev)
-    with wp.ScopedStream(warp_stream), torch.cuda.stream(torch_stream):
-        for _ in range(2):  # warm-up: kernels loaded, cuBLAS / cuDNN workspaces allocated
+    with wp.ScopedStream(ws), torch.cuda.stream(ts):
+        for _ in range(2):
             step()
     torch.cuda.synchronize(dev)
     graph = torch.cuda.CUDAGraph()
-    with wp.ScopedStream(warp_stream), torch.cuda.graph(graph, stream=torch_stream):
-        wp.capture_begin(force_module_load=False, external=True)
+    with wp.ScopedStream(ws), torch.cuda.graph(graph, stream=ts, capture_error_mode="thread_local"):
+        wp.capture_begin(stream=ws, force_module_load=False, external=True, capture_mode=wp.CaptureMode.THREAD_LOCAL)
         try:
             step()
-        finally:
-            wp.capture_end()
-    return graph
+        except BaseException:
+            try:  # Warp's record of the capture goes; the step's error is the one reported
+                wp.capture_end(stream=ws)
+            except Exception:  # noqa: BLE001, S110
+                pass
+            raise
+        wp.capture_end(stream=ws)
+
+    def replay(graph=graph, ts=ts):
+        with torch.cuda.stream(ts):
+            graph.replay()
+
+    return replay
 
 
 def capture_apart(ctrl_step, tnet, substeps: int, device):
-    """The fallback when one graph of both cannot be captured: wpctrl's step (its network launch a no-op) as a Warp
-    graph and the torch network's ``substeps`` substeps as a torch graph, replayed one after the other on Warp's
-    stream. The same work as the one-graph baseline (the network's substeps run after the step's instead of between
-    them); returns the replay function."""
+    """The fallback when one graph of both cannot be captured: two graphs replayed back to back on Warp's stream.
+
+    wpctrl's step (its network launch made a no-op by the caller) is captured by Warp on its own stream, as every
+    other variant of the bench; the torch network's ``substeps`` substeps by torch alone on the shared stream (after
+    two warm-up substeps there), in a private memory pool. Each replay launches the Warp graph, then the torch graph
+    on Warp's stream. The network's substeps then run after the step's instead of between them: the same work, and
+    the same ``joint_f`` while the state does not change within a control step (no physics runs in the bench)."""
+    ts, _ = shared_stream(device)
     dev = torch.device("cuda", wp.get_device(device).ordinal)
     with wp.ScopedCapture(device=device) as cap:
         ctrl_step()
-    torch_stream = torch.cuda.Stream(device=dev)
     torch.cuda.synchronize(dev)
-    with torch.cuda.stream(torch_stream):
+    with torch.cuda.stream(ts):
         for _ in range(2):
             tnet.substep()
     torch.cuda.synchronize(dev)
     graph = torch.cuda.CUDAGraph()
-    with torch.cuda.graph(graph, stream=torch_stream):
+    with torch.cuda.graph(graph, stream=ts, capture_error_mode="thread_local"):
         for _ in range(substeps):
             tnet.substep()
     on_warp = wp.stream_to_torch(wp.get_stream(device))
 
-    def replay(g=graph, wg=cap.graph):
-        wp.capture_launch(wg)
+    def replay(graph=graph, wgraph=cap.graph, on_warp=on_warp, device=device):
+        wp.capture_launch(wgraph, stream=wp.get_stream(device))
         with torch.cuda.stream(on_warp):
-            g.replay()
+            graph.replay()
 
     return replay

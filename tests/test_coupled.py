@@ -32,7 +32,7 @@ def _block(ctrl, state) -> np.ndarray:
     n = len(ctrl.joint_names)
     resp = wp.zeros((ctrl.num_envs, n), dtype=wp.float32)
     blk = wp.zeros((ctrl.num_envs, n, n), dtype=wp.float32)
-    ctrl._engine.response_part._fused.launch_response(state.joint_q, resp, blk)
+    ctrl._engine.response_part._fused.launch_response(state.joint_q, resp, blk)  # private: the fused kernel
     np.testing.assert_array_equal(resp.numpy(), np.diagonal(blk.numpy(), axis1=1, axis2=2))
     return blk.numpy().astype(np.float64)
 

@@ -186,8 +186,10 @@ def row_input(
     joint_qd_in: wp.array[float],
     joint_target_q_in: wp.array[float],
 ):
-    """The row's DOF index, position error ``q* - q`` and velocity. ``q_lin`` / ``qd_lin`` (>= 0): the network's
-    rows are consecutive coordinates / DOFs of env 0 from there (the index is computed, no table read)."""
+    """Everything the row reads, all before the network so that the loads are in flight together: its DOF index,
+    position error ``q* - q`` and velocity, its force limit and DC-motor envelope (saturation effort, velocity limit).
+    ``q_lin`` / ``qd_lin`` (>= 0): the network's rows are consecutive coordinates / DOFs of env 0 from there (the
+    index is computed, no table read)."""
     qi = q_lin + j + env * io.q_stride
     if q_lin < 0:
         qi = _at(io.q_idx, io.q_stride, env, r)
@@ -195,7 +197,8 @@ def row_input(
     if qd_lin < 0:
         di = _at(io.qd_idx, io.qd_stride, env, r)
     q = joint_q_in[qi]
-    return di, joint_target_q_in[qi] - q, joint_qd_in[di]
+    err = joint_target_q_in[qi] - q
+    return di, err, joint_qd_in[di], io.force_limit[env, r], io.sat_effort[env, r], io.vel_limit[env, r]
 
 
 @wp.func

@@ -179,11 +179,8 @@ def _make(L: NetLayout, block_dim: int) -> wp.Kernel:
         sat = float(0.0)
         vl = float(0.0)
         if live:
-            di, err, qd = row_input(io, wp.static(L.q_lin), wp.static(L.qd_lin), env, r, j, joint_q_in,
-                                                 joint_qd_in, joint_target_q_in)  # fmt: skip
-            lim = io.force_limit[env, r]
-            sat = io.sat_effort[env, r]
-            vl = io.vel_limit[env, r]
+            di, err, qd, lim, sat, vl = row_input(io, wp.static(L.q_lin), wp.static(L.qd_lin), env, r, j, joint_q_in,
+                                                  joint_qd_in, joint_target_q_in)  # fmt: skip
         x = vec_in()
         if wp.static(MLP):
             hp = vec_t()

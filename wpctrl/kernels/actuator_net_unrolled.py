@@ -104,12 +104,9 @@ def _make(L: NetLayout, weights: np.ndarray, scales: tuple[float, float, float])
         env = s // wp.static(N)
         j = s - env * wp.static(N)
         r = row0 + j
-        di, err, qd = row_input(io, wp.static(L.q_lin), wp.static(L.qd_lin), env, r, j, joint_q_in,
-                                             joint_qd_in, joint_target_q_in)  # fmt: skip
         # Every input is read here, before the network, so that all loads are in flight together.
-        lim = io.force_limit[env, r]
-        sat = io.sat_effort[env, r]
-        vl = io.vel_limit[env, r]
+        di, err, qd, lim, sat, vl = row_input(io, wp.static(L.q_lin), wp.static(L.qd_lin), env, r, j, joint_q_in,
+                                              joint_qd_in, joint_target_q_in)  # fmt: skip
         x = vec_w()
         if wp.static(MLP):
             # The history, newest first (Isaac Lab rolls it and writes the current sample at index 0).

@@ -74,6 +74,30 @@ def _task_solve(A: Mat6d, b: Vec6d, eps: wp.float64):
     return wp.cw_mul(d, x)
 
 
+@wp.struct
+class ImpedanceAction:
+    """How an impedance controller's ``set_action`` reads its action (one kernel argument instead of sixteen, fixed
+    for the controller's life): the action's options, the target columns' raw bounds, the gain limits of the
+    variable modes and the joint targets' clipping. Filled by :mod:`wpctrl.engine.parts.impedance`."""
+
+    mode: int  # 0 fixed, 1 variable_kp, 2 variable
+    use_delta: int
+    use_target: int
+    normalize: int
+    frame_bits: int  # OSC: the frames of the translation and rotation (as the EE kernels')
+    clip_targets: int  # joint impedance: clamp the targets to the joints' limits
+    target_lo: wp.array[float]  # (T,) raw bounds of the target columns
+    target_hi: wp.array[float]
+    rot_scale: wp.vec3
+    damping_ratio: wp.array[float]  # (T,) the fixed ratio of "variable_kp"
+    kp_lo: float  # the variable modes' stiffness and damping-ratio limits
+    kp_hi: float
+    ratio_lo: float
+    ratio_hi: float
+    row_qlo: wp.array[float]  # (rows,) the joints' limits (clip_targets)
+    row_qhi: wp.array[float]
+
+
 _set_action_cache: dict[tuple, wp.Kernel] = {}
 _torque_cache: dict[tuple, wp.Kernel] = {}
 
@@ -97,23 +121,7 @@ def set_action_kernel(osc: bool, n: int) -> wp.Kernel:
         col0: int,
         gain_col0: int,  # first column of the gain action (variable modes)
         gain_off: int,  # first column of the gains in kp_out / kd_out
-        # Parameters:
-        mode: int,  # 0 fixed, 1 variable_kp, 2 variable
-        use_delta: int,
-        use_target: int,
-        normalize: int,
-        frame_bits: int,
-        target_lo: wp.array[float],  # (T,) raw bounds of the target columns
-        target_hi: wp.array[float],
-        rot_scale: wp.vec3,
-        damping_ratio: wp.array[float],  # (T,) the fixed ratio of "variable_kp"
-        kp_lo: float,
-        kp_hi: float,
-        ratio_lo: float,
-        ratio_hi: float,
-        clip_targets: int,
-        row_qlo: wp.array[float],
-        row_qhi: wp.array[float],
+        p: ImpedanceAction,  # how the action maps to targets and gains
         # In:
         action_in: wp.array2d[float],
         joint_q_in: wp.array[float],
@@ -128,6 +136,9 @@ def set_action_kernel(osc: bool, n: int) -> wp.Kernel:
         env = wp.tid()
         if not _action_finite(action_in, env):
             return
+        mode, use_delta, use_target, normalize = p.mode, p.use_delta, p.use_target, p.normalize
+        target_lo, target_hi = p.target_lo, p.target_hi
+        kp_lo, kp_hi, ratio_lo, ratio_hi = p.kp_lo, p.kp_hi, p.ratio_lo, p.ratio_hi
         qb = env_q_base[env]
         if wp.static(OSC):
             q0 = vecD()
@@ -135,7 +146,7 @@ def set_action_kernel(osc: bool, n: int) -> wp.Kernel:
                 q0[c] = joint_q_in[qb + row_q_off[c]]
             lo = wp.vec3(target_lo[0], target_lo[1], target_lo[2])
             hi = wp.vec3(target_hi[0], target_hi[1], target_hi[2])
-            act = _pose_action(action_in, env, col0, 1, normalize, lo, hi, rot_scale)
+            act = _pose_action(action_in, env, col0, 1, normalize, lo, hi, p.rot_scale)
             for k in range(6):
                 processed_action_out[env, col0 + k] = act[k]
             t_ee, t_joint, axes, origins, kinds = _chain_fk(env, chain, joint_q_in, q0)
@@ -143,7 +154,7 @@ def set_action_kernel(osc: bool, n: int) -> wp.Kernel:
             prev = t_ee
             if use_target != 0:
                 prev = _read_pose(target_pose_out, env)
-            _write_pose(target_pose_out, env, _compose(prev, act, 1, use_delta, frame_bits))
+            _write_pose(target_pose_out, env, _compose(prev, act, 1, use_delta, p.frame_bits))
         else:
             for c in range(wp.static(N)):
                 x = _scale(action_in[env, col0 + c], target_lo[c], target_hi[c], normalize)
@@ -154,8 +165,8 @@ def set_action_kernel(osc: bool, n: int) -> wp.Kernel:
                         t = target_qpos_out[env, row0 + c] + x
                     else:
                         t = joint_q_in[qb + row_q_off[c]] + x
-                if clip_targets != 0:
-                    t = wp.clamp(t, row_qlo[row0 + c], row_qhi[row0 + c])
+                if p.clip_targets != 0:
+                    t = wp.clamp(t, p.row_qlo[row0 + c], p.row_qhi[row0 + c])
                 target_qpos_out[env, row0 + c] = t
         if mode != 0:
             kp = VecT()
@@ -163,7 +174,7 @@ def set_action_kernel(osc: bool, n: int) -> wp.Kernel:
             for k in range(wp.static(T)):
                 kp[k] = wp.clamp(_scale(action_in[env, gain_col0 + k], kp_lo, kp_hi, normalize), kp_lo, kp_hi)
                 processed_action_out[env, gain_col0 + k] = kp[k]
-                ratio[k] = damping_ratio[k]
+                ratio[k] = p.damping_ratio[k]
             if mode == 2:
                 for k in range(wp.static(T)):
                     c = gain_col0 + wp.static(T) + k

@@ -15,6 +15,8 @@ import sys
 import time
 from pathlib import Path
 
+from .ppo_config import runner_cfg
+
 MANISKILL_TASKS = ("PushCube-v1", "PickCube-v1")
 TASKS = ("reach",) + MANISKILL_TASKS
 CONTROL_MODES = ("pd_ee_delta_pos", "pd_joint_delta_pos")
@@ -23,13 +25,10 @@ CONTROL_MODES = ("pd_ee_delta_pos", "pd_joint_delta_pos")
 
 def train_cfg(num_steps_per_env: int = 24, seed: int = 0) -> dict:
     """rsl-rl's PPO configuration: Isaac Lab's settings for its Franka reach task (``FrankaReachPPORunnerCfg``)."""
-    return {
-        "seed": seed,
-        "num_steps_per_env": num_steps_per_env,
-        "save_interval": 10**9,
-        "obs_groups": {"actor": ["policy"], "critic": ["policy"]},
-        "algorithm": {
-            "class_name": "PPO",
+    return runner_cfg(
+        seed=seed,
+        num_steps_per_env=num_steps_per_env,
+        algorithm={
             "num_learning_epochs": 8,
             "num_mini_batches": 4,
             "learning_rate": 1.0e-3,
@@ -43,21 +42,9 @@ def train_cfg(num_steps_per_env: int = 24, seed: int = 0) -> dict:
             "use_clipped_value_loss": True,
             "clip_param": 0.2,
         },
-        "actor": {
-            "class_name": "MLPModel",
-            "hidden_dims": [64, 64],
-            "activation": "elu",
-            "obs_normalization": True,
-            "distribution_cfg": {"class_name": "GaussianDistribution", "init_std": 1.0},
-        },
-        "critic": {
-            "class_name": "MLPModel",
-            "hidden_dims": [64, 64],
-            "activation": "elu",
-            "obs_normalization": True,
-        },
-        "check_for_nan": False,
-    }
+        mlp={"class_name": "MLPModel", "hidden_dims": [64, 64], "activation": "elu", "obs_normalization": True},
+        distribution={"init_std": 1.0},
+    )
 
 
 class _Help(argparse.HelpFormatter):
@@ -142,6 +129,13 @@ def parse(argv):
         help="ManiSkill tasks: stop training once this many seconds have passed since the command started, then "
         "evaluate and save (default: no limit)",
     )
+    p.add_argument(
+        "--ppo-update",
+        choices=("captured", "rsl-rl"),
+        default=None,
+        help="ManiSkill tasks: 'captured' replays each PPO mini-batch step from one CUDA graph (CUDA only; the default "
+        "there), 'rsl-rl' runs rsl-rl's eager update (the default on the CPU)",
+    )
     p.add_argument("--out", default="wpctrl-train", help="output folder")
     p.add_argument("--no-graph", action="store_true", help="run the env step eagerly (no CUDA / CPU graph)")
     args = p.parse_args(argv)
@@ -159,7 +153,7 @@ def parse(argv):
     if args.time_limit is not None and not args.time_limit > 0:
         p.error(f"--time-limit: expected a positive number of seconds, got {args.time_limit}")
     if args.task == "reach":
-        for name in ("epochs", "minibatches", "substeps", "eval_envs", "time_limit"):
+        for name in ("epochs", "minibatches", "substeps", "eval_envs", "time_limit", "ppo_update"):
             if getattr(args, name) is not None:
                 p.error(f"--{name.replace('_', '-')}: only for the ManiSkill tasks {list(MANISKILL_TASKS)}")
         if args.no_partial_reset:

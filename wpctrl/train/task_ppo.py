@@ -17,6 +17,8 @@ import time
 
 import torch
 
+from .ppo_config import runner_cfg
+from .ppo_update import CapturedUpdate
 from .task_env import TaskVecEnv
 
 __all__ = ["Collector", "checkpoint_infos", "evaluate_policy", "maniskill_init", "maniskill_ppo_cfg", "train"]
@@ -40,13 +42,10 @@ def maniskill_ppo_cfg(
     normaliser; ManiSkill feeds them raw): the exported policy carries the normaliser.
     """
     mlp = {"class_name": "MLPModel", "hidden_dims": [256, 256, 256], "activation": "tanh", "obs_normalization": True}
-    return {
-        "seed": seed,
-        "num_steps_per_env": num_steps_per_env,
-        "save_interval": 10**9,
-        "obs_groups": {"actor": ["policy"], "critic": ["policy"]},
-        "algorithm": {
-            "class_name": "PPO",
+    return runner_cfg(
+        seed=seed,
+        num_steps_per_env=num_steps_per_env,
+        algorithm={
             "num_learning_epochs": num_learning_epochs,
             "num_mini_batches": num_mini_batches,
             "learning_rate": 3.0e-4,
@@ -61,10 +60,9 @@ def maniskill_ppo_cfg(
             "clip_param": 0.2,
             "normalize_advantage_per_mini_batch": True,
         },
-        "actor": dict(mlp, distribution_cfg={"class_name": "GaussianDistribution", "init_std": 1.0, "std_type": "log"}),
-        "critic": dict(mlp),
-        "check_for_nan": False,
-    }
+        mlp=mlp,
+        distribution={"init_std": 1.0, "std_type": "log"},
+    )
 
 
 def maniskill_init(model, last_gain: float) -> None:
@@ -188,6 +186,10 @@ def train(args, t_main: float) -> int:
         print(f"wpctrl train: --control-mode: expected one of the Panda's modes {list(T.CONTROL_MODES)}, got "
               f"{control_mode!r}", file=sys.stderr)  # fmt: skip
         return 2
+    ppo_update = args.ppo_update or ("captured" if cuda else "rsl-rl")
+    if ppo_update == "captured" and not cuda:
+        print(f"wpctrl train: --ppo-update: 'captured' needs a CUDA device, got --device {device}", file=sys.stderr)
+        return 2
     if not cuda:
         # the networks' matrices are small: one thread, since OpenMP workers spin-waiting for a busy core slow each
         # update down tens of times on a shared CPU
@@ -215,10 +217,13 @@ def train(args, t_main: float) -> int:
     maniskill_init(alg.critic, math.sqrt(2.0))
     for group in alg.optimizer.param_groups:
         group["eps"] = 1e-5  # ManiSkill's Adam
+    if ppo_update == "captured":
+        alg.update = CapturedUpdate(alg, graph=True)
     collector = Collector(env, alg)
     setup_s = time.perf_counter() - t0
     print(f"wpctrl train: {args.task}, {envs} envs on {device} ({env.substeps} MuJoCo steps per physics step), "
-          f"{control_mode}, evaluation on {eval_envs} envs; set up in {setup_s:.1f} s", flush=True)  # fmt: skip
+          f"{control_mode}, evaluation on {eval_envs} envs, PPO update {ppo_update}; set up in {setup_s:.1f} s",
+          flush=True)  # fmt: skip
 
     def deterministic(obs):
         return alg.actor(TensorDict({"policy": obs}, batch_size=[obs.shape[0]]))
@@ -288,6 +293,7 @@ def train(args, t_main: float) -> int:
         "device": device,
         "device_name": torch.cuda.get_device_name(torch.device(device)) if cuda else "cpu",
         "graph": env.graph is not None,
+        "ppo_update": ppo_update,
         "substeps": env.substeps,
         "partial_reset": env.partial_reset,
         "seed": args.seed,

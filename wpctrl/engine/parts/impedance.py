@@ -124,14 +124,24 @@ class _Unit:
         drive = self.engine.part("drive_properties")
         return drive.kp, drive.kd, self.row0
 
+    def _action_params(self) -> impedance_kernels.ImpedanceAction:
+        eng, s = self.engine, self.spec
+        p = impedance_kernels.ImpedanceAction()
+        p.mode, p.use_delta, p.use_target = int(s.mode), int(s.use_delta), int(s.use_target)
+        p.normalize, p.frame_bits, p.clip_targets = int(s.normalize), int(s.frame_bits), int(eng.plan.clip_targets)
+        p.target_lo, p.target_hi, p.damping_ratio = self.target_lo, self.target_hi, self.damping_ratio
+        p.rot_scale = wp.vec3(*(float(v) for v in s.rot_scale))
+        p.kp_lo, p.kp_hi = (float(v) for v in s.stiffness_limits)
+        p.ratio_lo, p.ratio_hi = (float(v) for v in s.damping_ratio_limits)
+        p.row_qlo, p.row_qhi = eng.core.row_qlo, eng.core.row_qhi
+        return p
+
     # -- stages ---------------------------------------------------------------------------------------------------
 
     def set_action(self, action: wp.array, state) -> None:
         eng, s = self.engine, self.spec
         if self._set_action is None:
             kp, kd, gain_off = self.gain_arrays()
-            lo, hi = s.stiffness_limits
-            rlo, rhi = s.damping_ratio_limits
             params = self.chain_params()
             params.update(
                 row_q_off=self.row_q_off,
@@ -140,22 +150,7 @@ class _Unit:
                 col0=self.col0,
                 gain_col0=self.col0 + s.task_dim,
                 gain_off=gain_off,
-                mode=s.mode,
-                use_delta=int(s.use_delta),
-                use_target=int(s.use_target),
-                normalize=int(s.normalize),
-                frame_bits=s.frame_bits,
-                target_lo=self.target_lo,
-                target_hi=self.target_hi,
-                rot_scale=wp.vec3(*(float(v) for v in s.rot_scale)),
-                damping_ratio=self.damping_ratio,
-                kp_lo=lo,
-                kp_hi=hi,
-                ratio_lo=rlo,
-                ratio_hi=rhi,
-                clip_targets=int(eng.plan.clip_targets),
-                row_qlo=eng.core.row_qlo,
-                row_qhi=eng.core.row_qhi,
+                p=self._action_params(),
                 action_in=action,
                 joint_q_in=state.joint_q,
                 processed_action_out=eng.core.processed_action,

@@ -23,11 +23,11 @@ def test_cuda_matches_cpu_for_the_same_state_and_step(task):
     envs = {d: T.make(task, num_envs=8, device=d, control_mode="pd_ee_delta_pos") for d in ("cpu", "cuda:0")}
     envs["cpu"].reset(seed=3)
     state = envs["cpu"].get_state_dict()
-    obs = {}
+    obs, loaded = {}, {}
     for d, env in envs.items():
         env.set_state_dict({g: {k: v.to(env.device) for k, v in e.items()} for g, e in state.items()})
-        before = env.get_obs().cpu().numpy()
-        np.testing.assert_allclose(before, envs["cpu"].get_obs().numpy(), atol=1e-5)
+        loaded[d] = env.get_obs().cpu().numpy()
+        np.testing.assert_allclose(loaded[d], loaded["cpu"], atol=1e-5)  # the CPU env's, before it steps
         action = torch.tensor([[0.3, -0.2, -0.5, 1.0]], device=env.device).expand(8, 4)
         o, r, *_ = env.step(action)
         obs[d] = (o.cpu().numpy(), r.cpu().numpy())

@@ -81,10 +81,13 @@ class CapturedUpdate:
         advantages = b["advantages"]
         if alg.normalize_advantage_per_mini_batch:
             advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
-        alg.actor(b["observations"], masks=None, hidden_state=None, stochastic_output=True)
-        log_prob = alg.actor.get_output_log_prob(b["actions"])
+        # rsl-rl's actor(..., stochastic_output=True) without its discarded sample: torch.normal checks its std on
+        # the host, which a capture does not allow
+        actor = alg.actor
+        actor.distribution.update(actor.mlp(actor.get_latent(b["observations"])))
+        log_prob = actor.get_output_log_prob(b["actions"])
         values = alg.critic(b["observations"], masks=None, hidden_state=None)
-        entropy = alg.actor.output_entropy
+        entropy = actor.output_entropy
         ratio = torch.exp(log_prob - torch.squeeze(b["old_actions_log_prob"]))
         surrogate = -torch.squeeze(advantages) * ratio
         clipped = -torch.squeeze(advantages) * torch.clamp(ratio, 1.0 - alg.clip_param, 1.0 + alg.clip_param)
@@ -100,6 +103,7 @@ class CapturedUpdate:
         torch.nn.utils.clip_grad_norm_(alg.actor.parameters(), alg.max_grad_norm)
         torch.nn.utils.clip_grad_norm_(alg.critic.parameters(), alg.max_grad_norm)
         alg.optimizer.step()
+        actor.distribution.update(actor.distribution.mean.detach())  # let go of this step's autograd graph
         self._sums += torch.stack([value_loss.detach(), surrogate_loss.detach(), entropy.mean().detach()])
 
     def _run_step(self):

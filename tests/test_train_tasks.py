@@ -326,6 +326,7 @@ def test_evaluate_in_the_real_maniskill_reports_a_hand_rolled_episodes_metrics(e
         (["--task", "PickCube-v1", "--time-limit", "-5"], "--time-limit: expected a positive number of seconds"),
         (["--task", "PushCube-v1", "--control-mode", "pd_ee_pos"], "--control-mode: expected one of the Panda's"),
         (["--task", "reach", "--ppo-update", "rsl-rl"], "--ppo-update: only for the ManiSkill tasks"),
+        (["--task", "reach", "--obs-normalization", "off"], "--obs-normalization: only for the ManiSkill tasks"),
         (
             ["--task", "PushCube-v1", "--ppo-update", "captured", "--device", "cpu"],
             "--ppo-update: 'captured' needs a CUDA device, got --device cpu",

@@ -136,6 +136,13 @@ def parse(argv):
         help="ManiSkill tasks: 'captured' replays each PPO mini-batch step from one CUDA graph (CUDA only; the default "
         "there), 'rsl-rl' runs rsl-rl's eager update (the default on the CPU)",
     )
+    p.add_argument(
+        "--obs-normalization",
+        choices=("on", "off"),
+        default=None,
+        help="ManiSkill tasks: 'on' normalises the observations with rsl-rl's running normaliser (the default), "
+        "'off' feeds them raw, as ManiSkill's PPO does",
+    )
     p.add_argument("--out", default="wpctrl-train", help="output folder")
     p.add_argument("--no-graph", action="store_true", help="run the env step eagerly (no CUDA / CPU graph)")
     args = p.parse_args(argv)
@@ -153,7 +160,7 @@ def parse(argv):
     if args.time_limit is not None and not args.time_limit > 0:
         p.error(f"--time-limit: expected a positive number of seconds, got {args.time_limit}")
     if args.task == "reach":
-        for name in ("epochs", "minibatches", "substeps", "eval_envs", "time_limit", "ppo_update"):
+        for name in ("epochs", "minibatches", "substeps", "eval_envs", "time_limit", "ppo_update", "obs_normalization"):
             if getattr(args, name) is not None:
                 p.error(f"--{name.replace('_', '-')}: only for the ManiSkill tasks {list(MANISKILL_TASKS)}")
         if args.no_partial_reset:

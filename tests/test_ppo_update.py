@@ -26,7 +26,7 @@ def _alg_after_rollout(device: str, clipped_value: bool, steps: int = 3, epochs:
     from rsl_rl.runners import OnPolicyRunner
 
     vec = TaskVecEnv("PushCube-v1", N, device=device, seed=5, substeps=2)
-    cfg = maniskill_ppo_cfg(steps, epochs, minibatches)
+    cfg = maniskill_ppo_cfg(steps, epochs, minibatches, obs_normalization=True)  # the normaliser the step refreshes
     cfg["algorithm"]["use_clipped_value_loss"] = clipped_value
     torch.manual_seed(0)
     with contextlib.redirect_stdout(io.StringIO()):

@@ -140,8 +140,8 @@ def parse(argv):
         "--obs-normalization",
         choices=("on", "off"),
         default=None,
-        help="ManiSkill tasks: 'on' normalises the observations with rsl-rl's running normaliser (the default), "
-        "'off' feeds them raw, as ManiSkill's PPO does",
+        help="ManiSkill tasks: 'off' feeds the observations raw, as ManiSkill's PPO does (the default); 'on' "
+        "normalises them with rsl-rl's running normaliser",
     )
     p.add_argument("--out", default="wpctrl-train", help="output folder")
     p.add_argument("--no-graph", action="store_true", help="run the env step eagerly (no CUDA / CPU graph)")

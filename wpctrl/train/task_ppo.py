@@ -33,15 +33,15 @@ def maniskill_ppo_cfg(
     num_learning_epochs: int = EPOCHS,
     num_mini_batches: int = MINIBATCHES,
     seed: int = 0,
-    obs_normalization: bool = True,
+    obs_normalization: bool = False,
 ) -> dict:
     """rsl-rl's configuration with ManiSkill's PPO baseline settings (see the module docstring).
 
     ManiSkill's value loss is ``vf_coef (0.5) * 0.5 * MSE``; rsl-rl's ``value_loss_coef * MSE``: 0.25 is the same
     loss. The learning rate is fixed as ManiSkill's (rsl-rl's adaptive schedule off); ManiSkill's early stop of an
-    update at an approximate KL of 0.1 has no rsl-rl counterpart. With ``obs_normalization`` the observations are
-    normalised (rsl-rl's running normaliser; the exported policy carries it); without, the networks read them raw,
-    as ManiSkill's do.
+    update at an approximate KL of 0.1 has no rsl-rl counterpart. The networks read the observations raw, as
+    ManiSkill's do; with ``obs_normalization`` they are normalised by rsl-rl's running normaliser (the exported
+    policy carries it), with which PPO stalls on PushCube (docs/training.md).
     """
     mlp = {"class_name": "MLPModel", "hidden_dims": [256, 256, 256], "activation": "tanh",
            "obs_normalization": obs_normalization}  # fmt: skip
@@ -209,7 +209,7 @@ def train(args, t_main: float) -> int:
                       seed=args.seed + 10_000, auto_reset=False, ignore_terminations=True,
                       physics=T.TaskPhysics(substeps=env.substeps), graph=graph)  # fmt: skip
     cfg = maniskill_ppo_cfg(steps, args.epochs or EPOCHS, args.minibatches or MINIBATCHES, args.seed,
-                            obs_normalization=args.obs_normalization != "off")  # fmt: skip
+                            obs_normalization=args.obs_normalization == "on")  # fmt: skip
     if envs * steps < cfg["algorithm"]["num_mini_batches"]:
         print(f"wpctrl train: --minibatches: {cfg['algorithm']['num_mini_batches']} mini-batches of a rollout of "
               f"{envs * steps} samples (--envs x --steps-per-env) leave some empty", file=sys.stderr)  # fmt: skip

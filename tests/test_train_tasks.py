@@ -163,6 +163,7 @@ def test_ppo_learns_pushcube_on_the_cpu(smoke_run):
     summary = _strict_json((smoke_run / "train.json").read_text())
     assert summary["iterations"] == 12 and summary["env_steps"] == 12 * 64 * 8 and summary["substeps"] == 4
     assert summary["ppo"]["algorithm"]["gamma"] == 0.8 and summary["partial_reset"] is True
+    assert summary["ppo"]["actor"]["obs_normalization"] is False  # ManiSkill's PPO reads the observations raw
     evals = summary["evaluations"]
     assert [e["iteration"] for e in evals] == [-1, 11] and all(e["episodes"] == 16 for e in evals)
     gain = evals[-1]["mean_episode_reward"] - evals[0]["mean_episode_reward"]

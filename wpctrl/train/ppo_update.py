@@ -146,7 +146,7 @@ class CapturedUpdate:
             for i in range(minibatches):
                 self._gather(flat, indices[i * size : (i + 1) * size])
                 self._run_step()
-        obs = st.observations.flatten(0, 1)
+        obs = flat["observations"]
         for model in (alg.actor, alg.critic):
             norm = getattr(model, "obs_normalizer", None)
             kept = getattr(norm, "_std", None)

@@ -8,8 +8,12 @@ One control step = ``set_action`` + K x ``before_simulation_step`` (K = 5), Mani
 * ``dc_motor``: ``wpctrl.DCMotor(87, 2.6)``;
 * ``position_limit``: ``wpctrl.PositionBasedEffortLimit`` with an 8-entry table;
 * ``mlp``: ``wpctrl.ActuatorNet`` of a 6-32-32-1 softsign MLP over 3 history taps (random weights), its default
-  kernel (the weights compiled in);
+  kernel (``kernel="auto"``: the weights compiled in, each row split over 4 or 2 threads when the rows are few);
 * ``lstm``: ``wpctrl.ActuatorNet`` of a 2-layer, 8-unit LSTM with a linear head (random weights), default kernel;
+* ``mlp_unrolled`` / ``lstm_unrolled``: the same networks with ``kernel="unrolled"`` (one thread per row at every
+  size);
+* ``mlp_split2`` / ``lstm_split2`` / ``mlp_split4`` / ``lstm_split4``: ``kernel="split2"`` / ``"split4"``, each row
+  split over 2 / 4 threads at every size (on the CPU without Warp's cooperative CPU blocks: the unrolled kernel);
 * ``mlp_tiled`` / ``lstm_tiled``: the same networks with ``kernel="tiled"`` (weights staged in shared memory, rows in
   64-row tiles, each layer a ``wp.tile_matmul``);
 * ``torch_mlp`` / ``torch_lstm``: the same control step with the network's substep written in torch on the same
@@ -21,10 +25,11 @@ One control step = ``set_action`` + K x ``before_simulation_step`` (K = 5), Mani
   (its own launch over every DOF): what the same DC-motor envelope costs as Newton's component.
 
 Graph-captured replay (and eager with ``--eager``), round-robin. Before timing, each torch variant's first control
-step is checked against the matching wpctrl one (``check_max_abs_joint_f``: max |joint_f| difference), and on CUDA one
-replay of its graph from the same start against that eager step (``replay_check_max_abs_joint_f``). A variant that
-cannot be built, run or captured is reported (``failures`` in the results) and the others are still timed. Run
-``python bench/actuator_cost.py --help``; results go to ``<out>/actuator_cost_<device>.{json,md}``.
+step is checked against the matching wpctrl one (``check_max_abs_joint_f``: max |joint_f| difference; a network
+variant's against the unrolled kernel's when that ran before it; ``kernel``: the network kernel that ran), and on
+CUDA one replay of its graph from the same start against that eager step (``replay_check_max_abs_joint_f``). A
+variant that cannot be built, run or captured is reported (``failures`` in the results) and the others are still
+timed. Run ``python bench/actuator_cost.py --help``; results go to ``<out>/actuator_cost_<device>.{json,md}``.
 """
 
 from __future__ import annotations
@@ -58,7 +63,8 @@ from bench.common import (  # noqa: E402
     synthetic_setup,
 )
 
-VARIANTS = ("plain", "dc_motor", "position_limit", "mlp", "lstm", "mlp_tiled", "lstm_tiled", "torch_mlp", "torch_lstm",
+VARIANTS = ("plain", "dc_motor", "position_limit", "mlp", "lstm", "mlp_unrolled", "lstm_unrolled", "mlp_split2",
+            "lstm_split2", "mlp_split4", "lstm_split4", "mlp_tiled", "lstm_tiled", "torch_mlp", "torch_lstm",
             "newton_dc")  # fmt: skip
 LABELS = {
     "plain": "plain explicit step",
@@ -66,6 +72,12 @@ LABELS = {
     "position_limit": "PositionBasedEffortLimit",
     "mlp": "ActuatorNet (MLP 6-32-32-1)",
     "lstm": "ActuatorNet (LSTM 2x8)",
+    "mlp_unrolled": "ActuatorNet (MLP, unrolled kernel)",
+    "lstm_unrolled": "ActuatorNet (LSTM, unrolled kernel)",
+    "mlp_split2": "ActuatorNet (MLP, split over 2)",
+    "lstm_split2": "ActuatorNet (LSTM, split over 2)",
+    "mlp_split4": "ActuatorNet (MLP, split over 4)",
+    "lstm_split4": "ActuatorNet (LSTM, split over 4)",
     "mlp_tiled": "ActuatorNet (MLP, tiled kernel)",
     "lstm_tiled": "ActuatorNet (LSTM, tiled kernel)",
     "torch_mlp": "MLP in torch",
@@ -140,6 +152,17 @@ def _torch_net(ctrl, state, control, lstm_cells: bool = False):
     return tnet
 
 
+def _reference(name: str) -> str | None:
+    """The variant whose first control step ``name``'s must reproduce: a torch baseline's network kernel (its default
+    one), a network kernel's the unrolled kernel of the same network."""
+    if name.startswith("torch_"):
+        return name.removeprefix("torch_")
+    net, _, kernel = name.partition("_")
+    if net in ("mlp", "lstm") and kernel != "unrolled":
+        return f"{net}_unrolled"
+    return None
+
+
 def _setup_variant(args, name, n_envs, model, small_model, sync, device, first_f, checks, lstm_cells):
     """Build variant ``name``, run its first control step (recorded in ``first_f``; a torch baseline's difference to
     the matching network kernel's in ``checks``) and capture it: ``(replay function or None, eager step)``."""
@@ -175,9 +198,15 @@ def _setup_variant(args, name, n_envs, model, small_model, sync, device, first_f
     # the first control step's joint_f (same action, same start): the torch baseline against wpctrl's kernel
     first_f[name] = control.joint_f.numpy().copy()
     base = name.removeprefix("torch_")
-    if base != name and base in first_f:
-        checks[name] = float(np.abs(first_f[name] - first_f[base]).max())
-        print(f"[{fmt_envs(n_envs)}] {name}: max |joint_f - {base}'s| after one step = {checks[name]:.3g}")
+    ref = _reference(name)
+    if ref in first_f:
+        checks[name] = float(np.abs(first_f[name] - first_f[ref]).max())
+        print(f"[{fmt_envs(n_envs)}] {name}: max |joint_f - {ref}'s| after one step = {checks[name]:.3g}")
+    nets = ctrl._engine.part("actuator_models").nets if ctrl._engine.part("actuator_models") else []
+    if nets and tnet is None:  # which network kernel ran (private attributes: the bench reports them)
+        kind = nets[0].kernel_kind + (f" x{nets[0].lanes}" if nets[0].kernel_kind == "split" else "")
+        checks[name + ":kernel"] = kind
+        print(f"[{fmt_envs(n_envs)}] {name}: kernel {kind}", flush=True)
     if tnet is None:
         with wp.ScopedCapture(device=device) as cap:
             step()
@@ -264,6 +293,7 @@ def run_one(args, n_envs, model, small_model, sync, device, failures: list) -> l
                 "samples_us": [x * 1e6 for x in t["samples_s"]],
                 "iters": t["iters"],
                 "clock": args.clock,
+                "kernel": checks.get(name + ":kernel"),
                 "check_max_abs_joint_f": checks.get(name),
                 "torch_capture": checks.get(name + ":capture"),
                 "torch_one_graph_error": checks.get(name + ":one graph error"),
@@ -288,10 +318,11 @@ def markdown(meta: dict, rows: list[dict], args) -> str:
             r["replay"],
             fmt_us(r["us"] * 1e-6),
             fmt_ratio(r["x_plain"]),
+            r.get("kernel") or "",
         ]
         for r in rows
     ]
-    out.append(md_table(["envs", "variant", "replay", "µs", "× plain"], body))
+    out.append(md_table(["envs", "variant", "replay", "µs", "× plain", "network kernel"], body))
     if any(r["layout"] == "synthetic" for r in rows):
         out.append("\n\\* synthetic layout (bench/common.py): a small model's layout tiled to N envs.\n")
     if any(r.get("torch_capture") == "two graphs" for r in rows):
@@ -308,8 +339,8 @@ def markdown(meta: dict, rows: list[dict], args) -> str:
                     f"{_g(r['replay_check_max_abs_joint_f'])} against the eager step; {r['torch_capture']})"
                 )
             each.append(txt)
-        out.append(f"\nTorch baseline against the network kernel, max |joint_f| difference (N·m) after the first "
-                   f"control step: {'; '.join(each)}.\n")  # fmt: skip
+        out.append(f"\nMax |joint_f| difference (N·m) after the first control step, a torch baseline against the "
+                   f"network kernel, a network kernel against the unrolled one: {'; '.join(each)}.\n")  # fmt: skip
     failures = meta.get("failures") or []
     if failures:
         out.append("\nNot timed: " + "; ".join(f"{fmt_envs(f['envs'])} {f['variant']}: {f['error']}" for f in failures)
@@ -328,7 +359,11 @@ def main(argv=None):
     p.add_argument("--mode", default="pd_joint_target_delta_pos")
     p.add_argument("--eager", action="store_true", help="also time the eager calls")
     p.add_argument("--max-real-envs", type=int, default=4096)
+    blocks = "Warp's cooperative CPU blocks (the split and tiled kernels run their GPU blocks on the CPU)"
+    p.add_argument("--cpu-blocks", action="store_true", help=blocks)
     args = parse_run_args(p, argv)
+    if args.cpu_blocks:
+        wp.config.enable_cpu_blocks = True
     device, sync, meta = start_run(p, args, cpu_envs="1,64,1k", cuda_envs="1,1k,4k,64k,1M")
     rows = []
     failures = meta.setdefault("failures", [])

@@ -18,9 +18,25 @@ from conftest import HAS_CUDA, build_panda
 
 import wpctrl
 from wpctrl.kernels import actuator_net as KN
+from wpctrl.kernels import actuator_net_split as KS
 from wpctrl.robots import PANDA_ARM_JOINTS
 
-KERNELS = ("unrolled", "tiled")
+KERNELS = ("unrolled", "tiled", "split2", "split4")
+
+
+def _kind(kernel: str) -> str:
+    """The kernel variant that runs for a ``kernel`` setting (split2 / split4: the split kernel)."""
+    return "split" if kernel.startswith("split") else kernel
+
+
+@pytest.fixture(autouse=True)
+def _cpu_blocks_for_split(request, monkeypatch):
+    """The split kernel's blocks (2 or 4 warps per 32 rows, synchronised) run on the CPU as Warp's cooperative CPU
+    blocks; without them the engine would run the unrolled kernel."""
+    kernel = getattr(request.node, "callspec", None) and request.node.callspec.params.get("kernel")
+    if isinstance(kernel, str) and kernel.startswith("split"):
+        monkeypatch.setattr(wp.config, "enable_cpu_blocks", True)
+
 
 pytestmark = pytest.mark.filterwarnings("ignore:`torch.jit:DeprecationWarning")
 f32 = np.float32
@@ -86,7 +102,7 @@ def test_mlp_actuator_equals_torch_with_history_and_partial_reset(tmp_path, orde
                                             actuator=act)  # fmt: skip
     model = build_panda(E)
     ctrl = wpctrl.build_controller(cfg, model, 100, 100, actuation="explicit", track_effort=True)
-    assert ctrl._engine.part("actuator_models").nets[0].kernel_kind == kernel  # private: the kernel variant that runs
+    assert ctrl._engine.part("actuator_models").nets[0].kernel_kind == _kind(kernel)  # private: the variant that runs
     hist_e = np.zeros((E, 5, J), f32)
     hist_v = np.zeros((E, 5, J), f32)
     rng = np.random.default_rng(0)
@@ -118,7 +134,7 @@ def test_lstm_actuator_equals_torch_with_hidden_state_and_partial_reset(tmp_path
                                             actuator=act)  # fmt: skip
     model = build_panda(E)
     ctrl = wpctrl.build_controller(cfg, model, 100, 100, actuation="explicit", track_effort=True)
-    assert ctrl._engine.part("actuator_models").nets[0].kernel_kind == kernel  # private: the kernel variant that runs
+    assert ctrl._engine.part("actuator_models").nets[0].kernel_kind == _kind(kernel)  # private: the variant that runs
     h = torch.zeros(2, E * J, 8)
     c = torch.zeros(2, E * J, 8)
     rng = np.random.default_rng(1)
@@ -189,7 +205,7 @@ def _check_against_torch(act, net, lstm, envs: int = E, device: str = "cpu", ste
     model = build_panda(envs, device)
     ctrl = wpctrl.build_controller(cfg, model, 100, 100, actuation="explicit", track_effort=True)
     if kernel is not None:
-        assert ctrl._engine.part("actuator_models").nets[0].kernel_kind == kernel  # private: the variant
+        assert ctrl._engine.part("actuator_models").nets[0].kernel_kind == _kind(kernel)  # private: the variant
     ref = _Reference(net, act, lstm, envs)
     rng = np.random.default_rng(7)
     s, c = model.state(), model.control()
@@ -263,15 +279,23 @@ NETWORKS = {
     # one LSTM layer of 4 units, velocity first, a head with an activation
     "lstm_1x4": (lambda: _LSTMHead(), {"input_order": "vel_pos", "pos_scale": 2.0, "vel_scale": 0.4,
                                        "torque_scale": 5.0}, (1, 4)),
+    # widths that 2 and 4 threads per row do not divide (the split kernel's last slices short or empty)
+    "odd_widths": (lambda: _mlp(torch.nn.Linear(6, 5), torch.nn.Tanh(), torch.nn.Linear(5, 7), torch.nn.Softsign(),
+                                torch.nn.Linear(7, 3), torch.nn.ELU(0.9), torch.nn.Linear(3, 1)),
+                   {"input_idx": (0, 1, 4), "pos_scale": 1.2, "vel_scale": 0.3, "torque_scale": 12.0}, None),
+    "lstm_2x3": (lambda: _LSTMHead(layers=2, hidden=3, head=False), {"torque_scale": 9.0}, (2, 3)),
 }  # fmt: skip
 
 
 class _LSTMHead(torch.nn.Module):
-    def __init__(self):
+    def __init__(self, layers=1, hidden=4, head=True):
         super().__init__()
         torch.manual_seed(4)
-        self.lstm = torch.nn.LSTM(2, 4, 1, batch_first=True)
-        self.head = torch.nn.Sequential(torch.nn.Linear(4, 4), torch.nn.Tanh(), torch.nn.Linear(4, 1))
+        self.lstm = torch.nn.LSTM(2, hidden, layers, batch_first=True)
+        if head:
+            self.head = torch.nn.Sequential(torch.nn.Linear(hidden, 4), torch.nn.Tanh(), torch.nn.Linear(4, 1))
+        else:
+            self.head = torch.nn.Sequential(torch.nn.Linear(hidden, 1))
         for p in self.parameters():
             torch.nn.init.uniform_(p, -0.8, 0.8)
 
@@ -292,10 +316,13 @@ def test_network_shapes_equal_torch(tmp_path, name, kernel):
     _check_against_torch(act, net, lstm, kernel=kernel)
 
 
+@pytest.mark.parametrize("kernel", ["tiled", "split2", "split4"])
 @pytest.mark.parametrize("kind", ["mlp", "lstm"])
-def test_tiled_kernel_with_a_partial_tile_on_cpu_blocks(tmp_path, monkeypatch, kind):
-    """Warp's cooperative CPU blocks run the tiled kernel as on a GPU: 64-row tiles, 13 envs x 7 joints = 91 rows, the
-    second tile 27 rows full and 37 threads past the end that still take part in the tile products."""
+def test_partial_tile_or_block_on_cpu_blocks(tmp_path, monkeypatch, kind, kernel):
+    """Warp's cooperative CPU blocks run the tiled and split kernels as on a GPU, 13 envs x 7 joints = 91 rows: the
+    tiled kernel's second 64-row tile 27 rows full and 37 threads past the end that still take part in the tile
+    products; the split kernel's third 32-row block 27 rows full, its 5 threads past the end (per warp) still taking
+    part in the block's synchronisations."""
     monkeypatch.setattr(wp.config, "enable_cpu_blocks", True)
     if kind == "mlp":
         make, kw, lstm = NETWORKS["trained"]
@@ -305,15 +332,16 @@ def test_tiled_kernel_with_a_partial_tile_on_cpu_blocks(tmp_path, monkeypatch, k
         torch.manual_seed(0)
         for p in net.parameters():
             torch.nn.init.uniform_(p, -0.6, 0.6)
-    act = wpctrl.ActuatorNet(net, kernel="tiled", **kw)
-    _check_against_torch(act, net, lstm, envs=13, kernel="tiled")
+    act = wpctrl.ActuatorNet(net, kernel=kernel, **kw)
+    _check_against_torch(act, net, lstm, envs=13, kernel=_kind(kernel))
 
 
 @pytest.mark.skipif(not HAS_CUDA, reason="needs a CUDA device: the kernels' GPU build (fast math, 64-row tiles)")
-@pytest.mark.parametrize("kernel", KERNELS)
-@pytest.mark.parametrize("name", ["trained", "activations", "lstm_2x8"])
+@pytest.mark.parametrize("kernel", [*KERNELS, "auto"])
+@pytest.mark.parametrize("name", ["trained", "activations", "lstm_2x8", "odd_widths", "lstm_2x3"])
 def test_networks_equal_torch_on_cuda(name, kernel):
-    """On the GPU, with 13 envs (91 rows: one full and one partial 64-row tile)."""
+    """On the GPU, with 13 envs (91 rows: one full and one partial 64-row tile, two full and one partial 32-row
+    block of the split kernel, which ``"auto"`` picks for so few rows)."""
     if name == "lstm_2x8":
         net, kw, lstm = _LSTMNet(hidden=8, layers=2), {"saturation_effort": 30.0, "velocity_limit": 6.0}, (2, 8)
         torch.manual_seed(0)
@@ -323,7 +351,8 @@ def test_networks_equal_torch_on_cuda(name, kernel):
         make, kw, lstm = NETWORKS[name]
         net = make()
     act = wpctrl.ActuatorNet(net, kernel=kernel, **kw)
-    _check_against_torch(act, net, lstm, envs=13, device="cuda:0", kernel=kernel)
+    kind = "split" if kernel == "auto" else _kind(kernel)
+    _check_against_torch(act, net, lstm, envs=13, device="cuda:0", kernel=kind)
 
 
 def test_kernel_choice_and_size_limit():
@@ -333,9 +362,22 @@ def test_kernel_choice_and_size_limit():
     big = small._replace(dense=((6, 64, 5, 0.0, 0, 0), (64, 64, 5, 0.0, 0, 0), (64, 1, 0, 0.0, 0, 0)))
     assert big.macs > KN.UNROLLED_MAX_MACS and KN.choose_kernel(big, "auto") == "tiled"
     assert KN.choose_kernel(big, "unrolled") == "unrolled"
+    # few rows on a GPU: the unrolled-size network split over 4 (2) threads per row while that fits 1,024 threads per
+    # SM; a full GPU, the CPU (1 lane) or a forced kernel: as set
+    assert [KS.split_lanes(rows, 132) for rows in (7, 4096 * 7, 33_792, 33_793, 67_584, 67_585)] == [4, 4, 4, 2, 2, 1]
+    assert KN.choose_kernel(small, "auto", KS.split_lanes(4096 * 7, 132)) == "split"
+    assert KN.choose_kernel(small, "auto", KS.split_lanes(65536 * 7, 132)) == "unrolled"
+    assert KN.choose_kernel(big, "auto", 4) == "tiled"
+    assert KN.choose_kernel(small, "unrolled", 4) == "unrolled" and KN.choose_kernel(small, "split4", 1) == "split"
     lstm = small._replace(dense=((32, 1, 0, 0.0, 0, 0),), lstm=((2, 32, 0, 0, 0, 0), (32, 32, 0, 0, 0, 0)), taps=())
     assert lstm.macs == 4 * 32 * 34 + 4 * 32 * 64 + 32 and KN.choose_kernel(lstm, "auto") == "tiled"
     model = build_panda(1)
+    # on the CPU without Warp's cooperative CPU blocks, "split" runs the unrolled kernel (the same results)
+    act = wpctrl.ActuatorNet(_mlp(torch.nn.Linear(6, 1)), kernel="split")
+    cfg = wpctrl.PDJointPosControllerConfig(PANDA_ARM_JOINTS, None, None, 0, 0, normalize_action=False, actuator=act)
+    assert not wp.config.enable_cpu_blocks
+    ctrl = wpctrl.build_controller(cfg, model, actuation="explicit")
+    assert ctrl._engine.part("actuator_models").nets[0].kernel_kind == "unrolled"  # private: the variant that runs
     huge = torch.nn.Sequential(torch.nn.Linear(6, 200), torch.nn.Tanh(), torch.nn.Linear(200, 100),
                                torch.nn.Linear(100, 1))  # fmt: skip
     cfg = wpctrl.PDJointPosControllerConfig(PANDA_ARM_JOINTS, None, None, 0, 0, normalize_action=False,
@@ -363,5 +405,6 @@ def test_network_errors_name_the_problem(tmp_path):
         build(torch.nn.Sequential(torch.nn.Conv1d(1, 1, 1), torch.nn.Linear(6, 1)))
     with pytest.raises(wpctrl.ConfigError, match=r"input_idx: expected substep indices"):
         build(torch.nn.Sequential(torch.nn.Linear(6, 1)), input_idx=(0, -1, 2))
-    with pytest.raises(wpctrl.ConfigError, match=r"kernel: expected 'auto', 'unrolled' or 'tiled', got 'fast'"):
+    with pytest.raises(wpctrl.ConfigError, match=r"kernel: expected 'auto', 'unrolled', 'split', 'split2', 'split4' or "
+                       r"'tiled', got 'fast'"):  # fmt: skip
         build(torch.nn.Sequential(torch.nn.Linear(6, 1)), kernel="fast")

@@ -642,7 +642,11 @@ BOUNDS: dict[str, dict[str, Bound]] = {
             outside=("lstm", "gru"),
             wrong_type=(3, None),
         ),
-        "kernel": Bound(inside=("auto", "unrolled", "tiled"), outside=("fast", "Tiled"), wrong_type=(3, None)),
+        "kernel": Bound(
+            inside=("auto", "unrolled", "split", "split2", "split4", "tiled"),
+            outside=("fast", "Tiled", "split3"),
+            wrong_type=(3, None),
+        ),
     },
     # The option groups, passed to build_controller with the base arm config (a position controller, force drives).
     "Actuation": {

@@ -84,12 +84,16 @@ class ActuatorNet:
     """DC-motor no-load speed [rad/s or m/s] (inf: none)."""
     kind: Literal["auto", "mlp", "lstm"] = "auto"
     """``"auto"``: an LSTM if the module holds one, else an MLP."""
-    kernel: Literal["auto", "unrolled", "tiled"] = "auto"
+    kernel: Literal["auto", "unrolled", "split", "split2", "split4", "tiled"] = "auto"
     """How the network runs on the device. ``"unrolled"``: its weights compiled into the kernel as instruction
-    operands, one thread per (env, joint), no loads of weights (the fastest for actuator-sized networks; one compile
-    per network). ``"tiled"``: the weights staged in shared memory once per block, rows batched into tiles and each
-    layer a tiled matrix product (one compile per network shape; for networks of up to 16,384 weights).
-    ``"auto"``: unrolled up to 4,096 multiply-adds per row, else tiled."""
+    operands, one thread per (env, joint), no loads of weights (the fastest for actuator-sized networks when the GPU
+    is full; one compile per network). ``"split"``: the same code with each row split over 2 or 4 threads (warps of a
+    block), each computing a slice of every layer, for launches of few rows; ``"split2"`` / ``"split4"`` force the
+    number, ``"split"`` takes it from the row count (on the CPU it needs Warp's cooperative CPU blocks, else the
+    unrolled kernel runs). ``"tiled"``: the weights staged in shared memory once per block, rows batched into tiles
+    and each layer a tiled matrix product (one compile per network shape; for networks of up to 16,384 weights).
+    ``"auto"``: up to 4,096 multiply-adds per row split on a GPU while 4 (else 2) threads per row stay within 1,024
+    threads per SM, else unrolled; larger networks tiled."""
 
 
 ACTUATOR_TYPES = (DCMotor, PositionBasedEffortLimit, ActuatorNet)
@@ -176,8 +180,9 @@ def actuator_rows(config, n: int) -> dict:
             v = getattr(act, f)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                 raise ConfigError(f"{where}.{f}: expected a finite number, got {v!r}")
-        if act.kernel not in ("auto", "unrolled", "tiled"):
-            raise ConfigError(f"{where}.kernel: expected 'auto', 'unrolled' or 'tiled', got {act.kernel!r}")
+        if act.kernel not in ("auto", "unrolled", "split", "split2", "split4", "tiled"):
+            kernels = "'auto', 'unrolled', 'split', 'split2', 'split4' or 'tiled'"
+            raise ConfigError(f"{where}.kernel: expected {kernels}, got {act.kernel!r}")
         out["act_model"][:] = ACT_NET
         out["extras"].append((0, n, act))
     return out

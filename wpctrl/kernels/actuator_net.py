@@ -4,13 +4,15 @@ Private module. A network's rows run in one launch after the substep kernel (the
 substep's, interpolated and delayed as the targets of any other row). Each thread of the launch is one (env, joint)
 row: it gathers ``joint_q`` / ``joint_qd`` / ``joint_target_q``, advances the history (or the recurrent state),
 evaluates the network, applies the DC-motor envelope and the force limit, and writes ``joint_f`` and the effort
-readout; no intermediate row buffer leaves the thread (or, in the tiled kernel, the block's shared memory). Two
-kernels evaluate the network, both compiled for its shape:
+readout; no intermediate row buffer leaves the thread (or, in the tiled kernel, the block's shared memory). Three
+kernels evaluate the network, all compiled for its shape:
 
 - :mod:`.actuator_net_unrolled` (networks of up to :data:`UNROLLED_MAX_MACS` multiply-adds per row): the weights are
   compiled into the kernel as immediate operands, so each multiply-add is one fused multiply-add instruction with no
   load, no shared memory and no block synchronisation. The kernel is compiled per network (its weights are part of
   it).
+- :mod:`.actuator_net_split` (the same networks, when the rows are few): the unrolled kernel's code with each row
+  split over 2 or 4 warps of a block, each computing a slice of every layer's units; the slices meet in shared memory.
 - :mod:`.actuator_net_tiled` (any size up to :data:`TILED_MAX_WEIGHTS` weights): the weights are staged once per
   block in shared memory (``wp.tile_load``), each block evaluates tiles of rows as matrix products
   (``wp.tile_matmul``), one tile per block pass. Compiled per network shape; the weights are data.
@@ -81,11 +83,16 @@ class NetLayout(NamedTuple):
         return (s, max(2 * self.past, 1)), (max(units, 1), s)
 
 
-def choose_kernel(layout: NetLayout, kernel: str) -> str:
-    """``"unrolled"`` or ``"tiled"`` for ``kernel`` (``"auto"``, ``"unrolled"`` or ``"tiled"``)."""
+def choose_kernel(layout: NetLayout, kernel: str, split_lanes: int = 1) -> str:
+    """``"unrolled"``, ``"split"`` or ``"tiled"`` for ``kernel`` (``"auto"``, ``"unrolled"``, ``"split"``,
+    ``"split2"``, ``"split4"`` or ``"tiled"``). ``split_lanes``: what :func:`.actuator_net_split.split_lanes` gives
+    for the launch's rows on its GPU (1 on the CPU): ``"auto"`` splits the rows of an unrolled-size network when it is
+    more than 1."""
     if kernel == "auto":
-        return "unrolled" if layout.macs <= UNROLLED_MAX_MACS else "tiled"
-    return kernel
+        if layout.macs > UNROLLED_MAX_MACS:
+            return "tiled"
+        return "split" if split_lanes > 1 else "unrolled"
+    return "split" if kernel.startswith("split") else kernel
 
 
 def dense_matrices(layout: NetLayout, weights: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, int, float]]:

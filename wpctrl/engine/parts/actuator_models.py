@@ -15,7 +15,7 @@ import warp as wp
 from ...config import ConfigError
 from ...config.actuator_models import ActuatorNet
 from ...config.networks import read_network
-from ...kernels import actuator_net, actuator_net_tiled, actuator_net_unrolled
+from ...kernels import actuator_net, actuator_net_split, actuator_net_tiled, actuator_net_unrolled
 from ...kernels.env_selection import MODE_SCALE, _bump_counter_kernel, _select
 from ..launch import _Launch
 from .part import Part
@@ -164,7 +164,14 @@ class _NetGroup:
             q_lin=_consecutive(plan.q_idx, plan.strided, row0, n),
             qd_lin=_consecutive(plan.qd_idx, plan.strided, row0, n),
         )
-        self.kernel_kind = actuator_net.choose_kernel(self.layout, spec.kernel)
+        cpu = wp.get_device(dev).is_cpu
+        lanes = 1 if cpu else actuator_net_split.split_lanes(E * n, wp.get_device(dev).sm_count)
+        self.kernel_kind = actuator_net.choose_kernel(self.layout, spec.kernel, lanes)
+        if self.kernel_kind == "split":
+            # forced: split2 / split4, else the rule's count, at least 2
+            self.lanes = int(spec.kernel[5:]) if spec.kernel[5:] else max(2, lanes)
+            if cpu and not wp.config.enable_cpu_blocks:
+                self.kernel_kind = "unrolled"  # the split kernel's blocks need Warp's cooperative CPU blocks
         extra = {}
         if self.kernel_kind == "tiled":
             wmat, bias = actuator_net_tiled.pack(self.layout, net.weights)
@@ -174,7 +181,6 @@ class _NetGroup:
                     f"actuator.network: {net.weights.size} weights and biases; the tiled kernel holds at most {most} "
                     f"(as {wmat.shape[0]} x {wmat.shape[1]} matrices and {bias.size} biases) in a block's shared memory"
                 )
-            cpu = wp.get_device(dev).is_cpu
             # On the CPU a block is one thread (a tile one row), unless Warp's cooperative CPU blocks are on.
             self.block_dim = 1 if cpu and not wp.config.enable_cpu_blocks else actuator_net_tiled.BLOCK_DIM
             tiles = -(-E * n // self.block_dim)
@@ -192,10 +198,15 @@ class _NetGroup:
         self.hist = wp.zeros(hist_shape, dtype=wp.float32, device=dev)
         self.lstm_h = wp.zeros(state_shape, dtype=wp.float32, device=dev)
         self.lstm_c = wp.zeros(state_shape, dtype=wp.float32, device=dev)
+        scales = (spec.pos_scale, spec.vel_scale, spec.torque_scale)
         if self.kernel_kind == "unrolled":
-            scales = (spec.pos_scale, spec.vel_scale, spec.torque_scale)
             self.kernel = actuator_net_unrolled.unrolled_kernel(self.layout, net.weights, scales)
             extra = {"hist_out": actuator_net_unrolled.history_vectors(self.hist)}
+        elif self.kernel_kind == "split":
+            self.kernel = actuator_net_split.split_kernel(self.layout, net.weights, scales, self.lanes)
+            self.block_dim = actuator_net_split.WARP * self.lanes
+            self.blocks = -(-E * n // actuator_net_split.WARP)
+            extra = {"hist_out": actuator_net_unrolled.history_vectors(self.hist), "num_rows": E * n}
         else:
             extra["hist_out"] = self.hist
         self._extra = extra
@@ -228,6 +239,8 @@ class _NetGroup:
             }
             if self.kernel_kind == "tiled":
                 dim, block_dim = (self.blocks, self.block_dim), self.block_dim
+            elif self.kernel_kind == "split":
+                dim, block_dim = self.blocks * self.block_dim, self.block_dim
             else:
                 dim, block_dim = engine.num_envs * self.n, actuator_net_unrolled.BLOCK_DIM
             self._launch = engine._launch(self.kernel, dim, per_call, block_dim)

@@ -7,7 +7,8 @@ control step (median of ``--repeats`` samples):
 
 * **MuJoCo-Warp rollout**: the control step's 5 x ``substeps`` solver steps alone (the contacts and Newton's contact
   sensor of the last one included, as the env computes them): simulating these envs with no controller, no task
-  kernels, no policy;
+  kernels, no policy; written out in the graph, and (with an even ``substeps`` on CUDA 12.4+) as the env's device
+  loop (:mod:`wpctrl.tasks.stepping`). The faster of the two is the reference of the ratios;
 * **controller calls**: ``set_action`` + 5 x ``before_simulation_step`` alone (the controller's share of the step);
 * **env.step without a policy**: the training env's whole step as PPO calls it (action copy, its graph: controller,
   physics, evaluation / observation / reward, episode bookkeeping, auto reset; the returned tensors and episode
@@ -15,8 +16,13 @@ control step (median of ``--repeats`` samples):
 * **rsl-rl alone**: PPO's ``act`` + the critic on the final observations (the bootstrap) + ``process_env_step`` on
   a fixed observation, no env step;
 * **PPO collection step**: one step of the training's rollout (``act`` -> ``env.step`` -> bootstrap ->
-  ``process_env_step``). Its rate over the rollout's is the collection efficiency; set against the sum and the
-  larger of the env step and rsl-rl alone, it shows whether the policy's work overlaps the env step or adds to it.
+  ``process_env_step``), back to back. Its rate over the rollout's is the collection efficiency; set against the sum
+  and the larger of the env step and rsl-rl alone, it shows whether the policy's work overlaps the env step or adds
+  to it;
+* **PPO rollout, then a sync**: one iteration's rollout (``--steps-per-env`` steps) and a device sync, as the
+  training times its collection (per step).
+
+``--action-sampling`` and ``--substep-loop`` pick the training's options (``wpctrl train``'s flags of those names).
 
 With ``--train-json`` (a ``python -m wpctrl train --task ...`` run with the same envs on the same device), that
 run's collection rate (median over its iterations after the first) is divided by the rollout's as well.
@@ -46,6 +52,8 @@ CONTROLLER = "controller calls"
 ENV_STEP = "env.step without a policy"
 RSL_RL = "rsl-rl alone (act + bootstrap value + process_env_step)"
 COLLECT = "PPO collection step"
+ROLLOUT_LOOP = "MuJoCo-Warp rollout as a device loop"
+ITERATION = "PPO rollout, then a sync (per step)"
 
 
 def main(argv=None) -> int:
@@ -55,6 +63,9 @@ def main(argv=None) -> int:
     p.add_argument("--substeps", type=int, default=None, help="MuJoCo-Warp steps per physics step (default: 16)")
     p.add_argument("--device", default="cuda:0" if wp.is_cuda_available() else "cpu")
     p.add_argument("--control-mode", default="pd_joint_delta_pos")
+    p.add_argument("--action-sampling", default="sync-free", choices=("sync-free", "rsl-rl"))
+    p.add_argument("--substep-loop", default="auto", choices=("auto", "unrolled", "device"))
+    p.add_argument("--steps-per-env", type=int, default=4, help="the rollout length of one PPO iteration")
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--min-s", type=float, default=0.25, help="minimum seconds per timing sample")
     p.add_argument("--train-json", type=Path, default=None, help="a training run's train.json: its collection rate")
@@ -64,6 +75,8 @@ def main(argv=None) -> int:
     from rsl_rl.runners import OnPolicyRunner
     from tensordict import TensorDict
 
+    from wpctrl.tasks.stepping import repeat
+    from wpctrl.train.sampling import act
     from wpctrl.train.task_env import TaskVecEnv
     from wpctrl.train.task_ppo import Collector, maniskill_ppo_cfg
 
@@ -72,7 +85,7 @@ def main(argv=None) -> int:
         torch.set_num_threads(1)
     train = collection_rate(args.train_json, args.envs, args.device) if args.train_json else None
     vec = TaskVecEnv(args.task, args.envs, device=args.device, control_mode=args.control_mode, seed=0,
-                     substeps=args.substeps)  # fmt: skip
+                     substeps=args.substeps, substep_loop=args.substep_loop)  # fmt: skip
     env = vec.env
     dev = env.wp_device
 
@@ -84,8 +97,23 @@ def main(argv=None) -> int:
     physics, ctrl_calls = task_step_parts(env)
     steps = env.ctrl.num_substeps * env.physics.substeps
 
+    def physics_loop():
+        solver, c, a, b = env.solver, env.control, env.state, env._other
+
+        def round_trip():
+            solver.step(a, b, c, None, env.dt)
+            solver.step(b, a, c, None, env.dt)
+
+        repeat(env._loop_count, steps // 2 - 1, round_trip)
+        solver.step(a, b, c, None, env.dt)
+        solver.step(b, a, c, env._contacts, env.dt, observables=env._observables)
+        env._sensor.update(None, env._contacts, observables=env._observables)
+
+    parts = [(ROLLOUT, physics), (CONTROLLER, ctrl_calls)]
+    if cuda and steps % 2 == 0 and wp.is_conditional_graph_supported():
+        parts.append((ROLLOUT_LOOP, physics_loop))
     fns = {}
-    for name, f in ((ROLLOUT, physics), (CONTROLLER, ctrl_calls)):
+    for name, f in parts:
         f()
         with wp.ScopedCapture(device=dev) as cap:
             f()
@@ -98,7 +126,8 @@ def main(argv=None) -> int:
     with contextlib.redirect_stdout(io.StringIO()):
         alg = OnPolicyRunner(vec, maniskill_ppo_cfg(), log_dir=None, device=args.device).alg
     alg.train_mode()
-    collector = Collector(vec, alg)
+    collector = Collector(vec, alg, args.action_sampling)
+    sample = (lambda o: act(alg, o)) if args.action_sampling == "sync-free" else alg.act
     obs0 = vec.get_observations()
     rew0 = torch.zeros(args.envs, device=vec.device)
     done0 = torch.zeros(args.envs, dtype=torch.bool, device=vec.device)
@@ -110,7 +139,7 @@ def main(argv=None) -> int:
 
     def rsl_rl_alone():
         room()
-        alg.act(obs0)
+        sample(obs0)
         value = alg.critic(TensorDict({"policy": obs0["policy"]}, batch_size=[args.envs])).squeeze(-1)
         alg.process_env_step(obs0, rew0 + alg.gamma * value * done0, done0, {})
 
@@ -118,17 +147,30 @@ def main(argv=None) -> int:
         room()
         live["obs"] = collector.rollout(live["obs"], 1)
 
+    def iteration():
+        alg.storage.clear()
+        live["obs"] = collector.rollout(live["obs"], args.steps_per_env)
+        sync()
+
     fns[RSL_RL] = rsl_rl_alone
     fns[COLLECT] = collection_step
+    fns[ITERATION] = iteration
     with torch.inference_mode():
         sec = {name: _time(f, sync, args.min_s, args.repeats) for name, f in fns.items()}
         host = {name: _host_time(f, sync, repeats=args.repeats) for name, f in fns.items()} if cuda else None
-    rollout, step, policy, collect = sec[ROLLOUT], sec[ENV_STEP], sec[RSL_RL], sec[COLLECT]
+    sec[ITERATION] /= args.steps_per_env
+    if host:
+        host[ITERATION] /= args.steps_per_env
+    rollout = min(sec[ROLLOUT], sec.get(ROLLOUT_LOOP, sec[ROLLOUT]))
+    step, policy, collect, per_iteration = sec[ENV_STEP], sec[RSL_RL], sec[COLLECT], sec[ITERATION]
     result = {
         "task": args.task,
         "envs": args.envs,
         "control_mode": args.control_mode,
         "substeps": env.physics.substeps,
+        "substep_loop": env.substep_loop,
+        "action_sampling": args.action_sampling,
+        "steps_per_env": args.steps_per_env,
         "solver_steps_per_control_step": steps,
         "graph": env.graph is not None,
         "us_per_control_step": {k: v * 1e6 for k, v in sec.items()},
@@ -139,6 +181,8 @@ def main(argv=None) -> int:
         "collection_env_steps_per_s": args.envs / collect,
         "collection_over_rollout": rollout / collect,
         "collection_over_env_step": step / collect,
+        "iteration_collection_env_steps_per_s": args.envs / per_iteration,
+        "iteration_collection_over_rollout": rollout / per_iteration,
         "policy_share_of_collection": 1.0 - step / collect,
         "collection_us_if_serial": (step + policy) * 1e6,
         "collection_us_if_overlapped": max(step, policy) * 1e6,
@@ -164,7 +208,10 @@ def main(argv=None) -> int:
         f"PPO collection: {args.envs / collect:,.0f} env-steps/s = {result['collection_over_rollout']:.0%} of the "
         f"MuJoCo-Warp rollout, {result['collection_over_env_step']:.0%} of env.step without a policy. Per step "
         f"{collect * 1e6:,.0f} µs, against {(step + policy) * 1e6:,.0f} µs if rsl-rl's work and the env step ran one "
-        f"after the other and {max(step, policy) * 1e6:,.0f} µs if they overlapped entirely.\n",
+        f"after the other and {max(step, policy) * 1e6:,.0f} µs if they overlapped entirely. One iteration's rollout "
+        f"of {args.steps_per_env} steps with its sync: {args.envs / per_iteration:,.0f} env-steps/s = "
+        f"{result['iteration_collection_over_rollout']:.0%} of the rollout. Env step's MuJoCo-Warp steps: "
+        f"{env.substep_loop}; action sampling: {args.action_sampling}.\n",
     ]
     if train:
         md.append(
@@ -172,7 +219,7 @@ def main(argv=None) -> int:
             f"{rate:,.0f} env-steps/s = {result['training_collection_over_rollout']:.0%} of the MuJoCo-Warp "
             "rollout.\n"
         )
-    stem = f"task_train_rate_{args.task}_{'cuda' if cuda else 'cpu'}"
+    stem = f"task_train_rate_{args.task}_{'cuda' if cuda else 'cpu'}_{env.substep_loop}_{args.action_sampling}"
     jpath, mpath = write_results(args.out, stem, meta, [result], "\n".join(md))
     print("\n".join(md))
     print(f"wrote {jpath} and {mpath}")

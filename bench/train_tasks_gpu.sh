@@ -20,6 +20,13 @@
 #   STAGE=pick bash bench/train_tasks_gpu.sh   (at most 9:50)
 #       PickCube-v1, 4,096 envs, evaluations every 10 iterations, stopping at 80 % (cap --time-limit 540 s from the
 #       command's start, limit 585 s).
+#   STAGE=rate bash bench/train_tasks_gpu.sh   (cold kernel cache ~6 min, warm ~3 min, at most 9:30)
+#       the warm-up above, then bench/task_train_rate.py on PushCube's 4,096 envs three times (limit 120 s each): the
+#       env step's MuJoCo-Warp steps written out with rsl-rl's action sampling (the collection before the sync-free
+#       sampler and the device loop), written out with the sync-free sampler, and as a device loop with it (the
+#       training's defaults).
+#   STAGE=tests bash bench/train_tasks_gpu.sh  (~2 min, at most 4 min)
+#       the CUDA tests of the tasks, the device loop, the sampler and the captured PPO update.
 #   STAGE=after bash bench/train_tasks_gpu.sh  (~2-3 min, at most 6 min)
 #       PickCube's export and Newton evaluation (limits 60 s each), then bench/task_train_rate.py on PushCube's 4,096 envs
 #       (limit 240 s): the bare MuJoCo-Warp rollout of the scene, the controller, the env step, rsl-rl alone and the
@@ -32,7 +39,7 @@
 #   python -m wpctrl evaluate --policy $OUT/push/policy.ts --sim maniskill --episodes 100 --out push_maniskill.json
 #   python -m wpctrl evaluate --policy $OUT/pick/policy.ts --sim maniskill --episodes 100 --out pick_maniskill.json
 #
-# Settings (environment variables): ENVS (4096), SUBSTEPS (8: MuJoCo-Warp steps per 10 ms physics step, twice as fast
+# Settings (environment variables): ENVS (4096), CONTROL_MODE (pd_joint_delta_pos), PICK_EVAL_EVERY (25), SUBSTEPS (8: MuJoCo-Warp steps per 10 ms physics step, twice as fast
 # as the default 16; the replay of ManiSkill's recorded episodes keeps 19 of 20 successes at 8, PushCube's cube 2.6 cm
 # off in the median instead of 0.24: docs/tasks.md), SEED (0),
 # PUSH_TARGET (0.9), PICK_TARGET (0.8), PUSH_CAP (150), PICK_CAP (540), EVAL_EPISODES
@@ -87,7 +94,8 @@ phase() {  # phase NAME LIMIT_S CMD...
 train() {  # train TASK DIR TARGET CAP EVAL_EVERY LIMIT
   mkdir -p "$2"
   phase "train $1" "$6" $PY -m wpctrl train --task "$1" --device "$DEVICE" --envs "$ENVS" --substeps "$SUBSTEPS" \
-    --seed "$SEED" --eval-every "$5" --target-success "$3" --time-limit "$4" --out "$2"
+    --seed "$SEED" --eval-every "$5" --target-success "$3" --time-limit "$4" --out "$2" \
+    --control-mode "${CONTROL_MODE:-pd_joint_delta_pos}"
   cp "$LOG" "$2/train.log"
 }
 
@@ -97,18 +105,35 @@ export_and_evaluate() {  # export_and_evaluate DIR LIMIT
     --episodes "$EVAL_EPISODES" --envs "$EVAL_EPISODES" --seed 1 --out "$1/newton_eval.json"
 }
 
+warmup() {
+  phase warmup 240 $PY -m wpctrl train --task PushCube-v1 --device "$DEVICE" --envs "$ENVS" --substeps "$SUBSTEPS" \
+    --seed "$SEED" --iterations 1 --out "$OUT/warmup"
+}
+
+rate() {  # rate SUBSTEP_LOOP ACTION_SAMPLING
+  phase "rate $1 $2" 120 $PY bench/task_train_rate.py --task PushCube-v1 --device "$DEVICE" --envs "$ENVS" \
+    --substeps "$SUBSTEPS" --substep-loop "$1" --action-sampling "$2" --out "$OUT/rate"
+}
+
 case "$STAGE" in
+  rate)
+    warmup
+    rate unrolled rsl-rl
+    rate unrolled sync-free
+    rate device sync-free ;;
+  tests)
+    phase "CUDA tests" 240 $PY -m pytest -q -p no:cacheprovider --no-cov tests/test_task_stepping.py \
+      tests/test_sampling.py tests/test_tasks_cuda.py tests/test_ppo_update.py -k "cuda" ;;
   push)
-    phase warmup 240 $PY -m wpctrl train --task PushCube-v1 --device "$DEVICE" --envs "$ENVS" --substeps "$SUBSTEPS" \
-      --seed "$SEED" --iterations 1 --out "$OUT/warmup"
+    warmup
     train PushCube-v1 "$OUT/push" "${PUSH_TARGET:-0.9}" "${PUSH_CAP:-150}" 5 200
     export_and_evaluate "$OUT/push" 60 ;;
   pick)
-    train PickCube-v1 "$OUT/pick" "${PICK_TARGET:-0.8}" "${PICK_CAP:-540}" 10 585 ;;
+    train PickCube-v1 "$OUT/pick" "${PICK_TARGET:-0.8}" "${PICK_CAP:-540}" "${PICK_EVAL_EVERY:-25}" 585 ;;
   after)
     export_and_evaluate "$OUT/pick" 60
     phase rate 240 $PY bench/task_train_rate.py --task PushCube-v1 --device "$DEVICE" --envs "$ENVS" \
       --substeps "$SUBSTEPS" --train-json "$OUT/push/train.json" --out "$OUT" ;;
-  *) echo "STAGE: expected push, pick or after, got '$STAGE'"; exit 2 ;;
+  *) echo "STAGE: expected rate, tests, push, pick or after, got '$STAGE'"; exit 2 ;;
 esac
 echo "=== total $(($(date +%s) - t0)) s" | tee -a "$LOG"

@@ -19,6 +19,7 @@ import torch
 
 from .ppo_config import runner_cfg
 from .ppo_update import CapturedUpdate
+from .sampling import SAMPLINGS, act, sync_free
 from .task_env import TaskVecEnv
 
 __all__ = ["Collector", "checkpoint_infos", "evaluate_policy", "maniskill_init", "maniskill_ppo_cfg", "train"]
@@ -83,18 +84,26 @@ class Collector:
     success with partial resets, where ManiSkill's PPO bootstraps too: success is not an absorbing state of the task)
     gets ``gamma * V(final observation)``, the critic's value of the state the episode ended in, and the episode's
     return stops there (rsl-rl's ``dones``). Branch-free: the critic runs on every env's final observation (equal to
-    the next observation where nothing ended), so no host sync inside the rollout."""
+    the next observation where nothing ended). With ``sampling="sync-free"`` (:mod:`wpctrl.train.sampling`) the
+    actions are drawn without rsl-rl's host sync, so nothing inside the rollout waits for the GPU: the host queues
+    the next step while the GPU runs the current one."""
 
-    def __init__(self, env: TaskVecEnv, alg):
+    def __init__(self, env: TaskVecEnv, alg, sampling: str = "sync-free"):
+        if sampling not in SAMPLINGS:
+            raise ValueError(f"Collector: sampling expected one of {SAMPLINGS}, got {sampling!r}")
+        if sampling == "sync-free" and (why := sync_free(alg)):
+            raise ValueError(f"Collector: sync-free sampling does not support {why}; use sampling='rsl-rl'")
         self.env = env
         self.alg = alg
+        self.sampling = sampling
+        self._act = (lambda obs: act(alg, obs)) if sampling == "sync-free" else alg.act
 
     def rollout(self, obs, steps: int):
         from tensordict import TensorDict
 
         alg, env = self.alg, self.env
         for _ in range(steps):
-            actions = alg.act(obs)
+            actions = self._act(obs)
             obs, rewards, dones, extras = env.step(actions)
             final = TensorDict({"policy": extras["final_observations"]}, batch_size=[env.num_envs])
             value = alg.critic(final).squeeze(-1)
@@ -174,6 +183,7 @@ def train(args, t_main: float) -> int:
     from tensordict import TensorDict
 
     import wpctrl.tasks as T
+    from wpctrl.config import ConfigError
 
     from .outputs import fmt, median, plot, write_json
 
@@ -193,6 +203,7 @@ def train(args, t_main: float) -> int:
     if ppo_update == "captured" and not cuda:
         print(f"wpctrl train: --ppo-update: 'captured' needs a CUDA device, got --device {device}", file=sys.stderr)
         return 2
+    sampling = args.action_sampling or "sync-free"
     if not cuda:
         # the networks' matrices are small: one thread, since OpenMP workers spin-waiting for a busy core slow each
         # update down tens of times on a shared CPU
@@ -203,11 +214,17 @@ def train(args, t_main: float) -> int:
 
     t0 = time.perf_counter()
     graph = not args.no_graph
-    env = TaskVecEnv(args.task, envs, device=device, control_mode=control_mode, seed=args.seed,
-                     partial_reset=not args.no_partial_reset, substeps=args.substeps, graph=graph)  # fmt: skip
-    eval_env = T.make(args.task, num_envs=eval_envs, device=device, control_mode=control_mode,
-                      seed=args.seed + 10_000, auto_reset=False, ignore_terminations=True,
-                      physics=T.TaskPhysics(substeps=env.substeps), graph=graph)  # fmt: skip
+    try:
+        env = TaskVecEnv(args.task, envs, device=device, control_mode=control_mode, seed=args.seed,
+                         partial_reset=not args.no_partial_reset, substeps=args.substeps, graph=graph,
+                         substep_loop=args.substep_loop or "auto")  # fmt: skip
+        eval_env = T.make(args.task, num_envs=eval_envs, device=device, control_mode=control_mode,
+                          seed=args.seed + 10_000, auto_reset=False, ignore_terminations=True,
+                          physics=T.TaskPhysics(substeps=env.substeps), graph=graph,
+                          substep_loop=args.substep_loop or "auto")  # fmt: skip
+    except ConfigError as e:  # an option the envs refuse (e.g. --substep-loop device with an odd --substeps)
+        print(f"wpctrl train: {e}", file=sys.stderr)
+        return 2
     cfg = maniskill_ppo_cfg(steps, args.epochs or EPOCHS, args.minibatches or MINIBATCHES, args.seed,
                             obs_normalization=args.obs_normalization == "on")  # fmt: skip
     if envs * steps < cfg["algorithm"]["num_mini_batches"]:
@@ -223,10 +240,11 @@ def train(args, t_main: float) -> int:
         group["eps"] = 1e-5  # ManiSkill's Adam
     if ppo_update == "captured":
         alg.update = CapturedUpdate(alg, graph=True)
-    collector = Collector(env, alg)
+    collector = Collector(env, alg, sampling)
     setup_s = time.perf_counter() - t0
     print(f"wpctrl train: {args.task}, {envs} envs on {device} ({env.substeps} MuJoCo steps per physics step), "
-          f"{control_mode}, evaluation on {eval_envs} envs, PPO update {ppo_update}; set up in {setup_s:.1f} s",
+          f"{control_mode}, evaluation on {eval_envs} envs, PPO update {ppo_update}, {sampling} action sampling, "
+          f"{env.substep_loop} substep loop; set up in {setup_s:.1f} s",
           flush=True)  # fmt: skip
 
     def deterministic(obs):
@@ -298,6 +316,8 @@ def train(args, t_main: float) -> int:
         "device_name": torch.cuda.get_device_name(torch.device(device)) if cuda else "cpu",
         "graph": env.graph is not None,
         "ppo_update": ppo_update,
+        "action_sampling": sampling,
+        "substep_loop": env.substep_loop,
         "substeps": env.substeps,
         "partial_reset": env.partial_reset,
         "seed": args.seed,

@@ -745,6 +745,38 @@ MUTATIONS: list[Mutation] = [
         "an actuator network's output skips its DC-motor envelope (saturation_effort / velocity_limit)",
         ("tests/test_actuator_setups.py", "tests/test_actuator_net.py"),
     ),
+    M(
+        "net_split_total_without_last_warp",
+        "wpctrl/kernels/actuator_net_split.py",
+        "        for q in range(1, wp.static(S)):\n",
+        "        for q in range(1, wp.static(S) - 1):\n",
+        "the split kernel's output sums the partial sums of every warp but the last",
+        ("tests/test_actuator_net.py",),
+    ),
+    M(
+        "net_split_hidden_gather_own_slice",
+        "wpctrl/kernels/actuator_net_split.py",
+        "v = sh[q, t]\n                        for k in range(wp.static(SLICE[DOUT[li]]",
+        "v = sh[lane, t]\n                        for k in range(wp.static(SLICE[DOUT[li]]",
+        "the split kernel's hidden layers read their own warp's slice in place of every other warp's",
+        ("tests/test_actuator_net.py",),
+    ),
+    M(
+        "net_split_lstm_c_of_first_warp",
+        "wpctrl/kernels/actuator_net_split.py",
+        "io.lstm_c[wp.static(li * H) + lane * wp.static(MH) + k, s]\n",
+        "io.lstm_c[wp.static(li * H) + k, s]\n",
+        "every warp of the split LSTM reads the first warp's units' cell state",
+        ("tests/test_actuator_net.py",),
+    ),
+    M(
+        "net_split_lstm_last_layer_h_everywhere",
+        "wpctrl/kernels/actuator_net_split.py",
+        "s] = ho[wp.static(li * MH) + k]\n",
+        "s] = own[k]\n",
+        "the split LSTM stores its last layer's new h as every layer's",
+        ("tests/test_actuator_net.py",),
+    ),
     # -- smoothing, effort readout, bases and DOF indices on later controllers / other models ----------------------
     M(
         "ema_alpha_of_row_0",

@@ -3,8 +3,10 @@
 #
 #   OUT=/tmp/nets bash bench/nets_gpu.sh
 #   OUT=/tmp/nets NETS_VARIANTS=plain,mlp,lstm,torch_mlp,torch_lstm STAGES=bench bash bench/nets_gpu.sh
-#   OUT=/tmp/nets NETS_ENVS=4k,1M NETS_VARIANTS=plain,dc_motor,position_limit,mlp_unrolled,lstm_unrolled,mlp,lstm,mlp_split2,lstm_split2 \
-#     NCU_VARIANTS=mlp_unrolled,lstm_unrolled,mlp,lstm,mlp_split2,lstm_split2 STAGES=bench,ncu bash bench/nets_gpu.sh
+#   OUT=/tmp/nets NETS_ENVS=4k,1M \
+#     NETS_VARIANTS=plain,dc_motor,position_limit,mlp_unrolled,lstm_unrolled,mlp,lstm,mlp_split2,lstm_split2 \
+#     NCU_ENVS=4k NCU_VARIANTS=mlp_unrolled,lstm_unrolled,mlp,lstm,mlp_split2,lstm_split2 \
+#     TESTS_K="cuda and (split4 or auto)" bash bench/nets_gpu.sh     # the split kernel against the unrolled one
 #
 #   nets_gpu.log                  the machine, versions, each stage's output (the bench's per-variant lines, the
 #                                 torch baseline's checks against the network kernels and how it was captured, the
@@ -17,7 +19,7 @@
 #                                 torch_capture field); a variant that fails is listed under "failures", the rest timed
 #   ncu_net_4k.txt, ncu_net_1M.txt
 #                                 Nsight Compute's details of one launch of each network kernel (bench/ncu_net.py,
-#                                 NCU_VARIANTS: default mlp,lstm,mlp_tiled,lstm_tiled):
+#                                 NCU_VARIANTS: default mlp,lstm,mlp_tiled,lstm_tiled; NCU_ENVS: default "4k 1M"):
 #                                 speed of light, compute and memory workload, occupancy, warp stalls, scheduler
 #
 # STAGES (default bench,ncu,tests) picks the stages and NETS_VARIANTS the bench's variants (default: all but
@@ -26,6 +28,7 @@
 # DEVICE: the bench's device (cuda:0; cpu for a dry run of the bench stage at NETS_ENVS=64, the torch baseline then
 # eager, the split and tiled kernels in Warp's cooperative CPU blocks). Expected on an H100: the bench stage ~2 min
 # with a warm kernel cache (Warp compiles first with an empty one: ~1 min more), all three stages ~3.5 min.
+# The split-kernel command above (third example): about 4 to 4.5 min with an empty kernel cache (estimated).
 set -uo pipefail
 cd "$(dirname "$0")/.."
 OUT=${OUT:-bench/results}
@@ -55,7 +58,7 @@ if [[ $STAGES == *bench* ]]; then
 fi
 
 if [[ $STAGES == *ncu* && $DEVICE == cuda* ]]; then
-  for n in 4k 1M; do
+  for n in ${NCU_ENVS:-4k 1M}; do
     echo "=== ncu $n (+$(( $(date +%s) - t0 ))s)" | tee -a "$LOG"
     timeout "${NCU_LIMIT:-60}" "$NCU" --profile-from-start off --clock-control none \
       --kernel-name regex:wpctrl_actuator_net --section SpeedOfLight --section ComputeWorkloadAnalysis \

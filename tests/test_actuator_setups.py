@@ -200,17 +200,18 @@ def substeps(ctrl, model, names, rng, steps, targets_in=None):
         yield q, qd, c.joint_target_q.numpy()[coord], c.joint_f.numpy()[dof]
 
 
-@pytest.mark.parametrize("order", ["pos_vel", "vel_pos"])
-def test_lstm_with_input_scales_on_a_later_controller_equals_torch(order):
+@pytest.mark.parametrize(("order", "kernel"), [("pos_vel", "auto"), ("vel_pos", "auto"), ("pos_vel", "split2")])
+def test_lstm_with_input_scales_on_a_later_controller_equals_torch(order, kernel, monkeypatch):
     """An LSTM actuator on the second controller with pos/vel/torque scales that are not 1 and a per-env DC
     envelope: torch's LSTM on the scaled inputs (in ``input_order``), the output times torque_scale, then Newton's
-    ClampingDCMotor at each env's values."""
+    ClampingDCMotor at each env's values. Also with the split kernel (on Warp's cooperative CPU blocks)."""
     from newton.actuators import ClampingDCMotor
 
+    monkeypatch.setattr(wp.config, "enable_cpu_blocks", kernel != "auto")
     net = init(LSTMNet())
     ps, vs, ts = 2.5, 0.3, 40.0
     act = wpctrl.ActuatorNet(net, pos_scale=ps, vel_scale=vs, torque_scale=ts, input_order=order,
-                             saturation_effort=50.0, velocity_limit=8.0)  # fmt: skip
+                             saturation_effort=50.0, velocity_limit=8.0, kernel=kernel)  # fmt: skip
     model = build_panda(E)
     mode = {"a": pos(ARM_A, 200.0, 10.0, 45.0), "b": pos(ARM_B, 0.0, 0.0, 60.0, actuator=act)}
     ctrl = wpctrl.build_controller(mode, model, 100, 100, actuation="explicit", track_effort=True)
@@ -299,18 +300,23 @@ def test_mlp_on_a_later_controller_reads_the_delayed_target():
         np.testing.assert_allclose(tau, u, rtol=1e-4, atol=1e-4)
 
 
-def test_two_networks_in_one_mode_keep_their_own_weights_scales_and_state():
-    """An MLP on the first controller and an LSTM on the second, different scales: each row gets its own network."""
+@pytest.mark.parametrize("kernel", ["auto", "split4"])
+def test_two_networks_in_one_mode_keep_their_own_weights_scales_and_state(kernel, monkeypatch):
+    """An MLP on the first controller and an LSTM on the second, different scales: each row gets its own network
+    (also with the split kernel, on Warp's cooperative CPU blocks)."""
+    monkeypatch.setattr(wp.config, "enable_cpu_blocks", kernel != "auto")
     mlp = init(torch.nn.Sequential(torch.nn.Linear(2, 5), torch.nn.ELU(0.5), torch.nn.Linear(5, 1)), seed=2)
     lstm = init(LSTMNet(hidden=4, layers=1), seed=3)
     mode = {
         "a": pos(ARM_A, 0.0, 0.0, 1e9, actuator=wpctrl.ActuatorNet(mlp, input_idx=(0,), pos_scale=3.0, vel_scale=0.5,
-                                                                      torque_scale=7.0)),
+                                                                      torque_scale=7.0, kernel=kernel)),
         "b": pos(ARM_B, 0.0, 0.0, 1e9, actuator=wpctrl.ActuatorNet(lstm, pos_scale=0.25, vel_scale=2.0,
-                                                                      torque_scale=-9.0)),
+                                                                      torque_scale=-9.0, kernel=kernel)),
     }  # fmt: skip
     model = build_panda(E)
     ctrl = wpctrl.build_controller(mode, model, 100, 100, actuation="explicit")
+    want = "split" if kernel != "auto" else "unrolled"
+    assert [g.kernel_kind for g in ctrl._engine.part("actuator_models").nets] == [want, want]  # private: the kernels
     h = torch.zeros(1, E * 4, 4)
     cs = torch.zeros(1, E * 4, 4)
     rng = np.random.default_rng(5)

@@ -8,7 +8,7 @@ One control step = ``set_action`` + K x ``before_simulation_step`` (K = 5), Mani
 * ``dc_motor``: ``wpctrl.DCMotor(87, 2.6)``;
 * ``position_limit``: ``wpctrl.PositionBasedEffortLimit`` with an 8-entry table;
 * ``mlp``: ``wpctrl.ActuatorNet`` of a 6-32-32-1 softsign MLP over 3 history taps (random weights), its default
-  kernel (``kernel="auto"``: the weights compiled in, each row split over 4 or 2 threads when the rows are few);
+  kernel (``kernel="auto"``: the unrolled kernel, the weights compiled in, one thread per row);
 * ``lstm``: ``wpctrl.ActuatorNet`` of a 2-layer, 8-unit LSTM with a linear head (random weights), default kernel;
 * ``mlp_unrolled`` / ``lstm_unrolled``: the same networks with ``kernel="unrolled"`` (one thread per row at every
   size);

@@ -4,9 +4,9 @@
 #   OUT=/tmp/nets bash bench/nets_gpu.sh
 #   OUT=/tmp/nets NETS_VARIANTS=plain,mlp,lstm,torch_mlp,torch_lstm STAGES=bench bash bench/nets_gpu.sh
 #   OUT=/tmp/nets NETS_ENVS=4k,1M \
-#     NETS_VARIANTS=plain,dc_motor,position_limit,mlp_unrolled,lstm_unrolled,mlp,lstm,mlp_split2,lstm_split2 \
-#     NCU_ENVS=4k NCU_VARIANTS=mlp_unrolled,lstm_unrolled,mlp,lstm,mlp_split2,lstm_split2 \
-#     TESTS_K="cuda and (split4 or auto)" bash bench/nets_gpu.sh     # the split kernel against the unrolled one
+#     NETS_VARIANTS=plain,dc_motor,position_limit,mlp_unrolled,lstm_unrolled,mlp_split4,lstm_split4,mlp_split2,lstm_split2 \
+#     NCU_ENVS=4k NCU_VARIANTS=mlp_unrolled,lstm_unrolled,mlp_split4,lstm_split4,mlp_split2,lstm_split2 \
+#     TESTS_K="cuda and split" bash bench/nets_gpu.sh     # the split kernel against the unrolled one
 #
 #   nets_gpu.log                  the machine, versions, each stage's output (the bench's per-variant lines, the
 #                                 torch baseline's checks against the network kernels and how it was captured, the
@@ -28,7 +28,8 @@
 # DEVICE: the bench's device (cuda:0; cpu for a dry run of the bench stage at NETS_ENVS=64, the torch baseline then
 # eager, the split and tiled kernels in Warp's cooperative CPU blocks). Expected on an H100: the bench stage ~2 min
 # with a warm kernel cache (Warp compiles first with an empty one: ~1 min more), all three stages ~3.5 min.
-# The split-kernel command above (third example): about 4 to 4.5 min with an empty kernel cache (estimated).
+# The split-kernel command above (third example): 87 s on an H200 (2026-11-26, with mlp / lstm in place of
+# mlp_split4 / lstm_split4, when "auto" still split over 4 at 4k).
 set -uo pipefail
 cd "$(dirname "$0")/.."
 OUT=${OUT:-bench/results}

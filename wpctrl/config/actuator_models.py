@@ -86,14 +86,14 @@ class ActuatorNet:
     """``"auto"``: an LSTM if the module holds one, else an MLP."""
     kernel: Literal["auto", "unrolled", "split", "split2", "split4", "tiled"] = "auto"
     """How the network runs on the device. ``"unrolled"``: its weights compiled into the kernel as instruction
-    operands, one thread per (env, joint), no loads of weights (the fastest for actuator-sized networks when the GPU
-    is full; one compile per network). ``"split"``: the same code with each row split over 2 or 4 threads (warps of a
-    block), each computing a slice of every layer, for launches of few rows; ``"split2"`` / ``"split4"`` force the
-    number, ``"split"`` takes it from the row count (on the CPU it needs Warp's cooperative CPU blocks, else the
-    unrolled kernel runs). ``"tiled"``: the weights staged in shared memory once per block, rows batched into tiles
-    and each layer a tiled matrix product (one compile per network shape; for networks of up to 16,384 weights).
-    ``"auto"``: up to 4,096 multiply-adds per row split on a GPU while 4 (else 2) threads per row stay within 1,024
-    threads per SM, else unrolled; larger networks tiled."""
+    operands, one thread per (env, joint), no loads of weights (the fastest for actuator-sized networks; one compile
+    per network). ``"tiled"``: the weights staged in shared memory once per block, rows batched into tiles and each
+    layer a tiled matrix product (one compile per network shape; for networks of up to 16,384 weights).
+    ``"split"``: the unrolled code with each row split over 2 or 4 threads (warps of a block), each computing a slice
+    of every layer; measured slower than ``"unrolled"`` at every size on an H200, kept for comparison on other GPUs;
+    ``"split2"`` / ``"split4"`` force the number, ``"split"`` takes 4 while 4 threads per row fit 1,024 per SM, else
+    2 (on the CPU it needs Warp's cooperative CPU blocks, else the unrolled kernel runs).
+    ``"auto"``: unrolled up to 4,096 multiply-adds per row, else tiled."""
 
 
 ACTUATOR_TYPES = (DCMotor, PositionBasedEffortLimit, ActuatorNet)

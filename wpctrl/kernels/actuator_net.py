@@ -11,8 +11,9 @@ kernels evaluate the network, all compiled for its shape:
   compiled into the kernel as immediate operands, so each multiply-add is one fused multiply-add instruction with no
   load, no shared memory and no block synchronisation. The kernel is compiled per network (its weights are part of
   it).
-- :mod:`.actuator_net_split` (the same networks, when the rows are few): the unrolled kernel's code with each row
-  split over 2 or 4 warps of a block, each computing a slice of every layer's units; the slices meet in shared memory.
+- :mod:`.actuator_net_split` (the same networks, on request only): the unrolled kernel's code with each row split
+  over 2 or 4 warps of a block, each computing a slice of every layer's units; the slices meet in shared memory.
+  Measured slower than the unrolled kernel at every size, so ``"auto"`` never picks it.
 - :mod:`.actuator_net_tiled` (any size up to :data:`TILED_MAX_WEIGHTS` weights): the weights are staged once per
   block in shared memory (``wp.tile_load``), each block evaluates tiles of rows as matrix products
   (``wp.tile_matmul``), one tile per block pass. Compiled per network shape; the weights are data.
@@ -83,15 +84,12 @@ class NetLayout(NamedTuple):
         return (s, max(2 * self.past, 1)), (max(units, 1), s)
 
 
-def choose_kernel(layout: NetLayout, kernel: str, split_lanes: int = 1) -> str:
+def choose_kernel(layout: NetLayout, kernel: str) -> str:
     """``"unrolled"``, ``"split"`` or ``"tiled"`` for ``kernel`` (``"auto"``, ``"unrolled"``, ``"split"``,
-    ``"split2"``, ``"split4"`` or ``"tiled"``). ``split_lanes``: what :func:`.actuator_net_split.split_lanes` gives
-    for the launch's rows on its GPU (1 on the CPU): ``"auto"`` splits the rows of an unrolled-size network when it is
-    more than 1."""
+    ``"split2"``, ``"split4"`` or ``"tiled"``). ``"auto"`` never splits: measured on an H200 the split kernel is
+    slower than the unrolled one at every size (see :mod:`.actuator_net_split`)."""
     if kernel == "auto":
-        if layout.macs > UNROLLED_MAX_MACS:
-            return "tiled"
-        return "split" if split_lanes > 1 else "unrolled"
+        return "tiled" if layout.macs > UNROLLED_MAX_MACS else "unrolled"
     return "split" if kernel.startswith("split") else kernel
 
 

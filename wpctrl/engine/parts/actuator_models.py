@@ -165,10 +165,10 @@ class _NetGroup:
             qd_lin=_consecutive(plan.qd_idx, plan.strided, row0, n),
         )
         cpu = wp.get_device(dev).is_cpu
-        lanes = 1 if cpu else actuator_net_split.split_lanes(E * n, wp.get_device(dev).sm_count)
-        self.kernel_kind = actuator_net.choose_kernel(self.layout, spec.kernel, lanes)
+        self.kernel_kind = actuator_net.choose_kernel(self.layout, spec.kernel)
         if self.kernel_kind == "split":
-            # forced: split2 / split4, else the rule's count, at least 2
+            # split2 / split4 as named; "split": 4 while that fits 1,024 threads per SM, else 2 (the CPU: 2)
+            lanes = 1 if cpu else actuator_net_split.split_lanes(E * n, wp.get_device(dev).sm_count)
             self.lanes = int(spec.kernel[5:]) if spec.kernel[5:] else max(2, lanes)
             if cpu and not wp.config.enable_cpu_blocks:
                 self.kernel_kind = "unrolled"  # the split kernel's blocks need Warp's cooperative CPU blocks

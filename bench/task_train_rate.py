@@ -7,8 +7,7 @@ control step (median of ``--repeats`` samples):
 
 * **MuJoCo-Warp rollout**: the control step's 5 x ``substeps`` solver steps alone (the contacts and Newton's contact
   sensor of the last one included, as the env computes them): simulating these envs with no controller, no task
-  kernels, no policy; written out in the graph, and (with an even ``substeps`` on CUDA 12.4+) as the env's device
-  loop (:mod:`wpctrl.tasks.stepping`). The faster of the two is the reference of the ratios;
+  kernels, no policy;
 * **controller calls**: ``set_action`` + 5 x ``before_simulation_step`` alone (the controller's share of the step);
 * **env.step without a policy**: the training env's whole step as PPO calls it (action copy, its graph: controller,
   physics, evaluation / observation / reward, episode bookkeeping, auto reset; the returned tensors and episode
@@ -22,7 +21,9 @@ control step (median of ``--repeats`` samples):
 * **PPO rollout, then a sync**: one iteration's rollout (``--steps-per-env`` steps) and a device sync, as the
   training times its collection (per step).
 
-``--action-sampling`` and ``--substep-loop`` pick the training's options (``wpctrl train``'s flags of those names).
+``--action-sampling`` picks the training's sampler (``wpctrl train``'s flag). On CUDA the host's cost of launching each
+captured graph is also measured on its own (a sync before every launch, so that a full launch queue cannot stall it):
+if the env step's launch takes the host about as long as the GPU takes to run it, nothing can hide it.
 
 With ``--train-json`` (a ``python -m wpctrl train --task ...`` run with the same envs on the same device), that
 run's collection rate (median over its iterations after the first) is divided by the rollout's as well.
@@ -37,7 +38,9 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
+import statistics
 import sys
+import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -52,8 +55,19 @@ CONTROLLER = "controller calls"
 ENV_STEP = "env.step without a policy"
 RSL_RL = "rsl-rl alone (act + bootstrap value + process_env_step)"
 COLLECT = "PPO collection step"
-ROLLOUT_LOOP = "MuJoCo-Warp rollout as a device loop"
 ITERATION = "PPO rollout, then a sync (per step)"
+
+
+def _launch_host_time(graph, sync, repeats: int) -> float:
+    """Median host seconds of one ``capture_launch(graph)`` issued with the device idle."""
+    samples = []
+    for _ in range(repeats):
+        sync()
+        t = time.perf_counter()
+        wp.capture_launch(graph)
+        samples.append(time.perf_counter() - t)
+    sync()
+    return statistics.median(samples)
 
 
 def main(argv=None) -> int:
@@ -64,7 +78,6 @@ def main(argv=None) -> int:
     p.add_argument("--device", default="cuda:0" if wp.is_cuda_available() else "cpu")
     p.add_argument("--control-mode", default="pd_joint_delta_pos")
     p.add_argument("--action-sampling", default="sync-free", choices=("sync-free", "rsl-rl"))
-    p.add_argument("--substep-loop", default="auto", choices=("auto", "unrolled", "device"))
     p.add_argument("--steps-per-env", type=int, default=4, help="the rollout length of one PPO iteration")
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--min-s", type=float, default=0.25, help="minimum seconds per timing sample")
@@ -75,7 +88,6 @@ def main(argv=None) -> int:
     from rsl_rl.runners import OnPolicyRunner
     from tensordict import TensorDict
 
-    from wpctrl.tasks.stepping import repeat
     from wpctrl.train.sampling import act
     from wpctrl.train.task_env import TaskVecEnv
     from wpctrl.train.task_ppo import Collector, maniskill_ppo_cfg
@@ -85,7 +97,7 @@ def main(argv=None) -> int:
         torch.set_num_threads(1)
     train = collection_rate(args.train_json, args.envs, args.device) if args.train_json else None
     vec = TaskVecEnv(args.task, args.envs, device=args.device, control_mode=args.control_mode, seed=0,
-                     substeps=args.substeps, substep_loop=args.substep_loop)  # fmt: skip
+                     substeps=args.substeps)  # fmt: skip
     env = vec.env
     dev = env.wp_device
 
@@ -97,27 +109,14 @@ def main(argv=None) -> int:
     physics, ctrl_calls = task_step_parts(env)
     steps = env.ctrl.num_substeps * env.physics.substeps
 
-    def physics_loop():
-        solver, c, a, b = env.solver, env.control, env.state, env._other
-
-        def round_trip():
-            solver.step(a, b, c, None, env.dt)
-            solver.step(b, a, c, None, env.dt)
-
-        repeat(env._loop_count, steps // 2 - 1, round_trip)
-        solver.step(a, b, c, None, env.dt)
-        solver.step(b, a, c, env._contacts, env.dt, observables=env._observables)
-        env._sensor.update(None, env._contacts, observables=env._observables)
-
-    parts = [(ROLLOUT, physics), (CONTROLLER, ctrl_calls)]
-    if cuda and steps % 2 == 0 and wp.is_conditional_graph_supported():
-        parts.append((ROLLOUT_LOOP, physics_loop))
-    fns = {}
-    for name, f in parts:
+    fns, graphs = {}, {}
+    for name, f in ((ROLLOUT, physics), (CONTROLLER, ctrl_calls)):
         f()
         with wp.ScopedCapture(device=dev) as cap:
             f()
         fns[name] = lambda g=cap.graph: wp.capture_launch(g)
+        graphs[name] = cap.graph
+    graphs[ENV_STEP] = env.graph
     hold = torch.zeros(args.envs, vec.num_actions, device=vec.device)
     hold[:, -1] = 1.0
     vec.reset(seed=0)
@@ -161,20 +160,21 @@ def main(argv=None) -> int:
     sec[ITERATION] /= args.steps_per_env
     if host:
         host[ITERATION] /= args.steps_per_env
-    rollout = min(sec[ROLLOUT], sec.get(ROLLOUT_LOOP, sec[ROLLOUT]))
+    rollout = sec[ROLLOUT]
+    launch = {name: _launch_host_time(g, sync, args.repeats) for name, g in graphs.items()} if cuda else None
     step, policy, collect, per_iteration = sec[ENV_STEP], sec[RSL_RL], sec[COLLECT], sec[ITERATION]
     result = {
         "task": args.task,
         "envs": args.envs,
         "control_mode": args.control_mode,
         "substeps": env.physics.substeps,
-        "substep_loop": env.substep_loop,
         "action_sampling": args.action_sampling,
         "steps_per_env": args.steps_per_env,
         "solver_steps_per_control_step": steps,
         "graph": env.graph is not None,
         "us_per_control_step": {k: v * 1e6 for k, v in sec.items()},
         "host_us_per_call": {k: v * 1e6 for k, v in host.items()} if host else None,
+        "host_us_per_graph_launch_device_idle": {k: v * 1e6 for k, v in launch.items()} if launch else None,
         "rollout_env_steps_per_s": args.envs / rollout,
         "env_step_env_steps_per_s": args.envs / step,
         "controller_share_of_env_step": sec[CONTROLLER] / step,
@@ -210,16 +210,18 @@ def main(argv=None) -> int:
         f"{collect * 1e6:,.0f} µs, against {(step + policy) * 1e6:,.0f} µs if rsl-rl's work and the env step ran one "
         f"after the other and {max(step, policy) * 1e6:,.0f} µs if they overlapped entirely. One iteration's rollout "
         f"of {args.steps_per_env} steps with its sync: {args.envs / per_iteration:,.0f} env-steps/s = "
-        f"{result['iteration_collection_over_rollout']:.0%} of the rollout. Env step's MuJoCo-Warp steps: "
-        f"{env.substep_loop}; action sampling: {args.action_sampling}.\n",
+        f"{result['iteration_collection_over_rollout']:.0%} of the rollout. Action sampling: {args.action_sampling}.\n",
     ]
+    if launch:
+        md.append("Host µs to launch a captured graph with the device idle (a sync before each launch): "
+                  + ", ".join(f"{k} {v * 1e6:,.0f}" for k, v in launch.items()) + ".\n")  # fmt: skip
     if train:
         md.append(
             f"The training run ({args.train_json}, median of its {train['iterations']} iterations' collection): "
             f"{rate:,.0f} env-steps/s = {result['training_collection_over_rollout']:.0%} of the MuJoCo-Warp "
             "rollout.\n"
         )
-    stem = f"task_train_rate_{args.task}_{'cuda' if cuda else 'cpu'}_{env.substep_loop}_{args.action_sampling}"
+    stem = f"task_train_rate_{args.task}_{'cuda' if cuda else 'cpu'}_{args.action_sampling}"
     jpath, mpath = write_results(args.out, stem, meta, [result], "\n".join(md))
     print("\n".join(md))
     print(f"wrote {jpath} and {mpath}")

@@ -20,13 +20,11 @@
 #   STAGE=pick bash bench/train_tasks_gpu.sh   (at most 9:50)
 #       PickCube-v1, 4,096 envs, evaluations every 10 iterations, stopping at 80 % (cap --time-limit 540 s from the
 #       command's start, limit 585 s).
-#   STAGE=rate bash bench/train_tasks_gpu.sh   (cold kernel cache ~6 min, warm ~3 min, at most 9:30)
-#       the warm-up above, then bench/task_train_rate.py on PushCube's 4,096 envs three times (limit 120 s each): the
-#       env step's MuJoCo-Warp steps written out with rsl-rl's action sampling (the collection before the sync-free
-#       sampler and the device loop), written out with the sync-free sampler, and as a device loop with it (the
-#       training's defaults).
+#   STAGE=rate bash bench/train_tasks_gpu.sh   (cold kernel cache ~5 min, warm ~2 min, at most 8 min)
+#       the warm-up above, then bench/task_train_rate.py on PushCube's 4,096 envs twice (limit 120 s each): with
+#       rsl-rl's action sampling and with the sync-free sampler (the training's default).
 #   STAGE=tests bash bench/train_tasks_gpu.sh  (~2 min, at most 4 min)
-#       the CUDA tests of the tasks, the device loop, the sampler and the captured PPO update.
+#       the CUDA tests of the tasks, the sampler and the captured PPO update.
 #   STAGE=after bash bench/train_tasks_gpu.sh  (~2-3 min, at most 6 min)
 #       PickCube's export and Newton evaluation (limits 60 s each), then bench/task_train_rate.py on PushCube's 4,096 envs
 #       (limit 240 s): the bare MuJoCo-Warp rollout of the scene, the controller, the env step, rsl-rl alone and the
@@ -110,20 +108,18 @@ warmup() {
     --seed "$SEED" --iterations 1 --out "$OUT/warmup"
 }
 
-rate() {  # rate SUBSTEP_LOOP ACTION_SAMPLING
-  phase "rate $1 $2" 120 $PY bench/task_train_rate.py --task PushCube-v1 --device "$DEVICE" --envs "$ENVS" \
-    --substeps "$SUBSTEPS" --substep-loop "$1" --action-sampling "$2" --out "$OUT/rate"
+rate() {  # rate ACTION_SAMPLING
+  phase "rate $1" 120 $PY bench/task_train_rate.py --task PushCube-v1 --device "$DEVICE" --envs "$ENVS" \
+    --substeps "$SUBSTEPS" --action-sampling "$1" --out "$OUT/rate"
 }
 
 case "$STAGE" in
   rate)
     warmup
-    rate unrolled rsl-rl
-    rate unrolled sync-free
-    rate device sync-free ;;
+    rate rsl-rl
+    rate sync-free ;;
   tests)
-    phase "CUDA tests" 240 $PY -m pytest -q -p no:cacheprovider --no-cov tests/test_task_stepping.py \
-      tests/test_sampling.py tests/test_tasks_cuda.py tests/test_ppo_update.py -k "cuda" ;;
+    phase "CUDA tests" 240 $PY -m pytest -q -p no:cacheprovider --no-cov tests/test_sampling.py tests/test_tasks_cuda.py tests/test_ppo_update.py -k "cuda" ;;
   push)
     warmup
     train PushCube-v1 "$OUT/push" "${PUSH_TARGET:-0.9}" "${PUSH_CAP:-150}" 5 200

@@ -330,13 +330,6 @@ def test_evaluate_in_the_real_maniskill_reports_a_hand_rolled_episodes_metrics(e
         (["--task", "reach", "--ppo-update", "rsl-rl"], "--ppo-update: only for the ManiSkill tasks"),
         (["--task", "reach", "--obs-normalization", "off"], "--obs-normalization: only for the ManiSkill tasks"),
         (["--task", "reach", "--action-sampling", "rsl-rl"], "--action-sampling: only for the ManiSkill tasks"),
-        (["--task", "reach", "--substep-loop", "device"], "--substep-loop: only for the ManiSkill tasks"),
-        (["--task", "PushCube-v1", "--substep-loop", "gpu"], "argument --substep-loop: invalid choice: 'gpu'"),
-        (
-            ["--task", "PushCube-v1", "--substep-loop", "device", "--substeps", "3", "--device", "cpu"],
-            "substep_loop='device' steps the state pair in both directions per iteration: expected an even "
-            "TaskPhysics.substeps >= 2, got 3",
-        ),
         (
             ["--task", "PushCube-v1", "--ppo-update", "captured", "--device", "cpu"],
             "--ppo-update: 'captured' needs a CUDA device, got --device cpu",

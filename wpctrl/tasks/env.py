@@ -23,7 +23,6 @@ from .definitions import PANDA_REST_QPOS, ROBOT_INIT_QPOS_NOISE, TaskSpec
 from .physics import TaskPhysics
 from .scene import build_scene
 from .state_dict import StateDictMixin
-from .stepping import repeat, resolve_substep_loop
 
 __all__ = ["REWARD_MODES", "TaskEnv"]
 
@@ -55,7 +54,6 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
         controller_semantics: str,
         asset_dir: str | None,
         graph: bool | None,
-        substep_loop: str = "auto",
     ):
         import torch
 
@@ -161,9 +159,6 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
         self.graph = None
         if graph is None:
             graph = True  # on the CPU too: Warp replays the recorded launches without Python's per-launch cost
-        self.substep_loop = resolve_substep_loop(substep_loop, dev, bool(graph), physics.substeps)
-        """How the MuJoCo-Warp steps run: ``"unrolled"`` or ``"device"`` (:mod:`wpctrl.tasks.stepping`)."""
-        self._loop_count = z(wp.int32, 1)
         if graph:
             self._step_impl()  # compile every kernel outside the capture
             self._reset_envs(self._all)
@@ -216,9 +211,6 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
     def _simulate(self) -> None:
         ctrl, solver = self.ctrl, self.solver
         ctrl.set_action(self.action_buf, self.state)
-        if self.substep_loop == "device":
-            self._simulate_device_loop()
-            return
         src, dst = self.state, self._other
         steps = ctrl.num_substeps * self.physics.substeps
         i = 0
@@ -232,24 +224,6 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
                 src, dst = dst, src
         if src is not self.state:
             self.state.assign(src)  # the env's state is always self.state (a captured graph binds its arrays)
-        self._sensor.update(None, self._contacts, observables=self._observables)
-
-    def _simulate_device_loop(self) -> None:
-        """The solver steps of :meth:`_simulate` as device loops of state-pair round trips (an even substep count):
-        the same steps in the same order, the last one handing its contacts to the sensor."""
-        ctrl, solver, c, dt = self.ctrl, self.solver, self.control, self.dt
-        a, b = self.state, self._other
-
-        def round_trip():
-            solver.step(a, b, c, None, dt)
-            solver.step(b, a, c, None, dt)
-
-        pairs = self.physics.substeps // 2
-        for k in range(ctrl.num_substeps):
-            ctrl.before_simulation_step(a, c)
-            repeat(self._loop_count, pairs - (k == ctrl.num_substeps - 1), round_trip)
-        solver.step(a, b, c, None, dt)
-        solver.step(b, a, c, self._contacts, dt, observables=self._observables)
         self._sensor.update(None, self._contacts, observables=self._observables)
 
     def _step_impl(self) -> None:

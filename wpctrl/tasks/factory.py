@@ -37,7 +37,6 @@ def make(
     controller_semantics: str = "physx_cpu",
     asset_dir: str | None = None,
     graph: bool | None = None,
-    substep_loop: str = "auto",
 ):
     """A ManiSkill task on Newton (:class:`~wpctrl.tasks.env.TaskEnv`), ``num_envs`` copies on ``device``.
 
@@ -58,10 +57,6 @@ def make(
             least-squares step, as ManiSkill's GPU sim). Joint modes are the same on both.
         asset_dir: A copy of ``mani_skill/assets`` to read the Panda from (default: the installed mani-skill).
         graph: Capture the step in a graph and replay it (default: True, on CUDA and the CPU).
-        substep_loop: How the MuJoCo-Warp steps of a control step run (:mod:`wpctrl.tasks.stepping`): ``"unrolled"``
-            (written out one after another), ``"device"`` (loops on the device: a captured CUDA graph a fraction of
-            the size, which the host launches that much faster) or ``"auto"`` (``"device"`` where it shortens a
-            captured CUDA graph, else ``"unrolled"``); the env's ``substep_loop`` says which runs.
     """
     if env_id not in TASKS:
         raise ConfigError(f"make: unknown env_id {env_id!r}; expected one of {sorted(TASKS)}")
@@ -86,10 +81,6 @@ def make(
     elif not isinstance(physics, TaskPhysics):
         raise ConfigError(f"make: physics expected a TaskPhysics, got {type(physics).__name__}")
     from ._validate import seed_value
-    from .stepping import SUBSTEP_LOOPS
 
-    if substep_loop not in SUBSTEP_LOOPS:
-        raise ConfigError(f"make: substep_loop expected one of {SUBSTEP_LOOPS}, got {substep_loop!r}")
     options = (bool(auto_reset), bool(ignore_terminations), physics, controller_semantics, asset_dir, graph)
-    return TaskEnv(TASKS[env_id], num_envs, device, control_mode, obs_mode, reward_mode, seed_value(seed), *options,
-                   substep_loop=substep_loop)  # fmt: skip
+    return TaskEnv(TASKS[env_id], num_envs, device, control_mode, obs_mode, reward_mode, seed_value(seed), *options)

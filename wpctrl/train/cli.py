@@ -152,14 +152,6 @@ def parse(argv):
         "rsl-rl's act (torch.normal, which waits for the GPU each step on CUDA). The same distribution; on the CPU "
         "the same numbers",
     )
-    p.add_argument(
-        "--substep-loop",
-        choices=("auto", "unrolled", "device"),
-        default=None,
-        help="ManiSkill tasks: how the env step's MuJoCo-Warp steps run (wpctrl.tasks.make's substep_loop): 'device' "
-        "loops on the GPU (a captured graph a fraction of the size, launched that much faster), 'unrolled' writes "
-        "them out, 'auto' (the default) picks 'device' on CUDA with conditional graph nodes and an even --substeps",
-    )
     p.add_argument("--out", default="wpctrl-train", help="output folder")
     p.add_argument("--no-graph", action="store_true", help="run the env step eagerly (no CUDA / CPU graph)")
     args = p.parse_args(argv)
@@ -178,7 +170,7 @@ def parse(argv):
         p.error(f"--time-limit: expected a positive number of seconds, got {args.time_limit}")
     if args.task == "reach":
         for name in ("epochs", "minibatches", "substeps", "eval_envs", "time_limit", "ppo_update", "obs_normalization",
-                     "action_sampling", "substep_loop"):  # fmt: skip
+                     "action_sampling"):  # fmt: skip
             if getattr(args, name) is not None:
                 p.error(f"--{name.replace('_', '-')}: only for the ManiSkill tasks {list(MANISKILL_TASKS)}")
         if args.no_partial_reset:

@@ -36,7 +36,6 @@ class TaskVecEnv(VecEnv):
         partial_reset: Success ends an episode (ManiSkill's PPO default); False: episodes end only at the time limit.
         substeps: MuJoCo-Warp steps per physics step (None: :class:`~wpctrl.tasks.TaskPhysics`'s default).
         graph: Capture the env step in a graph (default: True).
-        substep_loop: How the env step's MuJoCo-Warp steps run (:func:`wpctrl.tasks.make`'s ``substep_loop``).
     """
 
     def __init__(
@@ -51,7 +50,6 @@ class TaskVecEnv(VecEnv):
         substeps: int | None = None,
         graph: bool | None = None,
         asset_dir: str | None = None,
-        substep_loop: str = "auto",
     ):
         import wpctrl.tasks as T
 
@@ -59,7 +57,7 @@ class TaskVecEnv(VecEnv):
         self.env = T.make(task, num_envs=num_envs, device=device, control_mode=control_mode, obs_mode="state",
                           reward_mode=reward_mode, seed=seed, auto_reset=True,
                           ignore_terminations=not partial_reset, physics=physics, asset_dir=asset_dir,
-                          graph=graph, substep_loop=substep_loop)  # fmt: skip
+                          graph=graph)  # fmt: skip
         self.task = task
         self.num_envs = self.env.num_envs
         self.num_actions = int(self.env.single_action_space.shape[0])
@@ -68,7 +66,6 @@ class TaskVecEnv(VecEnv):
         self.device = self.env.device
         self.partial_reset = bool(partial_reset)
         self.substeps = physics.substeps
-        self.substep_loop = self.env.substep_loop
         self.cfg = {"task": task, "num_envs": self.num_envs, "control_mode": control_mode, "reward_mode": reward_mode,
                     "partial_reset": self.partial_reset, "substeps": physics.substeps}  # fmt: skip
         self.action_low = torch.as_tensor(self.env.single_action_space.low, device=self.device)

@@ -216,13 +216,12 @@ def train(args, t_main: float) -> int:
     graph = not args.no_graph
     try:
         env = TaskVecEnv(args.task, envs, device=device, control_mode=control_mode, seed=args.seed,
-                         partial_reset=not args.no_partial_reset, substeps=args.substeps, graph=graph,
-                         substep_loop=args.substep_loop or "auto")  # fmt: skip
+                         partial_reset=not args.no_partial_reset, substeps=args.substeps,
+                         graph=graph)  # fmt: skip
         eval_env = T.make(args.task, num_envs=eval_envs, device=device, control_mode=control_mode,
                           seed=args.seed + 10_000, auto_reset=False, ignore_terminations=True,
-                          physics=T.TaskPhysics(substeps=env.substeps), graph=graph,
-                          substep_loop=args.substep_loop or "auto")  # fmt: skip
-    except ConfigError as e:  # an option the envs refuse (e.g. --substep-loop device with an odd --substeps)
+                          physics=T.TaskPhysics(substeps=env.substeps), graph=graph)  # fmt: skip
+    except ConfigError as e:  # an option the envs refuse
         print(f"wpctrl train: {e}", file=sys.stderr)
         return 2
     cfg = maniskill_ppo_cfg(steps, args.epochs or EPOCHS, args.minibatches or MINIBATCHES, args.seed,
@@ -243,8 +242,8 @@ def train(args, t_main: float) -> int:
     collector = Collector(env, alg, sampling)
     setup_s = time.perf_counter() - t0
     print(f"wpctrl train: {args.task}, {envs} envs on {device} ({env.substeps} MuJoCo steps per physics step), "
-          f"{control_mode}, evaluation on {eval_envs} envs, PPO update {ppo_update}, {sampling} action sampling, "
-          f"{env.substep_loop} substep loop; set up in {setup_s:.1f} s",
+          f"{control_mode}, evaluation on {eval_envs} envs, PPO update {ppo_update}, {sampling} action sampling; "
+          f"set up in {setup_s:.1f} s",
           flush=True)  # fmt: skip
 
     def deterministic(obs):
@@ -317,7 +316,6 @@ def train(args, t_main: float) -> int:
         "graph": env.graph is not None,
         "ppo_update": ppo_update,
         "action_sampling": sampling,
-        "substep_loop": env.substep_loop,
         "substeps": env.substeps,
         "partial_reset": env.partial_reset,
         "seed": args.seed,

@@ -16,6 +16,8 @@ One control step = ``set_action`` + K x ``before_simulation_step`` (K = 5), Mani
   split over 2 / 4 threads at every size (on the CPU without Warp's cooperative CPU blocks: the unrolled kernel);
 * ``mlp_tiled`` / ``lstm_tiled``: the same networks with ``kernel="tiled"`` (weights staged in shared memory, rows in
   64-row tiles, each layer a ``wp.tile_matmul``);
+* ``mlp_fused`` / ``lstm_fused``: the unrolled kernel's network code run in the substep kernel's launch (one launch
+  per substep in place of two: wpctrl/kernels/actuator_net_fused.py, a private engine switch);
 * ``torch_mlp`` / ``torch_lstm``: the same control step with the network's substep written in torch on the same
   rows (bench/torch_actuator_net.py: cuBLAS / cuDNN, Isaac Lab's ``ActuatorNetMLP`` / ``ActuatorNetLSTM`` code
   path). On CUDA, wpctrl's launches and the torch ops are captured in one CUDA graph, or, where that capture fails,
@@ -64,8 +66,8 @@ from bench.common import (  # noqa: E402
 )
 
 VARIANTS = ("plain", "dc_motor", "position_limit", "mlp", "lstm", "mlp_unrolled", "lstm_unrolled", "mlp_split2",
-            "lstm_split2", "mlp_split4", "lstm_split4", "mlp_tiled", "lstm_tiled", "torch_mlp", "torch_lstm",
-            "newton_dc")  # fmt: skip
+            "lstm_split2", "mlp_split4", "lstm_split4", "mlp_tiled", "lstm_tiled", "mlp_fused", "lstm_fused",
+            "torch_mlp", "torch_lstm", "newton_dc")  # fmt: skip
 LABELS = {
     "plain": "plain explicit step",
     "dc_motor": "DCMotor",
@@ -80,6 +82,8 @@ LABELS = {
     "lstm_split4": "ActuatorNet (LSTM, split over 4)",
     "mlp_tiled": "ActuatorNet (MLP, tiled kernel)",
     "lstm_tiled": "ActuatorNet (LSTM, tiled kernel)",
+    "mlp_fused": "ActuatorNet (MLP, in the substep's launch)",
+    "lstm_fused": "ActuatorNet (LSTM, in the substep's launch)",
     "torch_mlp": "MLP in torch",
     "torch_lstm": "LSTM in torch",
     "newton_dc": "plain + Newton ClampingDCMotor",
@@ -113,9 +117,17 @@ def _actuator(name: str):
                     self.linear = torch.nn.Linear(8, 1)
 
             net = _LSTM()
+        kernel = "unrolled" if kernel == "fused" else kernel or "auto"
         return wpctrl.ActuatorNet(net, torque_scale=10.0, saturation_effort=87.0, velocity_limit=2.6,
-                                  kernel=kernel or "auto")  # fmt: skip
+                                  kernel=kernel)  # fmt: skip
     return None
+
+
+def fuse_if_asked(name: str, ctrl) -> None:
+    """``*_fused`` variants: the network's rows in the substep kernel's launch (a private engine switch; before the
+    first substep)."""
+    if name.endswith("_fused"):
+        ctrl._engine.part("actuator_models").fuse(ctrl._engine)
 
 
 def _mode(name: str, base: str) -> dict:
@@ -173,6 +185,7 @@ def _setup_variant(args, name, n_envs, model, small_model, sync, device, first_f
     action = wp.array(np.random.default_rng(1).uniform(-1, 1, (n_envs, ctrl.action_dim)).astype(np.float32),
                       device=device)  # fmt: skip
     ctrl.reset(state)
+    fuse_if_asked(name, ctrl)
     tnet = _torch_net(ctrl, state, control, lstm_cells) if name.startswith("torch_") else None
     extra = _newton_dc(ctrl, device) if name == "newton_dc" else None
 
@@ -205,6 +218,8 @@ def _setup_variant(args, name, n_envs, model, small_model, sync, device, first_f
     nets = ctrl._engine.part("actuator_models").nets if ctrl._engine.part("actuator_models") else []
     if nets and tnet is None:  # which network kernel ran (private attributes: the bench reports them)
         kind = nets[0].kernel_kind + (f" x{nets[0].lanes}" if nets[0].kernel_kind == "split" else "")
+        if ctrl._engine.part("actuator_models").fused is not None:
+            kind += ", in the substep's launch"
         checks[name + ":kernel"] = kind
         print(f"[{fmt_envs(n_envs)}] {name}: kernel {kind}", flush=True)
     if tnet is None:

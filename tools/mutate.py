@@ -777,6 +777,22 @@ MUTATIONS: list[Mutation] = [
         "the split LSTM stores its last layer's new h as every layer's",
         ("tests/test_actuator_net.py",),
     ),
+    M(
+        "net_fused_rows_from_zero",
+        "wpctrl/kernels/actuator_net_fused.py",
+        "            r = row0 + j\n",
+        "            r = j\n",
+        "a network run in the substep's launch, on a later controller, reads and writes the first controller's rows",
+        ("tests/test_actuator_net_fused.py",),
+    ),
+    M(
+        "net_fused_target_of_first_rows",
+        "wpctrl/kernels/actuator_net_fused.py",
+        "    err = target_qpos_in[env, r] - q\n",
+        "    err = target_qpos_in[env, j] - q\n",
+        "a network run in the substep's launch reads its targets from the mode's first rows",
+        ("tests/test_actuator_net_fused.py",),
+    ),
     # -- smoothing, effort readout, bases and DOF indices on later controllers / other models ----------------------
     M(
         "ema_alpha_of_row_0",

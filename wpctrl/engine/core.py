@@ -8,7 +8,8 @@ every env from the model's initial pose ends it. :class:`_Engine` then only runs
 
 - ``set_action``: the parts' pre-launch hooks (EE targets, the response update), then the joint kernel of the mode's
   layout (:mod:`wpctrl.kernels.pd_step`).
-- ``substep``: the substep kernel, plus the parts' hooks (per-substep response, the coupled drive's launch). A mode
+- ``substep``: the substep kernel, plus the parts' hooks (per-substep response, the coupled drive's launch, the
+  actuator networks' launches; a network fused into the substep's launch by ``ActuatorModels.fuse`` runs in it). A mode
   without per-substep work (implicit actuation, no interpolation, delay, effort readout or per-substep response)
   has drive targets that do not change between substeps: ``set_action`` writes them into the Control it knows (the
   last one given to ``substep`` or ``reset``) and ``substep`` launches nothing, unless it is handed another Control
@@ -206,8 +207,14 @@ class _Engine:
                 "joint_target_qd_out": control.joint_target_qd,
                 "joint_f_out": joint_f,
             }
-            kernel = pd_step.substep_kernel(self.layout)
-            self._launch_substep = self._launch(kernel, self.num_envs, per_call, self.block_dim)
+            models = self.part("actuator_models")
+            fused = None if models is None else models.substep_launch(self)
+            if fused is None:
+                kernel, dim, block_dim = pd_step.substep_kernel(self.layout), self.num_envs, self.block_dim
+            else:  # an actuator network's rows in the same launch (actuator_models.fuse)
+                kernel, dim, block_dim, extra = fused
+                per_call.update(extra)
+            self._launch_substep = self._launch(kernel, dim, per_call, block_dim)
         ln = self._launch_substep
         ln.bind("joint_q_in", state.joint_q)
         ln.bind("joint_qd_in", state.joint_qd)

@@ -11,6 +11,8 @@ activations' divisions are the approximate ones (a few ulp).
 
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 import warp as wp
 
@@ -21,7 +23,7 @@ wp.set_module_options({"enable_backward": False})
 BLOCK_DIM = 64
 """CUDA threads per block: at 4,096 Pandas (28,672 arm rows) 448 blocks spread over every SM."""
 
-_KERNELS: dict[tuple, wp.Kernel] = {}
+_KERNELS: dict[tuple, tuple[wp.Function, wp.Kernel]] = {}
 
 
 def unrolled_kernel(layout: NetLayout, weights: np.ndarray, scales: tuple[float, float, float]) -> wp.Kernel:
@@ -29,6 +31,17 @@ def unrolled_kernel(layout: NetLayout, weights: np.ndarray, scales: tuple[float,
     and ``scales`` (``pos_scale``, ``vel_scale``, ``torque_scale``, float32 values; a scale of 1 is no multiply)
     compiled in. Launched over ``num_envs * layout.rows`` threads; the history is a vector array aliasing the
     ``(num_envs * rows, 2 * past)`` one (:func:`history_vectors`)."""
+    return _unrolled(layout, weights, scales)[1]
+
+
+def unrolled_row(layout: NetLayout, weights: np.ndarray, scales: tuple[float, float, float]) -> wp.Function:
+    """The unrolled kernel's network as a function of one row, forced inline: ``(s, env, r, di, err, qd, lim, sat,
+    vl, io, hist_out, joint_f_out)``, the row's inputs as :func:`.actuator_net.row_input` returns them. For kernels
+    that run the network's rows beside other work in one launch (:mod:`.actuator_net_fused`)."""
+    return _unrolled(layout, weights, scales)[0]
+
+
+def _unrolled(layout: NetLayout, weights: np.ndarray, scales: tuple[float, float, float]):
     w = np.ascontiguousarray(weights, dtype=np.float32)
     scales = tuple(float(np.float32(x)) for x in scales)
     key = (layout, w.tobytes(), scales)
@@ -61,7 +74,7 @@ def _floats(a) -> tuple:
     return tuple(_floats(x) for x in a)
 
 
-def _make(L: NetLayout, weights: np.ndarray, scales: tuple[float, float, float]) -> wp.Kernel:
+def _make(L: NetLayout, weights: np.ndarray, scales: tuple[float, float, float]) -> tuple[wp.Function, wp.Kernel]:
     N, TAPS, POS_FIRST, PAST = L.rows, L.taps, bool(L.pos_first), L.past
     PS, VS, TS = scales
     MLP = not L.lstm
@@ -88,25 +101,21 @@ def _make(L: NetLayout, weights: np.ndarray, scales: tuple[float, float, float])
     POS_AT = tuple((t if POS_FIRST else T + t) for t in range(T))
     VEL_AT = tuple((T + t if POS_FIRST else t) for t in range(T))
 
-    def net(
-        row0: int,  # the network's rows: row0 .. row0 + n in the mode's tables
-        io: NetIO,  # index tables, per-env limits, the LSTM state, the effort readout
-        # In:
-        joint_q_in: wp.array[float],
-        joint_qd_in: wp.array[float],
-        joint_target_q_in: wp.array[float],  # this substep's (interpolated, delayed) target
-        # In/out: the MLP's past samples per row (position errors, then velocities, newest first):
+    def net_row(
+        s: int,  # (env, joint) row, joint fastest
+        env: int,
+        r: int,  # the row in the mode's tables
+        # The row's inputs (row_input):
+        di: int,
+        err: float,
+        qd: float,
+        lim: float,
+        sat: float,
+        vl: float,
+        io: NetIO,
         hist_out: wp.array[vec_p],
-        # Out:
         joint_f_out: wp.array[float],
     ):
-        s = wp.tid()  # (env, joint) row, joint fastest
-        env = s // wp.static(N)
-        j = s - env * wp.static(N)
-        r = row0 + j
-        # Every input is read here, before the network, so that all loads are in flight together.
-        di, err, qd, lim, sat, vl = row_input(io, wp.static(L.q_lin), wp.static(L.qd_lin), env, r, j, joint_q_in,
-                                              joint_qd_in, joint_target_q_in)  # fmt: skip
         x = vec_w()
         if wp.static(MLP):
             # The history, newest first (Isaac Lab rolls it and writes the current sample at index 0).
@@ -164,7 +173,34 @@ def _make(L: NetLayout, weights: np.ndarray, scales: tuple[float, float, float])
             x = y
         write_effort(_scaled(x[0], wp.static(TS)), qd, env, r, di, lim, sat, vl, joint_f_out, io)
 
-    return wp.kernel(
+    # The function's name carries the network: Warp's module hash does not see a function's wp.static() values that
+    # are resolved only at code generation (the weights, under loops), so two networks' functions must differ by name.
+    digest = hashlib.sha256(repr((L, scales)).encode() + weights.tobytes()).hexdigest()[:16]
+    row = wp.func(net_row, name="wpctrl_actuator_net_row_" + digest, module="unique", inline=True)
+
+    def net(
+        row0: int,  # the network's rows: row0 .. row0 + n in the mode's tables
+        io: NetIO,  # index tables, per-env limits, the LSTM state, the effort readout
+        # In:
+        joint_q_in: wp.array[float],
+        joint_qd_in: wp.array[float],
+        joint_target_q_in: wp.array[float],  # this substep's (interpolated, delayed) target
+        # In/out: the MLP's past samples per row (position errors, then velocities, newest first):
+        hist_out: wp.array[vec_p],
+        # Out:
+        joint_f_out: wp.array[float],
+    ):
+        s = wp.tid()  # (env, joint) row, joint fastest
+        env = s // wp.static(N)
+        j = s - env * wp.static(N)
+        r = row0 + j
+        # Every input is read here, before the network, so that all loads are in flight together.
+        di, err, qd, lim, sat, vl = row_input(io, wp.static(L.q_lin), wp.static(L.qd_lin), env, r, j, joint_q_in,
+                                              joint_qd_in, joint_target_q_in)  # fmt: skip
+        row(s, env, r, di, err, qd, lim, sat, vl, io, hist_out, joint_f_out)
+
+    net.__annotations__["hist_out"] = wp.array[vec_p]  # (the body does not name vec_p: no closure variable)
+    return row, wp.kernel(
         net,
         name="wpctrl_actuator_net",
         enable_backward=False,

@@ -55,7 +55,7 @@ from .step_layout import (  # noqa: F401  (the layout and table columns are this
 )
 
 _SET_ACTION: dict[StepLayout, wp.Kernel] = {}
-_SUBSTEP: dict[StepLayout, wp.Kernel] = {}
+_SUBSTEP: dict[StepLayout, tuple[wp.Function, wp.Kernel]] = {}
 
 
 def set_action_kernel(layout: StepLayout) -> wp.Kernel:
@@ -70,6 +70,16 @@ def set_action_kernel(layout: StepLayout) -> wp.Kernel:
 
 def substep_kernel(layout: StepLayout) -> wp.Kernel:
     """The substep kernel of ``layout``; set_action-only fields of the layout are ignored."""
+    return _substep(layout)[1]
+
+
+def substep_func(layout: StepLayout) -> wp.Function:
+    """The substep of ``layout`` as a function ``(env, *the substep kernel's parameters)``, forced inline: what a
+    kernel that also does other work in the same launch calls for its env threads."""
+    return _substep(layout)[0]
+
+
+def _substep(layout: StepLayout) -> tuple[wp.Function, wp.Kernel]:
     key = layout._replace(
         act_col=(), vel_col=(), mimic_src=(), action_dim=0, clip=False, yaw_row=(), base_axis=(), bx_col=(), by_col=()
     )

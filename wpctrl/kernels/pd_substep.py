@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import hashlib
+
 import warp as wp
 
 from ..config.actuator_models import ACT_DC_MOTOR, ACT_NET, ACT_NONE, ACT_POSITION_LIMIT
@@ -12,7 +14,9 @@ from .pd import _bidx, _interp
 from .step_layout import StepLayout, _make_row_indices
 
 
-def _make_substep_kernel(L: StepLayout) -> wp.Kernel:
+def _make_substep_kernel(L: StepLayout) -> tuple[wp.Function, wp.Kernel]:
+    """The substep of ``layout`` as a function of the env it steps (forced inline; for kernels that run it beside
+    other work in one launch, :mod:`.actuator_net_fused`) and as the substep kernel (one thread per env)."""
     R = len(L.kind)
     KIND, FLAGS, ACCEL = L.kind, L.flags, L.accel
     POS, VEL, PASSIVE, EFF = ROW_POS, ROW_VEL, ROW_PASSIVE, ROW_EFFORT
@@ -38,7 +42,8 @@ def _make_substep_kernel(L: StepLayout) -> wp.Kernel:
     vec_ri = wp.types.vector(length=max(R, 1), dtype=wp.int32)
     row_indices = _make_row_indices(L)
 
-    def substep(
+    def substep_env(
+        env: int,  # the env this thread steps
         # Envs x rows:
         q_idx: wp.array2d[wp.int32],  # (num_envs, rows) for a non-replicated layout; unused otherwise
         qd_idx: wp.array2d[wp.int32],
@@ -74,7 +79,6 @@ def _make_substep_kernel(L: StepLayout) -> wp.Kernel:
         applied_effort_out: wp.array2d[float],  # with EFFORT: after the clamp
         saturation_count_out: wp.array2d[wp.int32],  # with EFFORT, in/out: substeps with |computed| > limit
     ):
-        env = wp.tid()
         # Loads first (each array's sectors in one pass), then the arithmetic, then the stores grouped by array.
         k = step_out[env] + 1
         qi, di = row_indices(env, q_idx, qd_idx, q_stride, qd_stride)
@@ -231,4 +235,79 @@ def _make_substep_kernel(L: StepLayout) -> wp.Kernel:
                         if f[r] != u[r]:
                             saturation_count_out[env, r] = sat[r] + 1
 
-    return wp.kernel(substep, name="wpctrl_substep", enable_backward=False, module="unique")
+    # The function's name carries the layout: Warp's module hash does not see a function's wp.static() values that are
+    # resolved only at code generation (those under loops), so two layouts' functions must differ by name.
+    name = "wpctrl_substep_env_" + hashlib.sha256(repr(L).encode()).hexdigest()[:16]
+    func = wp.func(substep_env, name=name, module="unique", inline=True)
+
+    def substep(
+        # Envs x rows:
+        q_idx: wp.array2d[wp.int32],  # (num_envs, rows) for a non-replicated layout; unused otherwise
+        qd_idx: wp.array2d[wp.int32],
+        q_stride: int,
+        qd_stride: int,
+        # Drive properties (1 | num_envs, rows):
+        kp: wp.array2d[float],  # [N·m/rad or N/m; 1/s² for an acceleration drive]
+        kd: wp.array2d[float],  # [N·m·s/rad or N·s/m; 1/s]
+        force_limit: wp.array2d[float],  # [N·m or N]
+        sat_effort: wp.array2d[float],  # with DC motors: stall effort [N·m or N]
+        vel_limit: wp.array2d[float],  # with DC motors: no-load speed [rad/s or m/s]
+        num_substeps: int,
+        dt: float,  # [s] one solver substep
+        max_delay: int,  # [substeps]
+        # In:
+        joint_q_in: wp.array[float],  # [rad or m]
+        joint_qd_in: wp.array[float],  # [rad/s or m/s]
+        response_in: wp.array2d[float],  # (1 | num_envs, rows) r = (H^-1)_ii [1/(kg m²) or 1/kg]
+        start_qpos_in: wp.array2d[float],
+        target_qpos_in: wp.array2d[float],
+        target_qvel_in: wp.array2d[float],
+        target_effort_in: wp.array2d[float],  # with effort rows [N·m or N]
+        delay_in: wp.array[wp.int32],  # with DELAY: (num_envs,) [substeps]
+        # Out:
+        step_out: wp.array[wp.int32],  # in/out: ManiSkill's _step
+        delay_head_out: wp.array2d[wp.int32],  # in/out, with DELAY: each row's ring-buffer slot
+        delay_q_out: wp.array3d[float],  # in/out, with DELAY: (max_delay + 1, num_envs, rows)
+        delay_qd_out: wp.array3d[float],  # in/out, with DELAY_VEL
+        joint_target_q_out: wp.array[float],
+        joint_target_qd_out: wp.array[float],
+        joint_f_out: wp.array[float],  # with explicit actuation or effort rows [N·m or N]
+        computed_effort_out: wp.array2d[float],  # with EFFORT: PD law before the clamp [N·m or N]
+        applied_effort_out: wp.array2d[float],  # with EFFORT: after the clamp
+        saturation_count_out: wp.array2d[wp.int32],  # with EFFORT, in/out: substeps with |computed| > limit
+    ):
+        func(
+            wp.tid(),
+            q_idx,
+            qd_idx,
+            q_stride,
+            qd_stride,
+            kp,
+            kd,
+            force_limit,
+            sat_effort,
+            vel_limit,
+            num_substeps,
+            dt,
+            max_delay,
+            joint_q_in,
+            joint_qd_in,
+            response_in,
+            start_qpos_in,
+            target_qpos_in,
+            target_qvel_in,
+            target_effort_in,
+            delay_in,
+            step_out,
+            delay_head_out,
+            delay_q_out,
+            delay_qd_out,
+            joint_target_q_out,
+            joint_target_qd_out,
+            joint_f_out,
+            computed_effort_out,
+            applied_effort_out,
+            saturation_count_out,
+        )
+
+    return func, wp.kernel(substep, name="wpctrl_substep", enable_backward=False, module="unique")

@@ -15,7 +15,7 @@ import warp as wp
 from ...config import ConfigError
 from ...config.actuator_models import ActuatorNet
 from ...config.networks import read_network
-from ...kernels import actuator_net, actuator_net_split, actuator_net_tiled, actuator_net_unrolled
+from ...kernels import actuator_net, actuator_net_fused, actuator_net_split, actuator_net_tiled, actuator_net_unrolled
 from ...kernels.env_selection import MODE_SCALE, _bump_counter_kernel, _select
 from ..launch import _Launch
 from .part import Part
@@ -97,6 +97,7 @@ class ActuatorModels(Part):
         self.nets = [
             _NetGroup(plan, alloc, r0, n, spec) for r0, n, spec in rows.extras if isinstance(spec, ActuatorNet)
         ]
+        self.fused: _NetGroup | None = None  # the network run in the substep's launch (fuse)
 
     def kernel_args(self) -> dict:
         return {
@@ -106,7 +107,35 @@ class ActuatorModels(Part):
 
     def after_substep(self, engine, state, control) -> None:
         for net in self.nets:
-            net.launch(engine, state, control)
+            if net is not self.fused:
+                net.launch(engine, state, control)
+
+    def fuse(self, engine) -> None:
+        """Run the mode's network rows in the substep kernel's launch (:mod:`wpctrl.kernels.actuator_net_fused`): one
+        launch per substep in place of two, bit-identical on the CPU. For one unrolled network whose rows are neither
+        interpolated nor delayed, with no other launch after the substep's; before the first substep."""
+        why = None
+        if len(self.nets) != 1 or self.nets[0].kernel_kind != "unrolled":
+            why = "needs one network with the unrolled kernel"
+        elif [p.name for p in engine._hooks["after_substep"]] != [self.name]:
+            why = "needs the network's launch to be the only one after the substep's"
+        else:
+            reason = actuator_net_fused.fusable(engine.layout, self.nets[0].row0, self.nets[0].n)
+            why = None if reason is None else f"not with {reason}"
+        if why is not None:
+            raise ConfigError(f"actuator network in the substep's launch: {why}")
+        if engine._launch_substep is not None:
+            raise ConfigError("actuator network in the substep's launch: set before the first substep")
+        self.fused = self.nets[0]
+
+    def substep_launch(self, engine) -> tuple | None:
+        """``(kernel, dim, block_dim, parameters)`` of the substep's launch with the network in it, or None."""
+        g = self.fused
+        if g is None:
+            return None
+        kernel = actuator_net_fused.fused_kernel(engine.layout, g.layout, g.weights, g.scales)
+        per_call = {"row0": g.row0, "io": g.io(engine), "hist_out": g._extra["hist_out"]}
+        return kernel, engine.num_envs * (1 + g.n), actuator_net_fused.BLOCK_DIM, per_call
 
     def after_reset(self, engine, state, env_ids, env_mask) -> None:
         for net in self.nets:
@@ -199,6 +228,7 @@ class _NetGroup:
         self.lstm_h = wp.zeros(state_shape, dtype=wp.float32, device=dev)
         self.lstm_c = wp.zeros(state_shape, dtype=wp.float32, device=dev)
         scales = (spec.pos_scale, spec.vel_scale, spec.torque_scale)
+        self.weights, self.scales = net.weights, scales
         if self.kernel_kind == "unrolled":
             self.kernel = actuator_net_unrolled.unrolled_kernel(self.layout, net.weights, scales)
             extra = {"hist_out": actuator_net_unrolled.history_vectors(self.hist)}
@@ -212,22 +242,27 @@ class _NetGroup:
         self._extra = extra
         self._launch: _Launch | None = None
 
+    def io(self, engine) -> actuator_net.NetIO:
+        """The network kernels' ``io`` argument: the mode's index tables, the rows' limits, the LSTM state and the
+        effort readout."""
+        effort = engine.part("effort_readout")
+        c, models = engine.core, engine.part("actuator_models")
+        io = actuator_net.NetIO()
+        io.q_idx, io.qd_idx, io.q_stride, io.qd_stride = c.q_idx, c.qd_idx, c.q_stride, c.qd_stride
+        io.force_limit = engine.part("drive_properties").force_limit
+        io.sat_effort, io.vel_limit = models.sat_effort, models.vel_limit
+        io.lstm_h, io.lstm_c = self.lstm_h, self.lstm_c
+        if effort is not None:
+            io.computed_effort, io.applied_effort = effort.computed_effort, effort.applied_effort
+            io.saturation_count = effort.saturation_count
+        return io
+
     def launch(self, engine, state, control) -> None:
         if self._launch is None:
             s = self.spec
-            effort = engine.part("effort_readout")
-            c, models = engine.core, engine.part("actuator_models")
-            io = actuator_net.NetIO()
-            io.q_idx, io.qd_idx, io.q_stride, io.qd_stride = c.q_idx, c.qd_idx, c.q_stride, c.qd_stride
-            io.force_limit = engine.part("drive_properties").force_limit
-            io.sat_effort, io.vel_limit = models.sat_effort, models.vel_limit
-            io.lstm_h, io.lstm_c = self.lstm_h, self.lstm_c
-            if effort is not None:
-                io.computed_effort, io.applied_effort = effort.computed_effort, effort.applied_effort
-                io.saturation_count = effort.saturation_count
             per_call = {
                 "row0": self.row0,
-                "io": io,
+                "io": self.io(engine),
                 "pos_scale": float(s.pos_scale),
                 "vel_scale": float(s.vel_scale),
                 "torque_scale": float(s.torque_scale),

@@ -7,22 +7,24 @@ One control step = ``set_action`` + K x ``before_simulation_step`` (K = 5), Mani
 * ``plain``: no model (ManiSkill's clamp to ``force_limit``);
 * ``dc_motor``: ``wpctrl.DCMotor(87, 2.6)``;
 * ``position_limit``: ``wpctrl.PositionBasedEffortLimit`` with an 8-entry table;
-* ``mlp``: ``wpctrl.ActuatorNet`` of a 6-32-32-1 softsign MLP over 3 history taps (random weights), its default
-  kernel (``kernel="auto"``: the unrolled kernel, the weights compiled in, one thread per row);
-* ``lstm``: ``wpctrl.ActuatorNet`` of a 2-layer, 8-unit LSTM with a linear head (random weights), default kernel;
-* ``mlp_unrolled`` / ``lstm_unrolled``: the same networks with ``kernel="unrolled"`` (one thread per row at every
-  size);
+* ``mlp``: ``wpctrl.ActuatorNet`` of a 6-32-32-1 softsign MLP over 3 history taps (random weights), its defaults
+  (``kernel="auto"``: the unrolled kernel, the weights compiled in, one thread per row; ``launch="auto"``: in the
+  substep kernel's launch);
+* ``lstm``: ``wpctrl.ActuatorNet`` of a 2-layer, 8-unit LSTM with a linear head (random weights), its defaults;
+* ``mlp_unrolled`` / ``lstm_unrolled``: the same networks with ``kernel="unrolled"`` and ``launch="separate"`` (one
+  thread per row at every size, in a launch of its own after the substep kernel's: two launches per substep);
 * ``mlp_split2`` / ``lstm_split2`` / ``mlp_split4`` / ``lstm_split4``: ``kernel="split2"`` / ``"split4"``, each row
   split over 2 / 4 threads at every size (on the CPU without Warp's cooperative CPU blocks: the unrolled kernel);
 * ``mlp_tiled`` / ``lstm_tiled``: the same networks with ``kernel="tiled"`` (weights staged in shared memory, rows in
   64-row tiles, each layer a ``wp.tile_matmul``);
-* ``mlp_fused`` / ``lstm_fused``: the unrolled kernel's network code run in the substep kernel's launch (one launch
-  per substep in place of two: wpctrl/kernels/actuator_net_fused.py, a private engine switch);
+* ``mlp_fused`` / ``lstm_fused``: ``kernel="unrolled"``, ``launch="fused"``: the unrolled kernel's network code run in
+  the substep kernel's launch (one launch per substep in place of two; what the defaults run here);
 * ``torch_mlp`` / ``torch_lstm``: the same control step with the network's substep written in torch on the same
-  rows (bench/torch_actuator_net.py: cuBLAS / cuDNN, Isaac Lab's ``ActuatorNetMLP`` / ``ActuatorNetLSTM`` code
-  path). On CUDA, wpctrl's launches and the torch ops are captured in one CUDA graph, or, where that capture fails,
-  as a Warp graph and a torch graph replayed back to back on one stream (the ``torch_capture`` field says which); on
-  the CPU the step is timed eagerly only (torch's ops are no Warp launches to capture);
+  rows, in place of wpctrl's network launch (``launch="separate"``; bench/torch_actuator_net.py: cuBLAS / cuDNN,
+  Isaac Lab's ``ActuatorNetMLP`` / ``ActuatorNetLSTM`` code path). On CUDA, wpctrl's launches and the torch ops are
+  captured in one CUDA graph, or, where that capture fails, as a Warp graph and a torch graph replayed back to back
+  on one stream (the ``torch_capture`` field says which); on the CPU the step is timed eagerly only (torch's ops are
+  no Warp launches to capture);
 * ``newton_dc``: the plain step plus Newton 1.8's ``ClampingDCMotor`` applied to ``joint_f`` after every substep
   (its own launch over every DOF): what the same DC-motor envelope costs as Newton's component.
 
@@ -74,8 +76,8 @@ LABELS = {
     "position_limit": "PositionBasedEffortLimit",
     "mlp": "ActuatorNet (MLP 6-32-32-1)",
     "lstm": "ActuatorNet (LSTM 2x8)",
-    "mlp_unrolled": "ActuatorNet (MLP, unrolled kernel)",
-    "lstm_unrolled": "ActuatorNet (LSTM, unrolled kernel)",
+    "mlp_unrolled": "ActuatorNet (MLP, unrolled kernel, two launches)",
+    "lstm_unrolled": "ActuatorNet (LSTM, unrolled kernel, two launches)",
     "mlp_split2": "ActuatorNet (MLP, split over 2)",
     "lstm_split2": "ActuatorNet (LSTM, split over 2)",
     "mlp_split4": "ActuatorNet (MLP, split over 4)",
@@ -93,6 +95,7 @@ LABELS = {
 def _actuator(name: str):
     import wpctrl
 
+    torch_baseline = name.startswith("torch_")
     name, _, kernel = name.removeprefix("torch_").partition("_")
 
     if name == "dc_motor":
@@ -117,17 +120,12 @@ def _actuator(name: str):
                     self.linear = torch.nn.Linear(8, 1)
 
             net = _LSTM()
+        # *_unrolled: two launches; *_fused: one; a torch baseline replaces the network's own launch
+        launch = {"unrolled": "separate", "fused": "fused"}.get(kernel, "separate" if torch_baseline else "auto")
         kernel = "unrolled" if kernel == "fused" else kernel or "auto"
-        return wpctrl.ActuatorNet(net, torque_scale=10.0, saturation_effort=87.0, velocity_limit=2.6,
-                                  kernel=kernel)  # fmt: skip
+        return wpctrl.ActuatorNet(net, torque_scale=10.0, saturation_effort=87.0, velocity_limit=2.6, kernel=kernel,
+                                  launch=launch)  # fmt: skip
     return None
-
-
-def fuse_if_asked(name: str, ctrl) -> None:
-    """``*_fused`` variants: the network's rows in the substep kernel's launch (a private engine switch; before the
-    first substep)."""
-    if name.endswith("_fused"):
-        ctrl._engine.part("actuator_models").fuse(ctrl._engine)
 
 
 def _mode(name: str, base: str) -> dict:
@@ -185,7 +183,6 @@ def _setup_variant(args, name, n_envs, model, small_model, sync, device, first_f
     action = wp.array(np.random.default_rng(1).uniform(-1, 1, (n_envs, ctrl.action_dim)).astype(np.float32),
                       device=device)  # fmt: skip
     ctrl.reset(state)
-    fuse_if_asked(name, ctrl)
     tnet = _torch_net(ctrl, state, control, lstm_cells) if name.startswith("torch_") else None
     extra = _newton_dc(ctrl, device) if name == "newton_dc" else None
 

@@ -20,7 +20,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 import warp as wp  # noqa: E402
 
-from bench.actuator_cost import _mode, fuse_if_asked  # noqa: E402
+from bench.actuator_cost import _mode  # noqa: E402
 from bench.common import Sync, build_panda_model, parse_envs, real_setup, synthetic_setup  # noqa: E402
 
 
@@ -42,7 +42,6 @@ def main(argv=None):
     for name in args.variants.split(","):
         mode = _mode(name, "pd_joint_target_delta_pos")
         su = real_setup(mode, model, **kw) if model is not None else synthetic_setup(mode, small, n, **kw)
-        fuse_if_asked(name, su.ctrl)
         action = wp.array(np.random.default_rng(1).uniform(-1, 1, (n, su.ctrl.action_dim)).astype(np.float32),
                           device=device)  # fmt: skip
         su.ctrl.reset(su.state)

@@ -9,7 +9,7 @@ every env from the model's initial pose ends it. :class:`_Engine` then only runs
 - ``set_action``: the parts' pre-launch hooks (EE targets, the response update), then the joint kernel of the mode's
   layout (:mod:`wpctrl.kernels.pd_step`).
 - ``substep``: the substep kernel, plus the parts' hooks (per-substep response, the coupled drive's launch, the
-  actuator networks' launches; a network fused into the substep's launch by ``ActuatorModels.fuse`` runs in it). A mode
+  actuator networks' launches; a network run in the substep's launch, ``ActuatorNet.launch``, is part of it). A mode
   without per-substep work (implicit actuation, no interpolation, delay, effort readout or per-substep response)
   has drive targets that do not change between substeps: ``set_action`` writes them into the Control it knows (the
   last one given to ``substep`` or ``reset``) and ``substep`` launches nothing, unless it is handed another Control
@@ -76,6 +76,8 @@ class _Engine:
             h: [p for p in self.parts if getattr(type(p), h) is not getattr(Part, h)]
             for h in ("before_set_action", "before_substep", "after_substep", "after_reset")
         }
+        if "actuator_models" in self._by_name:  # an actuator network in the substep's launch, or its own (host only)
+            self._by_name["actuator_models"].choose_launch(self)
         self.writes_joint_f = plan.writes_joint_f
         self.action_buffer = self.core.action_buffer  # (read by every set_action)
         self.block_dim = step_block_dim(self.device, self.num_envs)
@@ -211,7 +213,7 @@ class _Engine:
             fused = None if models is None else models.substep_launch(self)
             if fused is None:
                 kernel, dim, block_dim = pd_step.substep_kernel(self.layout), self.num_envs, self.block_dim
-            else:  # an actuator network's rows in the same launch (actuator_models.fuse)
+            else:  # an actuator network's rows in the same launch (ActuatorModels.choose_launch)
                 kernel, dim, block_dim, extra = fused
                 per_call.update(extra)
             self._launch_substep = self._launch(kernel, dim, per_call, block_dim)

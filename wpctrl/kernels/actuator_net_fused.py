@@ -15,7 +15,8 @@ readout; the network writes nothing the substep kernel reads), so nothing has to
 with one exception: the network's position target. The substep kernel writes it to ``joint_target_q`` in this very
 launch, so a network row cannot read it from there; it reads the mode's target table (``target_qpos_in``) instead,
 which is the same value when the network's rows are neither interpolated nor delayed. :func:`fusable` says whether
-a mode's layout allows it; the engine fuses only then (bit-identical results to the two launches).
+a mode's layout allows it; the engine fuses only then (``ActuatorNet.launch``: by default wherever allowed), with
+bit-identical results to the two launches on the CPU.
 """
 
 from __future__ import annotations

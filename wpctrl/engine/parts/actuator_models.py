@@ -3,8 +3,9 @@ parameters.
 
 :class:`ActuatorModels` holds the per-env DC-motor parameters (``saturation_effort`` / ``velocity_limit``, randomisable
 like the drive properties) and the actuator networks: each network's rows get one launch after the substep kernel
-(:mod:`wpctrl.kernels.actuator_net`), and a reset zeroes their history / hidden state. Position tables need no part:
-they are compiled into the substep kernel (:mod:`wpctrl.kernels.actuator_models`).
+(:mod:`wpctrl.kernels.actuator_net`), or run in the substep kernel's launch where their ``launch`` setting and the mode
+allow it (:meth:`ActuatorModels.choose_launch`); a reset zeroes their history / hidden state. Position tables need no
+part: they are compiled into the substep kernel (:mod:`wpctrl.kernels.actuator_models`).
 """
 
 from __future__ import annotations
@@ -97,7 +98,7 @@ class ActuatorModels(Part):
         self.nets = [
             _NetGroup(plan, alloc, r0, n, spec) for r0, n, spec in rows.extras if isinstance(spec, ActuatorNet)
         ]
-        self.fused: _NetGroup | None = None  # the network run in the substep's launch (fuse)
+        self.fused: _NetGroup | None = None  # the network run in the substep's launch (choose_launch)
 
     def kernel_args(self) -> dict:
         return {
@@ -110,23 +111,38 @@ class ActuatorModels(Part):
             if net is not self.fused:
                 net.launch(engine, state, control)
 
-    def fuse(self, engine) -> None:
-        """Run the mode's network rows in the substep kernel's launch (:mod:`wpctrl.kernels.actuator_net_fused`): one
-        launch per substep in place of two, bit-identical on the CPU. For one unrolled network whose rows are neither
-        interpolated nor delayed, with no other launch after the substep's; before the first substep."""
-        why = None
-        if len(self.nets) != 1 or self.nets[0].kernel_kind != "unrolled":
-            why = "needs one network with the unrolled kernel"
-        elif [p.name for p in engine._hooks["after_substep"]] != [self.name]:
-            why = "needs the network's launch to be the only one after the substep's"
-        else:
-            reason = actuator_net_fused.fusable(engine.layout, self.nets[0].row0, self.nets[0].n)
-            why = None if reason is None else f"not with {reason}"
-        if why is not None:
-            raise ConfigError(f"actuator network in the substep's launch: {why}")
-        if engine._launch_substep is not None:
-            raise ConfigError("actuator network in the substep's launch: set before the first substep")
-        self.fused = self.nets[0]
+    def choose_launch(self, engine) -> None:
+        """Decide, once the engine knows its hooks, whether the network runs in the substep kernel's launch
+        (:mod:`wpctrl.kernels.actuator_net_fused`; ``ActuatorNet.launch``): ``"auto"`` where :meth:`fuse_reason` finds
+        nothing against it, ``"fused"`` or a :class:`~wpctrl.config.ConfigError` with that reason, ``"separate"``
+        never."""
+        asked = [g.spec.launch for g in self.nets]
+        if "separate" in asked or not asked:
+            if "fused" in asked:
+                raise ConfigError(
+                    "actuator.launch: expected 'auto' or 'separate' (the mode's other network runs in a launch of "
+                    "its own), got 'fused'"
+                )
+            return
+        why = self.fuse_reason(engine)
+        if why is None:
+            self.fused = self.nets[0]
+        elif "fused" in asked:
+            raise ConfigError(f"actuator.launch: expected 'auto' or 'separate' for this network ({why}), got 'fused'")
+
+    def fuse_reason(self, engine) -> str | None:
+        """Why the mode's network cannot run in the substep kernel's launch, or None when it can: one network, with
+        the unrolled kernel, the only launch after the substep's, its rows' targets neither interpolated nor
+        delayed."""
+        if len(self.nets) != 1:
+            return f"the substep's launch takes one network, this mode has {len(self.nets)}"
+        if self.nets[0].kernel_kind != "unrolled":
+            return f"the substep's launch takes the unrolled kernel, this network runs the {self.nets[0].kernel_kind}"
+        others = [p.name for p in engine._hooks["after_substep"] if p.name != self.name]
+        if others:
+            return f"the mode launches {', '.join(others)} after the substep"
+        reason = actuator_net_fused.fusable(engine.layout, self.nets[0].row0, self.nets[0].n)
+        return None if reason is None else f"not with {reason}"
 
     def substep_launch(self, engine) -> tuple | None:
         """``(kernel, dim, block_dim, parameters)`` of the substep's launch with the network in it, or None."""

@@ -34,7 +34,9 @@
 # with a warm kernel cache (Warp compiles first with an empty one: ~1 min more), all three stages ~3.5 min.
 # The split-kernel command above (third example): 87 s on an H200 (2026-11-26, with mlp / lstm in place of
 # mlp_split4 / lstm_split4, when "auto" still split over 4 at 4k).
-# The one-launch command (fourth example): about 2.5 to 3 min, most of it compiling the new kernels (estimated).
+# The one-launch command (fourth example): 73 s on an H200 (2026-11-26, with NETS_ENVS=4k,1M and
+# NCU_VARIANTS=mlp_unrolled,mlp_fused). mlp / lstm (the defaults) now run what mlp_fused / lstm_fused run;
+# mlp_unrolled / lstm_unrolled are the two launches (launch="separate").
 set -uo pipefail
 cd "$(dirname "$0")/.."
 OUT=${OUT:-bench/results}

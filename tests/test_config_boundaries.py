@@ -647,6 +647,11 @@ BOUNDS: dict[str, dict[str, Bound]] = {
             outside=("fast", "Tiled", "split3"),
             wrong_type=(3, None),
         ),
+        "launch": Bound(
+            inside=("auto", "fused", "separate", V("auto", {"kernel": "tiled"}, label="auto, tiled: separate")),
+            outside=("one", "Fused", V("fused", {"kernel": "tiled"}, label="fused with the tiled kernel")),
+            wrong_type=(1, None),
+        ),
     },
     # The option groups, passed to build_controller with the base arm config (a position controller, force drives).
     "Actuation": {

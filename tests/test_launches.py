@@ -94,6 +94,30 @@ def test_launches_per_control_step(monkeypatch, mode, actuation, options, expect
     assert len(counter.take()) == expected
 
 
+@pytest.mark.parametrize(
+    ("launch", "options", "expected"),
+    [
+        ("auto", {}, 1 + 5),  # the network's rows in the substep kernel's launch
+        ("separate", {}, 1 + 2 * 5),  # the substep kernel, then the network's own launch
+        ("auto", {"delay": 1}, 1 + 2 * 5),  # a delay: the network reads the delayed target, after the substep kernel
+    ],
+)
+def test_actuator_network_launches_per_control_step(monkeypatch, launch, options, expected):
+    torch = pytest.importorskip("torch", reason="torch is a dev dependency (the network is a torch module)")
+    torch.manual_seed(0)
+    net = torch.nn.Sequential(torch.nn.Linear(6, 8), torch.nn.Tanh(), torch.nn.Linear(8, 1))
+    arm = delta_arm(actuator=wpctrl.ActuatorNet(net, launch=launch))
+    h = Harness({"arm": arm, "gripper": gripper()}, num_envs=3, actuation="explicit", **options)
+    h.ctrl.reset(h.state)
+    act = wp.zeros((3, h.ctrl.action_dim), dtype=wp.float32)
+    counter = LaunchCounter(monkeypatch)
+    for _ in range(2):
+        _control_step(h, act)
+        launched = counter.take()
+        assert len(launched) == expected, launched
+        assert sum(k.startswith("wpctrl_substep_actuator_net") for k in launched) == (5 if expected == 6 else 0)
+
+
 class Expected:
     """The drive position targets of ``_mode()`` re-derived in numpy (ManiSkill's rules, float32): the arm's virtual
     target accumulates ``0.1 clip(a)``; both fingers take the gripper's column scaled onto [-0.01, 0.04]; an env with

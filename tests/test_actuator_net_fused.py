@@ -210,7 +210,7 @@ def test_fused_is_refused_with_the_reason_where_the_mode_does_not_allow_it(why, 
         wpctrl.build_controller(mode, build_panda(E), 20, 100, **kw)
 
 
-def test_launch_is_validated_and_separate_wins_over_fused_in_a_mode():
+def test_launch_is_validated_and_fused_is_refused_beside_a_separate_network():
     with pytest.raises(
         wpctrl.ConfigError,
         match=r"PDJointPosControllerConfig.actuator.launch: expected 'auto', 'fused' or 'separate', got 'one'",

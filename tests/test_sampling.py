@@ -92,6 +92,22 @@ def test_sync_free_sampling_is_refused_for_other_distributions(vec):
     Collector(vec, hetero, "rsl-rl")  # rsl-rl's own act takes any distribution
 
 
+def test_sync_free_rollout_never_calls_torch_normal(vec, monkeypatch):
+    """The call that syncs on CUDA (``torch.normal`` with a std tensor) is not made by a sync-free rollout; rsl-rl's
+    sampling makes it (checked on the CPU, where the sync itself does not exist)."""
+    alg = _alg(vec)
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("torch.normal called")
+
+    monkeypatch.setattr(torch, "normal", refuse)
+    with torch.inference_mode():
+        Collector(vec, alg, "sync-free").rollout(vec.get_observations(), 2)
+        alg.storage.clear()
+        with pytest.raises(AssertionError, match="torch.normal called"):
+            Collector(vec, alg, "rsl-rl").rollout(vec.get_observations(), 1)
+
+
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA: the host sync is a CUDA stream's")
 def test_a_cuda_rollout_does_not_wait_for_the_gpu():
     """With sync-free sampling a rollout raises no error under torch's sync debug mode set to "error" (any

@@ -183,7 +183,6 @@ def train(args, t_main: float) -> int:
     from tensordict import TensorDict
 
     import wpctrl.tasks as T
-    from wpctrl.config import ConfigError
 
     from .outputs import fmt, median, plot, write_json
 
@@ -214,16 +213,11 @@ def train(args, t_main: float) -> int:
 
     t0 = time.perf_counter()
     graph = not args.no_graph
-    try:
-        env = TaskVecEnv(args.task, envs, device=device, control_mode=control_mode, seed=args.seed,
-                         partial_reset=not args.no_partial_reset, substeps=args.substeps,
-                         graph=graph)  # fmt: skip
-        eval_env = T.make(args.task, num_envs=eval_envs, device=device, control_mode=control_mode,
-                          seed=args.seed + 10_000, auto_reset=False, ignore_terminations=True,
-                          physics=T.TaskPhysics(substeps=env.substeps), graph=graph)  # fmt: skip
-    except ConfigError as e:  # an option the envs refuse
-        print(f"wpctrl train: {e}", file=sys.stderr)
-        return 2
+    env = TaskVecEnv(args.task, envs, device=device, control_mode=control_mode, seed=args.seed,
+                     partial_reset=not args.no_partial_reset, substeps=args.substeps, graph=graph)  # fmt: skip
+    eval_env = T.make(args.task, num_envs=eval_envs, device=device, control_mode=control_mode,
+                      seed=args.seed + 10_000, auto_reset=False, ignore_terminations=True,
+                      physics=T.TaskPhysics(substeps=env.substeps), graph=graph)  # fmt: skip
     cfg = maniskill_ppo_cfg(steps, args.epochs or EPOCHS, args.minibatches or MINIBATCHES, args.seed,
                             obs_normalization=args.obs_normalization == "on")  # fmt: skip
     if envs * steps < cfg["algorithm"]["num_mini_batches"]:

@@ -21,6 +21,11 @@ control step (median of ``--repeats`` samples):
 * **PPO rollout, then a sync**: one iteration's rollout (``--steps-per-env`` steps) and a device sync, as the
   training times its collection (per step).
 
+* **the same states, with and without the policy**: ``--replay-steps`` collection steps from a fixed reset, their
+  actions recorded, then the env reset the same way and stepped with the recorded actions alone: the env's cost on
+  the states the policy drives it through (an arm in motion costs MuJoCo-Warp's solver more iterations than one at
+  rest), and the collection's overhead over exactly that work.
+
 ``--action-sampling`` picks the training's sampler (``wpctrl train``'s flag). On CUDA the host's cost of launching each
 captured graph is also measured on its own (a sync before every launch, so that a full launch queue cannot stall it):
 if the env step's launch takes the host about as long as the GPU takes to run it, nothing can hide it.
@@ -70,6 +75,29 @@ def _launch_host_time(graph, sync, repeats: int) -> float:
     return statistics.median(samples)
 
 
+def _same_states(vec, collector, alg, sync, steps: int) -> dict:
+    """Seconds per step of ``steps`` collection steps from ``reset(seed=1)``, their actions recorded, and of the env
+    stepped with those actions alone from the same reset (the same states, up to MuJoCo's warm start)."""
+    actions = []
+    obs = vec.reset(seed=1)
+    sync()
+    t = time.perf_counter()
+    for _ in range(steps):
+        if alg.storage.step >= alg.storage.num_transitions_per_env:
+            alg.storage.clear()
+        obs = collector.rollout(obs, 1)
+        actions.append(alg.storage.actions[alg.storage.step - 1].clone())  # the storage wraps: copy now
+    sync()
+    collect = (time.perf_counter() - t) / steps
+    vec.reset(seed=1)
+    sync()
+    t = time.perf_counter()
+    for a in actions:
+        vec.step(a)
+    sync()
+    return {"collection": collect, "env.step alone": (time.perf_counter() - t) / steps}
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--task", default="PushCube-v1", choices=("PushCube-v1", "PickCube-v1"))
@@ -79,6 +107,7 @@ def main(argv=None) -> int:
     p.add_argument("--control-mode", default="pd_joint_delta_pos")
     p.add_argument("--action-sampling", default="sync-free", choices=("sync-free", "rsl-rl"))
     p.add_argument("--steps-per-env", type=int, default=4, help="the rollout length of one PPO iteration")
+    p.add_argument("--replay-steps", type=int, default=48, help="steps of the same-states comparison")
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--min-s", type=float, default=0.25, help="minimum seconds per timing sample")
     p.add_argument("--train-json", type=Path, default=None, help="a training run's train.json: its collection rate")
@@ -157,6 +186,8 @@ def main(argv=None) -> int:
     with torch.inference_mode():
         sec = {name: _time(f, sync, args.min_s, args.repeats) for name, f in fns.items()}
         host = {name: _host_time(f, sync, repeats=args.repeats) for name, f in fns.items()} if cuda else None
+    with torch.inference_mode():
+        same = _same_states(vec, collector, alg, sync, args.replay_steps)
     sec[ITERATION] /= args.steps_per_env
     if host:
         host[ITERATION] /= args.steps_per_env
@@ -184,6 +215,8 @@ def main(argv=None) -> int:
         "iteration_collection_env_steps_per_s": args.envs / per_iteration,
         "iteration_collection_over_rollout": rollout / per_iteration,
         "policy_share_of_collection": 1.0 - step / collect,
+        "same_states_us_per_step": {k: v * 1e6 for k, v in same.items()},
+        "same_states_collection_over_env_step": same["env.step alone"] / same["collection"],
         "collection_us_if_serial": (step + policy) * 1e6,
         "collection_us_if_overlapped": max(step, policy) * 1e6,
     }
@@ -212,6 +245,12 @@ def main(argv=None) -> int:
         f"of {args.steps_per_env} steps with its sync: {args.envs / per_iteration:,.0f} env-steps/s = "
         f"{result['iteration_collection_over_rollout']:.0%} of the rollout. Action sampling: {args.action_sampling}.\n",
     ]
+    md.append(
+        f"The same {args.replay_steps} steps from the same reset (µs per step): collection "
+        f"{same['collection'] * 1e6:,.0f}, env.step with the recorded actions alone {same['env.step alone'] * 1e6:,.0f}: "
+        f"collection = {result['same_states_collection_over_env_step']:.0%} of the env step's rate on the states the "
+        "policy drives.\n"
+    )
     if launch:
         md.append("Host µs to launch a captured graph with the device idle (a sync before each launch): "
                   + ", ".join(f"{k} {v * 1e6:,.0f}" for k, v in launch.items()) + ".\n")  # fmt: skip

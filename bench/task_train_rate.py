@@ -247,7 +247,8 @@ def main(argv=None) -> int:
     ]
     md.append(
         f"The same {args.replay_steps} steps from the same reset (µs per step): collection "
-        f"{same['collection'] * 1e6:,.0f}, env.step with the recorded actions alone {same['env.step alone'] * 1e6:,.0f}: "
+        f"{same['collection'] * 1e6:,.0f}, env.step with the recorded actions alone "
+        f"{same['env.step alone'] * 1e6:,.0f}: "
         f"collection = {result['same_states_collection_over_env_step']:.0%} of the env step's rate on the states the "
         "policy drives.\n"
     )

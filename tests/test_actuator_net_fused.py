@@ -68,6 +68,14 @@ def fused(ctrl) -> bool:
 def _run(kind, launch, device="cpu"):
     """Everything the mode writes after each substep of 4 control steps (a partial reset after the second)."""
     model, ctrl = _build(kind, launch, device)
+    # values that differ per env, read by both parts of the one launch: the network rows' DC envelope and force
+    # limits, the gripper's gains (the substep threads' PD rows)
+    per_env = np.linspace(0.4, 1.6, E, dtype=f32)[:, None]
+    ctrl["arm"].set_drive_properties(saturation_effort=40.0 * per_env * np.ones((E, 7), f32),
+                                     velocity_limit=5.0 * per_env * np.ones((E, 7), f32),
+                                     force_limit=60.0 / per_env * np.ones((E, 7), f32))  # fmt: skip
+    ctrl["gripper"].set_drive_properties(stiffness=1e3 * per_env * np.ones((E, 2), f32),
+                                         damping=1e2 * per_env * np.ones((E, 2), f32))  # fmt: skip
     rng = np.random.default_rng(11)
     names = [*PANDA_ARM_JOINTS, *PANDA_GRIPPER_JOINTS]
     s, c = model.state(), model.control()

@@ -180,6 +180,19 @@ class NetIO:
 
 
 @wp.func
+def row_index(io: NetIO, q_lin: int, qd_lin: int, env: int, r: int, j: int):
+    """Row ``r`` (the network's ``j``-th) of ``env``: its coordinate and DOF index. ``q_lin`` / ``qd_lin`` (>= 0): the
+    network's rows are consecutive coordinates / DOFs of env 0 from there (the index is computed, no table read)."""
+    qi = q_lin + j + env * io.q_stride
+    if q_lin < 0:
+        qi = _at(io.q_idx, io.q_stride, env, r)
+    di = qd_lin + j + env * io.qd_stride
+    if qd_lin < 0:
+        di = _at(io.qd_idx, io.qd_stride, env, r)
+    return qi, di
+
+
+@wp.func
 def row_input(
     io: NetIO,
     q_lin: int,
@@ -192,15 +205,9 @@ def row_input(
     joint_target_q_in: wp.array[float],
 ):
     """Everything the row reads, all before the network so that the loads are in flight together: its DOF index,
-    position error ``q* - q`` and velocity, its force limit and DC-motor envelope (saturation effort, velocity limit).
-    ``q_lin`` / ``qd_lin`` (>= 0): the network's rows are consecutive coordinates / DOFs of env 0 from there (the
-    index is computed, no table read)."""
-    qi = q_lin + j + env * io.q_stride
-    if q_lin < 0:
-        qi = _at(io.q_idx, io.q_stride, env, r)
-    di = qd_lin + j + env * io.qd_stride
-    if qd_lin < 0:
-        di = _at(io.qd_idx, io.qd_stride, env, r)
+    position error ``q* - q`` and velocity, its force limit and DC-motor envelope (saturation effort, velocity limit);
+    the indices are :func:`row_index`'s."""
+    qi, di = row_index(io, q_lin, qd_lin, env, r, j)
     q = joint_q_in[qi]
     err = joint_target_q_in[qi] - q
     return di, err, joint_qd_in[di], io.force_limit[env, r], io.sat_effort[env, r], io.vel_limit[env, r]

@@ -26,9 +26,8 @@ import warp as wp
 
 from ..config.actuator_models import ACT_NET
 from ..config.rows import FLAG_INTERPOLATE
-from .actuator_net import NetIO, NetLayout
+from .actuator_net import NetIO, NetLayout, row_index
 from .actuator_net_unrolled import unrolled_row
-from .pd import _at
 from .pd_step import substep_func
 from .step_layout import StepLayout
 
@@ -67,12 +66,7 @@ def _table_input(
 ):
     """:func:`.actuator_net.row_input` with the position target read from the mode's target table (the value the
     substep kernel writes to ``joint_target_q`` for a row neither interpolated nor delayed)."""
-    qi = q_lin + j + env * io.q_stride
-    if q_lin < 0:
-        qi = _at(io.q_idx, io.q_stride, env, r)
-    di = qd_lin + j + env * io.qd_stride
-    if qd_lin < 0:
-        di = _at(io.qd_idx, io.qd_stride, env, r)
+    qi, di = row_index(io, q_lin, qd_lin, env, r, j)
     q = joint_q_in[qi]
     err = target_qpos_in[env, r] - q
     return di, err, joint_qd_in[di], io.force_limit[env, r], io.sat_effort[env, r], io.vel_limit[env, r]

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 import torch
 import warp as wp
+from actuator_nets import LSTMNet
 from conftest import HAS_CUDA, build_panda
 
 import wpctrl
@@ -42,19 +43,6 @@ pytestmark = pytest.mark.filterwarnings("ignore:`torch.jit:DeprecationWarning")
 f32 = np.float32
 E = 3
 J = 7
-
-
-class _LSTMNet(torch.nn.Module):
-    """legged_gym / Isaac Lab's actuator LSTM: torques, (h, c) = net(x, (h, c)) on x of shape (batch, 1, 2)."""
-
-    def __init__(self, hidden=8, layers=2):
-        super().__init__()
-        self.lstm = torch.nn.LSTM(2, hidden, layers, batch_first=True)
-        self.linear = torch.nn.Linear(hidden, 1)
-
-    def forward(self, x, hc: tuple[torch.Tensor, torch.Tensor]):
-        out, (h, c) = self.lstm(x, hc)
-        return self.linear(out), (h, c)
 
 
 def _scripted(module, tmp_path, name):
@@ -128,7 +116,7 @@ def test_mlp_actuator_equals_torch_with_history_and_partial_reset(tmp_path, orde
 
 @pytest.mark.parametrize("kernel", KERNELS)
 def test_lstm_actuator_equals_torch_with_hidden_state_and_partial_reset(tmp_path, kernel):
-    path, net = _scripted(_LSTMNet(hidden=8, layers=2), tmp_path, "lstm")
+    path, net = _scripted(LSTMNet(hidden=8, layers=2), tmp_path, "lstm")
     act = wpctrl.ActuatorNet(path, saturation_effort=30.0, velocity_limit=6.0, kernel=kernel)
     cfg = wpctrl.PDJointPosControllerConfig(PANDA_ARM_JOINTS, None, None, 0.0, 0.0, 1e9, normalize_action=False,
                                             actuator=act)  # fmt: skip
@@ -328,7 +316,7 @@ def test_partial_tile_or_block_on_cpu_blocks(tmp_path, monkeypatch, kind, kernel
         make, kw, lstm = NETWORKS["trained"]
         net = make()
     else:
-        net, kw, lstm = _LSTMNet(hidden=8, layers=2), {"saturation_effort": 30.0, "velocity_limit": 6.0}, (2, 8)
+        net, kw, lstm = LSTMNet(hidden=8, layers=2), {"saturation_effort": 30.0, "velocity_limit": 6.0}, (2, 8)
         torch.manual_seed(0)
         for p in net.parameters():
             torch.nn.init.uniform_(p, -0.6, 0.6)
@@ -343,7 +331,7 @@ def test_networks_equal_torch_on_cuda(name, kernel):
     """On the GPU, with 13 envs (91 rows: one full and one partial 64-row tile, two full and one partial 32-row
     block of the split kernel; ``"auto"`` runs the unrolled kernel even for so few rows)."""
     if name == "lstm_2x8":
-        net, kw, lstm = _LSTMNet(hidden=8, layers=2), {"saturation_effort": 30.0, "velocity_limit": 6.0}, (2, 8)
+        net, kw, lstm = LSTMNet(hidden=8, layers=2), {"saturation_effort": 30.0, "velocity_limit": 6.0}, (2, 8)
         torch.manual_seed(0)
         for p in net.parameters():
             torch.nn.init.uniform_(p, -0.6, 0.6)

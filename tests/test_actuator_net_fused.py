@@ -16,22 +16,14 @@ import wpctrl
 from wpctrl.robots import PANDA_ARM_JOINTS, PANDA_GRIPPER_JOINTS
 
 torch = pytest.importorskip("torch", reason="torch is a dev dependency (the networks are torch modules)")
+
+from actuator_nets import LSTMNet  # noqa: E402
+
 pytestmark = pytest.mark.filterwarnings("ignore:`torch.jit:DeprecationWarning")
 
 f32 = np.float32
 E = 5
 MIMIC = {"panda_finger_joint2": {"joint": "panda_finger_joint1"}}
-
-
-class _LSTMNet(torch.nn.Module):
-    def __init__(self, hidden=5, layers=2):
-        super().__init__()
-        self.lstm = torch.nn.LSTM(2, hidden, layers, batch_first=True)
-        self.linear = torch.nn.Linear(hidden, 1)
-
-    def forward(self, x, hc: tuple[torch.Tensor, torch.Tensor]):
-        out, (h, c) = self.lstm(x, hc)
-        return self.linear(out), (h, c)
 
 
 def _network(kind):
@@ -40,7 +32,7 @@ def _network(kind):
         net = torch.nn.Sequential(torch.nn.Linear(6, 16), torch.nn.Softsign(), torch.nn.Linear(16, 16),
                                   torch.nn.ELU(0.7), torch.nn.Linear(16, 1))  # fmt: skip
     else:
-        net = _LSTMNet()
+        net = LSTMNet(hidden=5, layers=2)
     for p in net.parameters():
         torch.nn.init.uniform_(p, -0.6, 0.6)
     return net.eval()

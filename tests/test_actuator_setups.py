@@ -16,6 +16,9 @@ import wpctrl
 from wpctrl.robots import PANDA_ARM_JOINTS, PANDA_GRIPPER_JOINTS
 
 torch = pytest.importorskip("torch", reason="torch is a dev dependency (the networks' reference)")
+
+from actuator_nets import LSTMNet  # noqa: E402
+
 pytestmark = pytest.mark.filterwarnings("ignore:`torch.jit:DeprecationWarning")
 
 f32 = np.float32
@@ -164,19 +167,6 @@ def test_position_tables_on_two_controllers_each_equal_newtons_component():
 # -- actuator networks: scales, order, a later controller, per-env envelopes, delay ---------------------------------
 
 
-class LSTMNet(torch.nn.Module):
-    """legged_gym / Isaac Lab's actuator LSTM: torques, (h, c) = net(x, (h, c)) on x of shape (batch, 1, 2)."""
-
-    def __init__(self, hidden=6, layers=2):
-        super().__init__()
-        self.lstm = torch.nn.LSTM(2, hidden, layers, batch_first=True)
-        self.linear = torch.nn.Linear(hidden, 1)
-
-    def forward(self, x, hc: tuple[torch.Tensor, torch.Tensor]):
-        out, (h, c) = self.lstm(x, hc)
-        return self.linear(out), (h, c)
-
-
 def init(module, seed=0):
     torch.manual_seed(seed)
     for p in module.parameters():
@@ -208,7 +198,7 @@ def test_lstm_with_input_scales_on_a_later_controller_equals_torch(order, kernel
     from newton.actuators import ClampingDCMotor
 
     monkeypatch.setattr(wp.config, "enable_cpu_blocks", kernel != "auto")
-    net = init(LSTMNet())
+    net = init(LSTMNet(hidden=6, layers=2))
     ps, vs, ts = 2.5, 0.3, 40.0
     act = wpctrl.ActuatorNet(net, pos_scale=ps, vel_scale=vs, torque_scale=ts, input_order=order,
                              saturation_effort=50.0, velocity_limit=8.0, kernel=kernel)  # fmt: skip

@@ -17,6 +17,8 @@ One control step = ``set_action`` + K x ``before_simulation_step`` (K = 5), Mani
   split over 2 / 4 threads at every size (on the CPU without Warp's cooperative CPU blocks: the unrolled kernel);
 * ``mlp_tiled`` / ``lstm_tiled``: the same networks with ``kernel="tiled"`` (weights staged in shared memory, rows in
   64-row tiles, each layer a ``wp.tile_matmul``);
+* ``mlp_3xtf32``: the MLP with ``kernel="3xtf32"`` (each layer a warp-wide tensor-core product at float32 accuracy,
+  32 rows per warp; its own launch after the substep kernel's);
 * ``mlp_fused`` / ``lstm_fused``: ``kernel="unrolled"``, ``launch="fused"``: the unrolled kernel's network code run in
   the substep kernel's launch (one launch per substep in place of two; what the defaults run here);
 * ``torch_mlp`` / ``torch_lstm``: the same control step with the network's substep written in torch on the same
@@ -69,7 +71,7 @@ from bench.common import (  # noqa: E402
 
 VARIANTS = ("plain", "dc_motor", "position_limit", "mlp", "lstm", "mlp_unrolled", "lstm_unrolled", "mlp_split2",
             "lstm_split2", "mlp_split4", "lstm_split4", "mlp_tiled", "lstm_tiled", "mlp_fused", "lstm_fused",
-            "torch_mlp", "torch_lstm", "newton_dc")  # fmt: skip
+            "mlp_3xtf32", "torch_mlp", "torch_lstm", "newton_dc")  # fmt: skip
 LABELS = {
     "plain": "plain explicit step",
     "dc_motor": "DCMotor",
@@ -85,6 +87,7 @@ LABELS = {
     "mlp_tiled": "ActuatorNet (MLP, tiled kernel)",
     "lstm_tiled": "ActuatorNet (LSTM, tiled kernel)",
     "mlp_fused": "ActuatorNet (MLP, in the substep's launch)",
+    "mlp_3xtf32": "ActuatorNet (MLP, tensor cores, 3xTF32)",
     "lstm_fused": "ActuatorNet (LSTM, in the substep's launch)",
     "torch_mlp": "MLP in torch",
     "torch_lstm": "LSTM in torch",

@@ -23,6 +23,7 @@ from wpctrl.kernels import actuator_net_split as KS
 from wpctrl.robots import PANDA_ARM_JOINTS
 
 KERNELS = ("unrolled", "tiled", "split2", "split4")
+MLP_KERNELS = (*KERNELS, "3xtf32")
 
 
 def _kind(kernel: str) -> str:
@@ -76,7 +77,7 @@ def _rollout(ctrl, model, steps, rng, reset_at=None):
         yield q[b.coord_index], qd[b.dof_index], target, c.joint_f.numpy()[b.dof_index], mask
 
 
-@pytest.mark.parametrize("kernel", KERNELS)
+@pytest.mark.parametrize("kernel", MLP_KERNELS)
 @pytest.mark.parametrize("order", ["pos_vel", "vel_pos"])
 def test_mlp_actuator_equals_torch_with_history_and_partial_reset(tmp_path, order, kernel):
     mlp = torch.nn.Sequential(
@@ -272,6 +273,10 @@ NETWORKS = {
                                 torch.nn.Linear(7, 3), torch.nn.ELU(0.9), torch.nn.Linear(3, 1)),
                    {"input_idx": (0, 1, 4), "pos_scale": 1.2, "vel_scale": 0.3, "torque_scale": 12.0}, None),
     "lstm_2x3": (lambda: _LSTMHead(layers=2, hidden=3, head=False), {"torque_scale": 9.0}, (2, 3)),
+    # the tensor-core kernel's widest operands: 64 units (8 tiles of 8), 16 inputs (2 tiles)
+    "wide": (lambda: _mlp(torch.nn.Linear(16, 64), torch.nn.Softsign(), torch.nn.Linear(64, 40), torch.nn.Tanh(),
+                          torch.nn.Linear(40, 1)),
+             {"input_idx": tuple(range(8)), "pos_scale": 1.1, "vel_scale": 0.2, "torque_scale": 6.0}, None),
 }  # fmt: skip
 
 
@@ -292,15 +297,21 @@ class _LSTMHead(torch.nn.Module):
         return self.head(out), (h, c)
 
 
-@pytest.mark.parametrize("kernel", KERNELS)
+@pytest.mark.parametrize("kernel", MLP_KERNELS)
 @pytest.mark.parametrize("name", list(NETWORKS))
 def test_network_shapes_equal_torch(tmp_path, name, kernel):
+    """Every kernel on every shape; the tensor-core kernel (on the CPU: its per-row build, with the GPU's TF32 split
+    and the packed weights) refuses the LSTMs, naming why."""
     make, kw, lstm = NETWORKS[name]
     module = make()
     path = tmp_path / f"{name}.pt"
     torch.jit.script(module).save(str(path))
     net = torch.jit.load(str(path))
     act = wpctrl.ActuatorNet(path, kernel=kernel, **kw)
+    if kernel == "3xtf32" and lstm is not None:
+        with pytest.raises(wpctrl.ConfigError, match=r"kernel: expected another kernel than '3xtf32' for an LSTM"):
+            _check_against_torch(act, net, lstm, kernel=kernel)
+        return
     _check_against_torch(act, net, lstm, kernel=kernel)
 
 
@@ -325,11 +336,14 @@ def test_partial_tile_or_block_on_cpu_blocks(tmp_path, monkeypatch, kind, kernel
 
 
 @pytest.mark.skipif(not HAS_CUDA, reason="needs a CUDA device: the kernels' GPU build (fast math, 64-row tiles)")
-@pytest.mark.parametrize("kernel", [*KERNELS, "auto"])
-@pytest.mark.parametrize("name", ["trained", "activations", "lstm_2x8", "odd_widths", "lstm_2x3"])
+@pytest.mark.parametrize("kernel", [*MLP_KERNELS, "auto"])
+@pytest.mark.parametrize("name", ["trained", "activations", "lstm_2x8", "odd_widths", "lstm_2x3", "wide"])
 def test_networks_equal_torch_on_cuda(name, kernel):
     """On the GPU, with 13 envs (91 rows: one full and one partial 64-row tile, two full and one partial 32-row
-    block of the split kernel; ``"auto"`` runs the unrolled kernel even for so few rows)."""
+    block of the split kernel and of the tensor-core kernel's warps; ``"auto"`` runs the unrolled kernel for so few
+    rows)."""
+    if kernel == "3xtf32" and name.startswith("lstm"):
+        pytest.skip("the tensor-core kernel runs MLPs (its refusal of an LSTM is tested on the CPU)")
     if name == "lstm_2x8":
         net, kw, lstm = LSTMNet(hidden=8, layers=2), {"saturation_effort": 30.0, "velocity_limit": 6.0}, (2, 8)
         torch.manual_seed(0)
@@ -391,6 +405,9 @@ def test_network_errors_name_the_problem(tmp_path):
         build(torch.nn.Sequential(torch.nn.Conv1d(1, 1, 1), torch.nn.Linear(6, 1)))
     with pytest.raises(wpctrl.ConfigError, match=r"input_idx: expected substep indices"):
         build(torch.nn.Sequential(torch.nn.Linear(6, 1)), input_idx=(0, -1, 2))
-    with pytest.raises(wpctrl.ConfigError, match=r"kernel: expected 'auto', 'unrolled', 'split', 'split2', 'split4' or "
-                       r"'tiled', got 'fast'"):  # fmt: skip
+    with pytest.raises(wpctrl.ConfigError, match=r"kernel: expected 'auto', 'unrolled', '3xtf32', 'split', 'split2', "
+                       r"'split4' or 'tiled', got 'fast'"):  # fmt: skip
         build(torch.nn.Sequential(torch.nn.Linear(6, 1)), kernel="fast")
+    with pytest.raises(wpctrl.ConfigError, match=r"kernel: expected another kernel than '3xtf32' for a layer 136 wide "
+                       r"\(padded to 8; at most 128\), got '3xtf32'"):  # fmt: skip
+        build(torch.nn.Sequential(torch.nn.Linear(6, 130), torch.nn.Linear(130, 1)), kernel="3xtf32")

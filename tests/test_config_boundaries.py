@@ -643,13 +643,18 @@ BOUNDS: dict[str, dict[str, Bound]] = {
             wrong_type=(3, None),
         ),
         "kernel": Bound(
-            inside=("auto", "unrolled", "split", "split2", "split4", "tiled"),
+            inside=("auto", "unrolled", "3xtf32", "split", "split2", "split4", "tiled"),
             outside=("fast", "Tiled", "split3"),
             wrong_type=(3, None),
         ),
         "launch": Bound(
             inside=("auto", "fused", "separate", V("auto", {"kernel": "tiled"}, label="auto, tiled: separate")),
-            outside=("one", "Fused", V("fused", {"kernel": "tiled"}, label="fused with the tiled kernel")),
+            outside=(
+                "one",
+                "Fused",
+                V("fused", {"kernel": "tiled"}, label="fused with the tiled kernel"),
+                V("fused", {"kernel": "3xtf32"}, label="fused with the tensor-core kernel"),
+            ),
             wrong_type=(1, None),
         ),
     },

@@ -74,6 +74,44 @@ def _floats(a) -> tuple:
     return tuple(_floats(x) for x in a)
 
 
+def mlp_input(L: NetLayout, scales: tuple[float, float], vec_x) -> wp.Function:
+    """An MLP row's input vector (``vec_x``, its first ``2 * len(L.taps)`` entries the scaled samples in the network's
+    order, the rest zero) as a function of the row ``(s, err, qd, hist_out)``, which also advances the row's history:
+    shared by the network kernels that compile an MLP's layout in (the unrolled and the tensor-core ones)."""
+    TAPS, POS_FIRST, PAST = L.taps, bool(L.pos_first), L.past
+    PS, VS = (float(np.float32(x)) for x in scales)
+    T = len(TAPS)
+    vec_t = wp.types.vector(length=max(L.history, 1), dtype=wp.float32)
+    vec_p = wp.types.vector(length=max(2 * PAST, 1), dtype=wp.float32)
+    POS_AT = tuple((t if POS_FIRST else T + t) for t in range(T))
+    VEL_AT = tuple((T + t if POS_FIRST else t) for t in range(T))
+
+    def x_of(s: int, err: float, qd: float, hist_out: wp.array[vec_p]):
+        x = vec_x()
+        # The history, newest first (Isaac Lab rolls it and writes the current sample at index 0).
+        hp = vec_t()
+        hv = vec_t()
+        hp[0] = err
+        hv[0] = qd
+        if wp.static(PAST > 0):
+            old = hist_out[s]
+            new = vec_p()
+            for k in range(wp.static(PAST)):
+                hp[k + 1] = old[k]
+                hv[k + 1] = old[wp.static(PAST) + k]
+                new[k] = hp[k]
+                new[wp.static(PAST) + k] = hv[k]
+            hist_out[s] = new
+        for t in range(wp.static(T)):
+            x[wp.static(POS_AT[t])] = _scaled(hp[wp.static(TAPS[t])], wp.static(PS))
+            x[wp.static(VEL_AT[t])] = _scaled(hv[wp.static(TAPS[t])], wp.static(VS))
+        return x
+
+    x_of.__annotations__["hist_out"] = wp.array[vec_p]
+    digest = hashlib.sha256(repr((TAPS, POS_FIRST, PAST, PS, VS, vec_x._length_)).encode()).hexdigest()[:16]
+    return wp.func(x_of, name="wpctrl_actuator_net_input_" + digest, module="unique", inline=True)
+
+
 def _make(L: NetLayout, weights: np.ndarray, scales: tuple[float, float, float]) -> tuple[wp.Function, wp.Kernel]:
     N, TAPS, POS_FIRST, PAST = L.rows, L.taps, bool(L.pos_first), L.past
     PS, VS, TS = scales
@@ -96,10 +134,8 @@ def _make(L: NetLayout, weights: np.ndarray, scales: tuple[float, float, float])
     vec_w = wp.types.vector(length=width, dtype=wp.float32)
     vec_g = wp.types.vector(length=4 * H, dtype=wp.float32)
     vec_s = wp.types.vector(length=max(len(L.lstm) * H, 1), dtype=wp.float32)
-    vec_t = wp.types.vector(length=max(L.history, 1), dtype=wp.float32)
     vec_p = wp.types.vector(length=max(2 * PAST, 1), dtype=wp.float32)
-    POS_AT = tuple((t if POS_FIRST else T + t) for t in range(T))
-    VEL_AT = tuple((T + t if POS_FIRST else t) for t in range(T))
+    mlp_x = mlp_input(L, (PS, VS), vec_w)
 
     def net_row(
         s: int,  # (env, joint) row, joint fastest
@@ -118,23 +154,7 @@ def _make(L: NetLayout, weights: np.ndarray, scales: tuple[float, float, float])
     ):
         x = vec_w()
         if wp.static(MLP):
-            # The history, newest first (Isaac Lab rolls it and writes the current sample at index 0).
-            hp = vec_t()
-            hv = vec_t()
-            hp[0] = err
-            hv[0] = qd
-            if wp.static(PAST > 0):
-                old = hist_out[s]
-                new = vec_p()
-                for k in range(wp.static(PAST)):
-                    hp[k + 1] = old[k]
-                    hv[k + 1] = old[wp.static(PAST) + k]
-                    new[k] = hp[k]
-                    new[wp.static(PAST) + k] = hv[k]
-                hist_out[s] = new
-            for t in range(wp.static(T)):
-                x[wp.static(POS_AT[t])] = _scaled(hp[wp.static(TAPS[t])], wp.static(PS))
-                x[wp.static(VEL_AT[t])] = _scaled(hv[wp.static(TAPS[t])], wp.static(VS))
+            x = mlp_x(s, err, qd, hist_out)
         else:
             if wp.static(POS_FIRST):
                 x[0] = _scaled(err, wp.static(PS))
@@ -173,6 +193,7 @@ def _make(L: NetLayout, weights: np.ndarray, scales: tuple[float, float, float])
             x = y
         write_effort(_scaled(x[0], wp.static(TS)), qd, env, r, di, lim, sat, vl, joint_f_out, io)
 
+    net_row.__annotations__["hist_out"] = wp.array[vec_p]  # (the body does not name vec_p: no closure variable)
     # The function's name carries the network: Warp's module hash does not see a function's wp.static() values that
     # are resolved only at code generation (the weights, under loops), so two networks' functions must differ by name.
     digest = hashlib.sha256(repr((L, scales)).encode() + weights.tobytes()).hexdigest()[:16]

@@ -16,7 +16,14 @@ import warp as wp
 from ...config import ConfigError
 from ...config.actuator_models import ActuatorNet
 from ...config.networks import read_network
-from ...kernels import actuator_net, actuator_net_fused, actuator_net_split, actuator_net_tiled, actuator_net_unrolled
+from ...kernels import (
+    actuator_net,
+    actuator_net_fused,
+    actuator_net_mma,
+    actuator_net_split,
+    actuator_net_tiled,
+    actuator_net_unrolled,
+)
 from ...kernels.env_selection import MODE_SCALE, _bump_counter_kernel, _select
 from ..launch import _Launch
 from .part import Part
@@ -248,6 +255,16 @@ class _NetGroup:
         if self.kernel_kind == "unrolled":
             self.kernel = actuator_net_unrolled.unrolled_kernel(self.layout, net.weights, scales)
             extra = {"hist_out": actuator_net_unrolled.history_vectors(self.hist)}
+        elif self.kernel_kind == "3xtf32":
+            _check_mma(self.layout, dev)
+            self.kernel = actuator_net_mma.mma_kernel(self.layout, scales)
+            wfrag, bfrag = actuator_net_mma.pack(self.layout, net.weights)
+            extra = {
+                "hist_out": actuator_net_unrolled.history_vectors(self.hist),
+                "wfrag": wp.array(wfrag.reshape(-1, 4), dtype=wp.vec4, device=dev),
+                "bfrag": wp.array(bfrag.reshape(-1, 2), dtype=wp.vec2, device=dev),
+                "num_rows": E * n,
+            }
         elif self.kernel_kind == "split":
             self.kernel = actuator_net_split.split_kernel(self.layout, net.weights, scales, self.lanes)
             self.block_dim = actuator_net_split.WARP * self.lanes
@@ -292,6 +309,8 @@ class _NetGroup:
                 dim, block_dim = (self.blocks, self.block_dim), self.block_dim
             elif self.kernel_kind == "split":
                 dim, block_dim = self.blocks * self.block_dim, self.block_dim
+            elif self.kernel_kind == "3xtf32":
+                dim, block_dim = actuator_net_mma.launch_dim(engine.num_envs * self.n), actuator_net_mma.BLOCK_DIM
             else:
                 dim, block_dim = engine.num_envs * self.n, actuator_net_unrolled.BLOCK_DIM
             self._launch = engine._launch(self.kernel, dim, per_call, block_dim)
@@ -311,6 +330,19 @@ class _NetGroup:
             dim=(dim, self.n),
             inputs=[engine.num_envs, self.n, env_ids, env_mask, self.hist, self.lstm_h, self.lstm_c],
             device=engine.device,
+        )
+
+
+def _check_mma(layout, device) -> None:
+    """Refuse what the tensor-core kernel cannot run: an LSTM or too wide a layer, a GPU older than sm_80."""
+    why = actuator_net_mma.supports(layout)
+    if why is not None:
+        raise ConfigError(f"actuator.kernel: expected another kernel than '3xtf32' for {why}, got '3xtf32'")
+    d = wp.get_device(device)
+    if d.is_cuda and d.arch < actuator_net_mma.MIN_SM:
+        raise ConfigError(
+            f"actuator.kernel: '3xtf32' needs TF32 tensor cores (sm_{actuator_net_mma.MIN_SM} or later), "
+            f"got {d.name} (sm_{d.arch})"
         )
 
 

@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import re
 import sys
 import time
 from pathlib import Path
@@ -95,11 +96,30 @@ LABELS = {
 }
 
 
+def _mma_options(options: str) -> None:
+    """The tensor-core kernel's build options of a variant ``mlp_3xtf32@<options>`` (the defaults without one):
+    ``t<n>`` tiles per pass, ``r<n>`` register cap (0: none), ``w<n>`` resident warps per SM (0: one warp per 32-row
+    group), ``f<0|1>`` fenced weight loads; e.g. ``mlp_3xtf32@t1r128w0``."""
+    from wpctrl.kernels import actuator_net_mma as mma
+
+    names = {"t": "TILES_PER_PASS", "r": "MAX_REGISTERS", "w": "RESIDENT_WARPS", "f": "FENCE_LOADS"}
+    for name in names.values():
+        setattr(mma, name, _MMA_DEFAULTS.setdefault(name, getattr(mma, name)))
+    for key, value in re.findall(r"([trwf])(\d+)", options):
+        setattr(mma, names[key], int(value))
+
+
+_MMA_DEFAULTS: dict = {}
+
+
 def _actuator(name: str):
     import wpctrl
 
     torch_baseline = name.startswith("torch_")
     name, _, kernel = name.removeprefix("torch_").partition("_")
+    kernel, _, options = kernel.partition("@")
+    if kernel == "3xtf32":
+        _mma_options(options)
 
     if name == "dc_motor":
         return wpctrl.DCMotor(87.0, 2.6)
@@ -329,7 +349,7 @@ def markdown(meta: dict, rows: list[dict], args) -> str:
     body = [
         [
             fmt_envs(r["envs"]) + ("*" if r["layout"] == "synthetic" else ""),
-            LABELS[r["variant"]] + ("†" if r.get("torch_capture") == "two graphs" else ""),
+            LABELS.get(r["variant"], r["variant"]) + ("†" if r.get("torch_capture") == "two graphs" else ""),
             r["replay"],
             fmt_us(r["us"] * 1e-6),
             fmt_ratio(r["x_plain"]),
@@ -395,7 +415,8 @@ def main(argv=None):
             break
         for r in got:
             print(
-                f"[{fmt_envs(n)}] {LABELS[r['variant']]:>32} {r['replay']:>5}: {r['us']:10.2f} us  x plain "
+                f"[{fmt_envs(n)}] {LABELS.get(r['variant'], r['variant']):>32} {r['replay']:>5}: "
+                f"{r['us']:10.2f} us  x plain "
                 f"{fmt_ratio(r['x_plain']):>7}",
                 flush=True,
             )

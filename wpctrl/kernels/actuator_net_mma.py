@@ -43,6 +43,17 @@ MAX_WIDTH = 128
 """The widest layer (inputs or units, padded to a multiple of 8) the kernel takes: its operand and accumulator
 fragments live in registers, 8 per 8 units each."""
 
+TILES_PER_PASS = 2
+"""16-row tiles each pass through the layers carries (1 or 2; the warp's 32 rows are two tiles): 2 interleaves both
+tiles' products (more independent work per warp), 1 takes one tile after the other (fewer registers, more warps)."""
+
+MAX_REGISTERS = 0
+"""A cap on the kernel's registers per thread (0: the compiler's choice); fewer registers, more warps per SM."""
+
+FENCE_LOADS = False
+"""Keep each k-tile's weight loads after the previous k-tile's products (a compiler barrier): the compiler otherwise
+issues a layer's weight loads together, in registers."""
+
 MIN_SM = 80
 """The oldest CUDA architecture with TF32 tensor cores (sm_80)."""
 
@@ -109,18 +120,26 @@ def pack(layout: NetLayout, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray
 def mma_kernel(layout: NetLayout, scales: tuple[float, float, float]) -> wp.Kernel:
     """The kernel of ``layout`` (an MLP, :func:`supports`) with ``scales`` (``pos_scale``, ``vel_scale``,
     ``torque_scale``) compiled in; the weights are its ``wfrag`` / ``bfrag`` arguments (:func:`pack`). Launched over
-    ``num_rows`` rounded up to a multiple of 32 threads with ``block_dim = BLOCK_DIM``."""
+    ``32 * num_warps`` threads (:func:`launch_warps`) with ``block_dim = BLOCK_DIM``."""
     scales = tuple(float(np.float32(x)) for x in scales)
-    key = (layout, scales)
+    key = (layout, scales, TILES_PER_PASS, MAX_REGISTERS, FENCE_LOADS, RESIDENT_WARPS)
     k = _KERNELS.get(key)
     if k is None:
         k = _KERNELS[key] = _make(layout, scales)
     return k
 
 
-def launch_dim(num_rows: int) -> int:
-    """Threads of a launch over ``num_rows`` rows: whole warps (a warp's ``mma`` needs all 32 lanes)."""
-    return -(-int(num_rows) // 32) * 32
+RESIDENT_WARPS = 16
+"""Warps per SM the launch provides (what fits at once with the kernel's ~104 registers per thread): each then loops
+over 32-row groups, loading the next group's inputs while its network runs on the current one."""
+
+
+def launch_warps(num_rows: int, device) -> int:
+    """Warps of a launch over ``num_rows`` rows (the launch is ``32 *`` that many threads: a warp's ``mma`` needs all
+    its lanes): one per 32-row group, at most :data:`RESIDENT_WARPS` per SM on CUDA."""
+    groups = max(1, -(-int(num_rows) // 32))
+    d = wp.get_device(device)
+    return min(groups, d.sm_count * RESIDENT_WARPS) if d.is_cuda and RESIDENT_WARPS else groups
 
 
 # -- the network as a native snippet: the CUDA branch (warp-wide) and the CPU branch (one row) ----------------------
@@ -147,10 +166,14 @@ def _act(v: str, code: int, a: float) -> str:
     return v
 
 
-def _snippet(layout: NetLayout, tag: str) -> str:
+def _snippet(layout: NetLayout, tag: str, tiles: int, fence: bool = False) -> str:
+    """The network's native code: on CUDA the warp's 32 rows as two 16-row tiles, ``tiles`` (1 or 2) of them per pass
+    through the layers (2: both tiles' products interleaved; 1: one tile after the other, half the registers); on the
+    CPU one row."""
     dims = [(_pad8(d[0]), _pad8(d[1]), int(d[2]), float(d[3])) for d in layout.dense]
     K0 = dims[0][0]
     warps = BLOCK_DIM // 32
+    MT = int(tiles)
     cu = [
         "__syncwarp();",
         "const int lane = threadIdx.x & 31, g = lane >> 2, t = lane & 3;",
@@ -160,14 +183,8 @@ def _snippet(layout: NetLayout, tag: str) -> str:
         "const int own = 16 * (t >> 1) + g + 8 * (t & 1);  // this lane's row in the warp's 32",
         f"#pragma unroll\nfor (int k = 0; k < {K0}; ++k) xw[own][k] = x.c[k];",
         "__syncwarp();",
-        f"float a0[2][{K0 // 8}][4];",
-        f"#pragma unroll\nfor (int m = 0; m < 2; ++m)\n#pragma unroll\nfor (int k = 0; k < {K0 // 8}; ++k) {{",
-        "  a0[m][k][0] = xw[16 * m + g][8 * k + 2 * t]; a0[m][k][1] = xw[16 * m + g + 8][8 * k + 2 * t];",
-        "  a0[m][k][2] = xw[16 * m + g][8 * k + 2 * t + 1]; a0[m][k][3] = xw[16 * m + g + 8][8 * k + 2 * t + 1];",
-        "}",
-        "__syncwarp();",
-        "const float4* wf = reinterpret_cast<const float4*>(wfrag.data);",
-        "const float2* bf = reinterpret_cast<const float2*>(bfrag.data);",
+        "const float4* wf_all = reinterpret_cast<const float4*>(wfrag.data);",
+        "const float2* bf_all = reinterpret_cast<const float2*>(bfrag.data);",
         "auto mma = [](float* d, const unsigned* a, unsigned b0, unsigned b1) {",
         '  asm("mma.sync.aligned.m16n8k8.row.col.f32.tf32.tf32.f32 {%0,%1,%2,%3}, {%4,%5,%6,%7}, {%8,%9}, '
         '{%0,%1,%2,%3};"',
@@ -180,6 +197,18 @@ def _snippet(layout: NetLayout, tag: str) -> str:
         "  h = (__float_as_uint(v) + 0x1000u) & 0xffffe000u;",
         "  l = __float_as_uint(v - __uint_as_float(h)) & 0xffffe000u;",
         "};",
+        "float out = 0.0f;",
+        ("#pragma unroll 1" if MT == 1 else "#pragma unroll") + f"\nfor (int m0 = 0; m0 < 2; m0 += {MT}) {{",
+        # (the weights' address opaque to the compiler in each pass: else it hoists every weight load out of the
+        # passes' loop into registers)
+        "const float4* wf = wf_all; const float2* bf = bf_all;",
+        'asm volatile("" : "+l"(wf), "+l"(bf));',
+        f"float a0[{MT}][{K0 // 8}][4];",
+        f"#pragma unroll\nfor (int m = 0; m < {MT}; ++m)\n#pragma unroll\nfor (int k = 0; k < {K0 // 8}; ++k) {{",
+        "  const int r = 16 * (m0 + m) + g;",
+        "  a0[m][k][0] = xw[r][8 * k + 2 * t]; a0[m][k][1] = xw[r + 8][8 * k + 2 * t];",
+        "  a0[m][k][2] = xw[r][8 * k + 2 * t + 1]; a0[m][k][3] = xw[r + 8][8 * k + 2 * t + 1];",
+        "}",
     ]
     cpu = [
         "auto bits = [](float v, unsigned add) -> float {",
@@ -197,28 +226,29 @@ def _snippet(layout: NetLayout, tag: str) -> str:
         if li == last:
             break
         cu += [
-            f"float c{li}[2][{NT}][4];",
+            f"float c{li}[{MT}][{NT}][4];",
             f"#pragma unroll\nfor (int n = 0; n < {NT}; ++n) {{",
             f"  const float2 b = __ldg(bf + ({boff} + n) * 32 + lane);",
-            f"  #pragma unroll\n  for (int m = 0; m < 2; ++m) {{ c{li}[m][n][0] = b.x; c{li}[m][n][1] = b.y; "
+            f"  #pragma unroll\n  for (int m = 0; m < {MT}; ++m) {{ c{li}[m][n][0] = b.x; c{li}[m][n][1] = b.y; "
             f"c{li}[m][n][2] = b.x; c{li}[m][n][3] = b.y; }}",
             "}",
             f"#pragma unroll\nfor (int k = 0; k < {KT}; ++k) {{",
-            "  unsigned hi[2][4], lo[2][4];",
-            f"  #pragma unroll\n  for (int m = 0; m < 2; ++m)\n  #pragma unroll\n  for (int i = 0; i < 4; ++i) "
+            '  asm volatile("" ::: "memory");' if fence else "",
+            f"  unsigned hi[{MT}][4], lo[{MT}][4];",
+            f"  #pragma unroll\n  for (int m = 0; m < {MT}; ++m)\n  #pragma unroll\n  for (int i = 0; i < 4; ++i) "
             f"split(a{p}[m][k][i], hi[m][i], lo[m][i]);",
             f"  #pragma unroll\n  for (int n = 0; n < {NT}; ++n) {{",
             f"    const float4 w = __ldg(wf + ({woff} + k * {NT} + n) * 32 + lane);",
             "    const unsigned h0 = __float_as_uint(w.x), h1 = __float_as_uint(w.y);",
             "    const unsigned l0 = __float_as_uint(w.z), l1 = __float_as_uint(w.w);",
-            "    #pragma unroll\n    for (int m = 0; m < 2; ++m) {",
+            f"    #pragma unroll\n    for (int m = 0; m < {MT}; ++m) {{",
             f"      mma(c{li}[m][n], lo[m], h0, h1); mma(c{li}[m][n], hi[m], l0, l1); mma(c{li}[m][n], hi[m], h0, h1);",
             "    }",
             "  }",
             "}",
             # the accumulator (rows g, g+8; units 2t, 2t+1) is the next operand (cols t, t+4 = units 2t, 2t+1)
-            f"float a{li}[2][{NT}][4];",
-            f"#pragma unroll\nfor (int m = 0; m < 2; ++m)\n#pragma unroll\nfor (int n = 0; n < {NT}; ++n) {{",
+            f"float a{li}[{MT}][{NT}][4];",
+            f"#pragma unroll\nfor (int m = 0; m < {MT}; ++m)\n#pragma unroll\nfor (int n = 0; n < {NT}; ++n) {{",
             "  float v;",
             f"  v = c{li}[m][n][0]; a{li}[m][n][0] = {_act('v', code, a)};",
             f"  v = c{li}[m][n][2]; a{li}[m][n][1] = {_act('v', code, a)};",
@@ -243,25 +273,29 @@ def _snippet(layout: NetLayout, tag: str) -> str:
         ]
         woff += KT * NT
         boff += NT
-    # The output unit: each lane's dot product over its inputs (8k + 2t, 8k + 2t + 1) of rows g and g + 8 of both
-    # tiles, summed over the group's four lanes (t) by two butterfly shuffles; every lane of group g then holds its
-    # four rows' sums, and the owner of row 16m + g + 8h (lane 4g + 2m + h) takes its own.
+    # The output unit: each lane's dot product over its inputs (8k + 2t, 8k + 2t + 1) of rows g and g + 8 of the
+    # pass's tiles, summed over the group's four lanes (t) by two butterfly shuffles; every lane of group g then holds
+    # those rows' sums, and the owner of row 16m + g + 8h (lane 4g + 2m + h) takes its own.
     p = last - 1
     cu += [
-        "float y[2][2] = {{0.0f, 0.0f}, {0.0f, 0.0f}};",
+        f"float y[{MT}][2];",
+        f"#pragma unroll\nfor (int m = 0; m < {MT}; ++m) {{ y[m][0] = 0.0f; y[m][1] = 0.0f; }}",
         f"#pragma unroll\nfor (int k = 0; k < {KT}; ++k) {{",
         f"  const float4 w = __ldg(wf + ({woff} + k) * 32 + lane);",
-        "  #pragma unroll\n  for (int m = 0; m < 2; ++m) {",
+        f"  #pragma unroll\n  for (int m = 0; m < {MT}; ++m) {{",
         f"    y[m][0] = fmaf(a{p}[m][k][0], w.x, y[m][0]); y[m][0] = fmaf(a{p}[m][k][2], w.y, y[m][0]);",
         f"    y[m][1] = fmaf(a{p}[m][k][1], w.x, y[m][1]); y[m][1] = fmaf(a{p}[m][k][3], w.y, y[m][1]);",
         "  }",
         "}",
-        "#pragma unroll\nfor (int m = 0; m < 2; ++m)\n#pragma unroll\nfor (int h = 0; h < 2; ++h) {",
-        "  y[m][h] += __shfl_xor_sync(0xffffffffu, y[m][h], 1);",
-        "  y[m][h] += __shfl_xor_sync(0xffffffffu, y[m][h], 2);",
+        f"#pragma unroll\nfor (int m = 0; m < {MT}; ++m) {{",
+        "  #pragma unroll\n  for (int h = 0; h < 2; ++h) {",
+        "    y[m][h] += __shfl_xor_sync(0xffffffffu, y[m][h], 1);",
+        "    y[m][h] += __shfl_xor_sync(0xffffffffu, y[m][h], 2);",
+        "  }",
+        "  if ((t >> 1) == m0 + m) out = (t & 1) ? y[m][1] : y[m][0];",
         "}",
-        "float v = (t >> 1) ? ((t & 1) ? y[1][1] : y[1][0]) : ((t & 1) ? y[0][1] : y[0][0]);",
-        f"v += __ldg(bf + {boff} * 32 + lane).x;",
+        "}",  # the passes
+        f"float v = out + __ldg(bf_all + {boff} * 32 + lane).x;",
         f"return {_act('v', code, a)};",
     ]
     cpu += [
@@ -298,14 +332,49 @@ def _make(L: NetLayout, scales: tuple[float, float, float]) -> wp.Kernel:
     vec_x = wp.types.vector(length=K0, dtype=wp.float32)
     vec_p = wp.types.vector(length=max(2 * L.past, 1), dtype=wp.float32)
     mlp_x = mlp_input(L, (PS, VS), vec_x)
-    digest = hashlib.sha256(repr((L, scales, BLOCK_DIM)).encode()).hexdigest()[:16]
+    tiles, regs, fence = int(TILES_PER_PASS), int(MAX_REGISTERS), bool(FENCE_LOADS)
+    digest = hashlib.sha256(repr((L, scales, BLOCK_DIM, tiles, regs, fence)).encode()).hexdigest()[:16]
 
-    @_Native.func_native(_snippet(L, digest), "wpctrl_actuator_net_mma_" + digest, vec_x)
+    @_Native.func_native(_snippet(L, digest, tiles, fence), "wpctrl_actuator_net_mma_" + digest, vec_x)
     def net_fn(x: vec_x, wfrag: wp.array[wp.vec4], bfrag: wp.array[wp.vec2]) -> float: ...
+
+    PAST = L.past
+
+    def fetch(
+        s: int,
+        row0: int,
+        num_rows: int,
+        io: NetIO,
+        joint_q_in: wp.array[float],
+        joint_qd_in: wp.array[float],
+        joint_target_q_in: wp.array[float],
+        hist_out: wp.array[vec_p],
+    ):
+        """Row ``s``'s inputs (zeros past the last row): its env, table row, DOF, position error, velocity, limits
+        and stored history."""
+        env = s // wp.static(N)
+        r = row0 + s - env * wp.static(N)
+        di = int(0)
+        err = float(0.0)
+        qd = float(0.0)
+        lim = float(0.0)
+        sat = float(0.0)
+        vl = float(0.0)
+        old = vec_p()
+        if s < num_rows:
+            di, err, qd, lim, sat, vl = row_input(io, wp.static(L.q_lin), wp.static(L.qd_lin), env, r, r - row0,
+                                                  joint_q_in, joint_qd_in, joint_target_q_in)  # fmt: skip
+            if wp.static(PAST > 0):
+                old = hist_out[s]
+        return env, r, di, err, qd, lim, sat, vl, old
+
+    fetch.__annotations__["hist_out"] = wp.array[vec_p]
+    fetch = wp.func(fetch, name="wpctrl_actuator_net_mma_fetch_" + digest, module="unique", inline=True)
 
     def net(
         row0: int,  # the network's rows: row0 .. row0 + n in the mode's tables
-        num_rows: int,  # num_envs * n (the launch is whole warps)
+        num_rows: int,  # num_envs * n
+        num_warps: int,  # the launch's warps (launch_warps): warp w takes the 32-row groups w, w + num_warps, ...
         io: NetIO,
         wfrag: wp.array[wp.vec4],  # the packed weights (pack)
         bfrag: wp.array[wp.vec2],
@@ -322,23 +391,36 @@ def _make(L: NetLayout, scales: tuple[float, float, float]) -> wp.Kernel:
         lane = i % 32
         g = lane // 4
         t = lane % 4
-        s = i - lane + 16 * (t // 2) + g + 8 * (t % 2)  # the lane's row (the owner of the fragments' rows)
-        env = s // wp.static(N)
-        j = s - env * wp.static(N)
-        r = row0 + j
-        x = vec_x()
-        di = int(0)
-        qd = float(0.0)
-        lim = float(0.0)
-        sat = float(0.0)
-        vl = float(0.0)
-        if s < num_rows:
-            di, err, qd, lim, sat, vl = row_input(io, wp.static(L.q_lin), wp.static(L.qd_lin), env, r, j, joint_q_in,
-                                                  joint_qd_in, joint_target_q_in)  # fmt: skip
-            x = mlp_x(s, err, qd, hist_out)
-        y = net_fn(x, wfrag, bfrag)  # every lane of the warp, rows past the end with zero inputs
-        if s < num_rows:
-            write_effort(_scaled(y, wp.static(TS)), qd, env, r, di, lim, sat, vl, joint_f_out, io)
+        # the lane's row in each group: the row whose output its fragments hand it (row 16m + g + 8h: lane 4g + 2m + h)
+        s = i - lane + 16 * (t // 2) + g + 8 * (t % 2)
+        env, r, di, err, qd, lim, sat, vl, old = fetch(s, row0, num_rows, io, joint_q_in, joint_qd_in,
+                                                       joint_target_q_in, hist_out)  # fmt: skip
+        step = num_warps * 32
+        while i - lane < num_rows:  # (warp-uniform: the group's first row)
+            # the next group's inputs, loaded while this group's network runs
+            s_n = s + step
+            env_n, r_n, di_n, err_n, qd_n, lim_n, sat_n, vl_n, old_n = fetch(s_n, row0, num_rows, io, joint_q_in,
+                                                                             joint_qd_in, joint_target_q_in,
+                                                                             hist_out)  # fmt: skip
+            x = vec_x()
+            if s < num_rows:
+                x, new = mlp_x(err, qd, old)
+                if wp.static(PAST > 0):
+                    hist_out[s] = new
+            y = net_fn(x, wfrag, bfrag)  # every lane of the warp, rows past the end with zero inputs
+            if s < num_rows:
+                write_effort(_scaled(y, wp.static(TS)), qd, env, r, di, lim, sat, vl, joint_f_out, io)
+            s = s_n
+            env = env_n
+            r = r_n
+            di = di_n
+            err = err_n
+            qd = qd_n
+            lim = lim_n
+            sat = sat_n
+            vl = vl_n
+            old = old_n
+            i = i + step
 
     net.__annotations__["hist_out"] = wp.array[vec_p]
     return wp.kernel(
@@ -348,4 +430,5 @@ def _make(L: NetLayout, scales: tuple[float, float, float]) -> wp.Kernel:
         grid_stride=False,
         module="unique",
         module_options={"fast_math": True},
+        **({"cuda_max_registers": regs} if regs else {}),
     )

@@ -75,9 +75,11 @@ def _floats(a) -> tuple:
 
 
 def mlp_input(L: NetLayout, scales: tuple[float, float], vec_x) -> wp.Function:
-    """An MLP row's input vector (``vec_x``, its first ``2 * len(L.taps)`` entries the scaled samples in the network's
-    order, the rest zero) as a function of the row ``(s, err, qd, hist_out)``, which also advances the row's history:
-    shared by the network kernels that compile an MLP's layout in (the unrolled and the tensor-core ones)."""
+    """An MLP row's input vector and its next history, as a function ``(err, qd, old) -> (x, new)`` of the row's
+    position error and velocity and its stored past samples ``old`` (the history array's row, :func:`history_vectors`):
+    ``x`` (``vec_x``) holds the scaled samples in the network's order, zero past them; ``new`` is what the row's
+    history becomes. Shared by the kernels that compile an MLP's layout in (the unrolled and the tensor-core ones);
+    the caller reads and writes the history (with no past samples kept, ``new`` is unused)."""
     TAPS, POS_FIRST, PAST = L.taps, bool(L.pos_first), L.past
     PS, VS = (float(np.float32(x)) for x in scales)
     T = len(TAPS)
@@ -86,28 +88,25 @@ def mlp_input(L: NetLayout, scales: tuple[float, float], vec_x) -> wp.Function:
     POS_AT = tuple((t if POS_FIRST else T + t) for t in range(T))
     VEL_AT = tuple((T + t if POS_FIRST else t) for t in range(T))
 
-    def x_of(s: int, err: float, qd: float, hist_out: wp.array[vec_p]):
+    def x_of(err: float, qd: float, old: vec_p):
         x = vec_x()
         # The history, newest first (Isaac Lab rolls it and writes the current sample at index 0).
         hp = vec_t()
         hv = vec_t()
         hp[0] = err
         hv[0] = qd
-        if wp.static(PAST > 0):
-            old = hist_out[s]
-            new = vec_p()
-            for k in range(wp.static(PAST)):
-                hp[k + 1] = old[k]
-                hv[k + 1] = old[wp.static(PAST) + k]
-                new[k] = hp[k]
-                new[wp.static(PAST) + k] = hv[k]
-            hist_out[s] = new
+        new = vec_p()
+        for k in range(wp.static(PAST)):
+            hp[k + 1] = old[k]
+            hv[k + 1] = old[wp.static(PAST) + k]
+            new[k] = hp[k]
+            new[wp.static(PAST) + k] = hv[k]
         for t in range(wp.static(T)):
             x[wp.static(POS_AT[t])] = _scaled(hp[wp.static(TAPS[t])], wp.static(PS))
             x[wp.static(VEL_AT[t])] = _scaled(hv[wp.static(TAPS[t])], wp.static(VS))
-        return x
+        return x, new
 
-    x_of.__annotations__["hist_out"] = wp.array[vec_p]
+    x_of.__annotations__["old"] = vec_p
     digest = hashlib.sha256(repr((TAPS, POS_FIRST, PAST, PS, VS, vec_x._length_)).encode()).hexdigest()[:16]
     return wp.func(x_of, name="wpctrl_actuator_net_input_" + digest, module="unique", inline=True)
 
@@ -154,7 +153,12 @@ def _make(L: NetLayout, weights: np.ndarray, scales: tuple[float, float, float])
     ):
         x = vec_w()
         if wp.static(MLP):
-            x = mlp_x(s, err, qd, hist_out)
+            old = vec_p()
+            if wp.static(PAST > 0):
+                old = hist_out[s]
+            x, new = mlp_x(err, qd, old)
+            if wp.static(PAST > 0):
+                hist_out[s] = new
         else:
             if wp.static(POS_FIRST):
                 x[0] = _scaled(err, wp.static(PS))

@@ -98,14 +98,23 @@ LABELS = {
 
 def _mma_options(options: str) -> None:
     """The tensor-core kernel's build options of a variant ``mlp_3xtf32@<options>`` (the defaults without one):
-    ``t<n>`` tiles per pass, ``r<n>`` register cap (0: none), ``w<n>`` resident warps per SM (0: one warp per 32-row
-    group), ``f<0|1>`` fenced weight loads; e.g. ``mlp_3xtf32@t1r128w0``."""
+    ``t<n>`` tiles per pass, ``r<n>`` register cap (0: none), ``f<0|1>`` fenced weight loads, ``i<0|1>`` interleaved
+    products, ``s<0|1>`` separate accumulators for the small products, ``b<n>`` threads per block, ``v<0|1>`` weight
+    loads in program order; e.g. ``mlp_3xtf32@t1r128``."""
     from wpctrl.kernels import actuator_net_mma as mma
 
-    names = {"t": "TILES_PER_PASS", "r": "MAX_REGISTERS", "w": "RESIDENT_WARPS", "f": "FENCE_LOADS"}
+    names = {
+        "t": "TILES_PER_PASS",
+        "r": "MAX_REGISTERS",
+        "f": "FENCE_LOADS",
+        "i": "INTERLEAVE",
+        "s": "SPLIT_ACC",
+        "b": "BLOCK_DIM",
+        "v": "IN_ORDER_LOADS",
+    }
     for name in names.values():
         setattr(mma, name, _MMA_DEFAULTS.setdefault(name, getattr(mma, name)))
-    for key, value in re.findall(r"([trwf])(\d+)", options):
+    for key, value in re.findall(r"([trfisbv])(\d+)", options):
         setattr(mma, names[key], int(value))
 
 

@@ -335,19 +335,6 @@ def test_partial_tile_or_block_on_cpu_blocks(tmp_path, monkeypatch, kind, kernel
     _check_against_torch(act, net, lstm, envs=13, kernel=_kind(kernel))
 
 
-def test_tensor_core_kernel_warps_loop_over_groups(monkeypatch):
-    """The tensor-core kernel's warps each take every ``num_warps``-th 32-row group, loading the next group's inputs
-    while the current one's network runs: two warps over 13 envs x 7 joints = 91 rows (three groups, the last 27 rows
-    full) give torch's efforts, with the history and a partial reset, as one warp per group does."""
-    from wpctrl.kernels import actuator_net_mma as KM
-
-    monkeypatch.setattr(KM, "launch_warps", lambda rows, device: 2)
-    make, kw, lstm = NETWORKS["trained"]
-    net = make()
-    act = wpctrl.ActuatorNet(net, kernel="3xtf32", **kw)
-    _check_against_torch(act, net, lstm, envs=13, kernel="3xtf32")
-
-
 @pytest.mark.skipif(not HAS_CUDA, reason="needs a CUDA device: the kernels' GPU build (fast math, 64-row tiles)")
 @pytest.mark.parametrize("kernel", [*MLP_KERNELS, "auto"])
 @pytest.mark.parametrize("name", ["trained", "activations", "lstm_2x8", "odd_widths", "lstm_2x3", "wide"])

@@ -54,6 +54,18 @@ FENCE_LOADS = False
 """Keep each k-tile's weight loads after the previous k-tile's products (a compiler barrier): the compiler otherwise
 issues a layer's weight loads together, in registers."""
 
+INTERLEAVE = True
+"""Order a k-tile's products by kind (all ``lo*hi``, then all ``hi*lo``, then all ``hi*hi``) so that products into
+the same accumulator are ``2 * tiles * n-tiles`` instructions apart, not back to back."""
+
+SPLIT_ACC = False
+"""Accumulate the two small products apart from ``hi*hi`` (summed after the layer): chains half as long, twice the
+accumulator registers."""
+
+IN_ORDER_LOADS = False
+"""Load each k-tile's weights where the code reads them (a volatile load): the compiler otherwise issues a layer's or
+the whole network's weight loads at once, each weight then held in registers."""
+
 MIN_SM = 80
 """The oldest CUDA architecture with TF32 tensor cores (sm_80)."""
 
@@ -120,26 +132,18 @@ def pack(layout: NetLayout, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray
 def mma_kernel(layout: NetLayout, scales: tuple[float, float, float]) -> wp.Kernel:
     """The kernel of ``layout`` (an MLP, :func:`supports`) with ``scales`` (``pos_scale``, ``vel_scale``,
     ``torque_scale``) compiled in; the weights are its ``wfrag`` / ``bfrag`` arguments (:func:`pack`). Launched over
-    ``32 * num_warps`` threads (:func:`launch_warps`) with ``block_dim = BLOCK_DIM``."""
+    :func:`launch_dim` threads with ``block_dim = BLOCK_DIM``."""
     scales = tuple(float(np.float32(x)) for x in scales)
-    key = (layout, scales, TILES_PER_PASS, MAX_REGISTERS, FENCE_LOADS, RESIDENT_WARPS)
+    key = (layout, scales, TILES_PER_PASS, MAX_REGISTERS, FENCE_LOADS, INTERLEAVE, SPLIT_ACC, BLOCK_DIM, IN_ORDER_LOADS)
     k = _KERNELS.get(key)
     if k is None:
         k = _KERNELS[key] = _make(layout, scales)
     return k
 
 
-RESIDENT_WARPS = 16
-"""Warps per SM the launch provides (what fits at once with the kernel's ~104 registers per thread): each then loops
-over 32-row groups, loading the next group's inputs while its network runs on the current one."""
-
-
-def launch_warps(num_rows: int, device) -> int:
-    """Warps of a launch over ``num_rows`` rows (the launch is ``32 *`` that many threads: a warp's ``mma`` needs all
-    its lanes): one per 32-row group, at most :data:`RESIDENT_WARPS` per SM on CUDA."""
-    groups = max(1, -(-int(num_rows) // 32))
-    d = wp.get_device(device)
-    return min(groups, d.sm_count * RESIDENT_WARPS) if d.is_cuda and RESIDENT_WARPS else groups
+def launch_dim(num_rows: int) -> int:
+    """Threads of a launch over ``num_rows`` rows: whole warps (a warp's ``mma`` needs all 32 lanes)."""
+    return -(-int(num_rows) // 32) * 32
 
 
 # -- the network as a native snippet: the CUDA branch (warp-wide) and the CPU branch (one row) ----------------------
@@ -166,7 +170,15 @@ def _act(v: str, code: int, a: float) -> str:
     return v
 
 
-def _snippet(layout: NetLayout, tag: str, tiles: int, fence: bool = False) -> str:
+def _snippet(
+    layout: NetLayout,
+    tag: str,
+    tiles: int,
+    fence: bool = False,
+    interleave: bool = True,
+    split_acc: bool = False,
+    in_order: bool = False,
+) -> str:
     """The network's native code: on CUDA the warp's 32 rows as two 16-row tiles, ``tiles`` (1 or 2) of them per pass
     through the layers (2: both tiles' products interleaved; 1: one tile after the other, half the registers); on the
     CPU one row."""
@@ -193,16 +205,23 @@ def _snippet(layout: NetLayout, tag: str, tiles: int, fence: bool = False) -> st
         "};",
         # hi: v rounded to TF32 (nearest, ties away: cvt.rna's result for finite v, in two integer instructions
         # where cvt.rna.tf32 is four); lo: the rest, truncated to TF32 (~2^-23 of v lost)
+        # a weight tile's load: __ldg, or (in_order) a volatile load the compiler keeps where it is written
+        "auto ldw = [](const float4* p) -> float4 {",
+        '  float4 w; asm volatile("ld.global.nc.v4.f32 {%0,%1,%2,%3}, [%4];" : "=f"(w.x), "=f"(w.y), "=f"(w.z), '
+        '"=f"(w.w) : "l"(p));'
+        if in_order
+        else "  const float4 w = __ldg(p);",
+        "  return w;",
+        "};",
         "auto split = [](float v, unsigned& h, unsigned& l) {",
         "  h = (__float_as_uint(v) + 0x1000u) & 0xffffe000u;",
         "  l = __float_as_uint(v - __uint_as_float(h)) & 0xffffe000u;",
         "};",
         "float out = 0.0f;",
         ("#pragma unroll 1" if MT == 1 else "#pragma unroll") + f"\nfor (int m0 = 0; m0 < 2; m0 += {MT}) {{",
-        # (the weights' address opaque to the compiler in each pass: else it hoists every weight load out of the
-        # passes' loop into registers)
-        "const float4* wf = wf_all; const float2* bf = bf_all;",
-        'asm volatile("" : "+l"(wf), "+l"(bf));',
+        # (the weights' address depends on the pass through the arrays' ndim - 1, 0 but unknown to the compiler:
+        # else it hoists every weight load out of the passes' loop, each weight then held in registers)
+        "const float4* wf = wf_all + (wfrag.ndim - 1) * m0; const float2* bf = bf_all + (bfrag.ndim - 1) * m0;",
         f"float a0[{MT}][{K0 // 8}][4];",
         f"#pragma unroll\nfor (int m = 0; m < {MT}; ++m)\n#pragma unroll\nfor (int k = 0; k < {K0 // 8}; ++k) {{",
         "  const int r = 16 * (m0 + m) + g;",
@@ -225,6 +244,7 @@ def _snippet(layout: NetLayout, tag: str, tiles: int, fence: bool = False) -> st
         p = li - 1
         if li == last:
             break
+        small = f"s{li}" if split_acc else f"c{li}"
         cu += [
             f"float c{li}[{MT}][{NT}][4];",
             f"#pragma unroll\nfor (int n = 0; n < {NT}; ++n) {{",
@@ -232,20 +252,43 @@ def _snippet(layout: NetLayout, tag: str, tiles: int, fence: bool = False) -> st
             f"  #pragma unroll\n  for (int m = 0; m < {MT}; ++m) {{ c{li}[m][n][0] = b.x; c{li}[m][n][1] = b.y; "
             f"c{li}[m][n][2] = b.x; c{li}[m][n][3] = b.y; }}",
             "}",
+            f"float s{li}[{MT}][{NT}][4] = {{}};" if split_acc else "",
             f"#pragma unroll\nfor (int k = 0; k < {KT}; ++k) {{",
             '  asm volatile("" ::: "memory");' if fence else "",
             f"  unsigned hi[{MT}][4], lo[{MT}][4];",
             f"  #pragma unroll\n  for (int m = 0; m < {MT}; ++m)\n  #pragma unroll\n  for (int i = 0; i < 4; ++i) "
             f"split(a{p}[m][k][i], hi[m][i], lo[m][i]);",
+            f"  unsigned wh[{NT}][2], wl[{NT}][2];",
             f"  #pragma unroll\n  for (int n = 0; n < {NT}; ++n) {{",
-            f"    const float4 w = __ldg(wf + ({woff} + k * {NT} + n) * 32 + lane);",
-            "    const unsigned h0 = __float_as_uint(w.x), h1 = __float_as_uint(w.y);",
-            "    const unsigned l0 = __float_as_uint(w.z), l1 = __float_as_uint(w.w);",
-            f"    #pragma unroll\n    for (int m = 0; m < {MT}; ++m) {{",
-            f"      mma(c{li}[m][n], lo[m], h0, h1); mma(c{li}[m][n], hi[m], l0, l1); mma(c{li}[m][n], hi[m], h0, h1);",
-            "    }",
+            f"    const float4 w = ldw(wf + ({woff} + k * {NT} + n) * 32 + lane);",
+            "    wh[n][0] = __float_as_uint(w.x); wh[n][1] = __float_as_uint(w.y);",
+            "    wl[n][0] = __float_as_uint(w.z); wl[n][1] = __float_as_uint(w.w);",
             "  }",
-            "}",
+        ]
+        each = f"  #pragma unroll\n  for (int n = 0; n < {NT}; ++n)\n  #pragma unroll\n  for (int m = 0; m < {MT}; ++m)"
+        if interleave:  # each product kind over every (n, m) before the next: 2 * NT * MT independent mma apart
+            cu += [
+                each,
+                f"    mma({small}[m][n], lo[m], wh[n][0], wh[n][1]);",
+                each,
+                f"    mma({small}[m][n], hi[m], wl[n][0], wl[n][1]);",
+                each,
+                f"    mma(c{li}[m][n], hi[m], wh[n][0], wh[n][1]);",
+            ]
+        else:
+            cu += [
+                each + " {",
+                f"    mma({small}[m][n], lo[m], wh[n][0], wh[n][1]); mma({small}[m][n], hi[m], wl[n][0], wl[n][1]);",
+                f"    mma(c{li}[m][n], hi[m], wh[n][0], wh[n][1]);",
+                "  }",
+            ]
+        cu += ["}"]
+        if split_acc:
+            cu += [
+                f"#pragma unroll\nfor (int m = 0; m < {MT}; ++m)\n#pragma unroll\nfor (int n = 0; n < {NT}; ++n)\n"
+                f"#pragma unroll\nfor (int i = 0; i < 4; ++i) c{li}[m][n][i] += s{li}[m][n][i];",
+            ]
+        cu += [
             # the accumulator (rows g, g+8; units 2t, 2t+1) is the next operand (cols t, t+4 = units 2t, 2t+1)
             f"float a{li}[{MT}][{NT}][4];",
             f"#pragma unroll\nfor (int m = 0; m < {MT}; ++m)\n#pragma unroll\nfor (int n = 0; n < {NT}; ++n) {{",
@@ -333,48 +376,20 @@ def _make(L: NetLayout, scales: tuple[float, float, float]) -> wp.Kernel:
     vec_p = wp.types.vector(length=max(2 * L.past, 1), dtype=wp.float32)
     mlp_x = mlp_input(L, (PS, VS), vec_x)
     tiles, regs, fence = int(TILES_PER_PASS), int(MAX_REGISTERS), bool(FENCE_LOADS)
-    digest = hashlib.sha256(repr((L, scales, BLOCK_DIM, tiles, regs, fence)).encode()).hexdigest()[:16]
+    inter, split, order = bool(INTERLEAVE), bool(SPLIT_ACC), bool(IN_ORDER_LOADS)
+    opts = (BLOCK_DIM, tiles, regs, fence, inter, split, order)
+    digest = hashlib.sha256(repr((L, scales, opts)).encode()).hexdigest()[:16]
 
-    @_Native.func_native(_snippet(L, digest, tiles, fence), "wpctrl_actuator_net_mma_" + digest, vec_x)
+    snippet = _snippet(L, digest, tiles, fence, inter, split, order)
+
+    @_Native.func_native(snippet, "wpctrl_actuator_net_mma_" + digest, vec_x)
     def net_fn(x: vec_x, wfrag: wp.array[wp.vec4], bfrag: wp.array[wp.vec2]) -> float: ...
 
     PAST = L.past
 
-    def fetch(
-        s: int,
-        row0: int,
-        num_rows: int,
-        io: NetIO,
-        joint_q_in: wp.array[float],
-        joint_qd_in: wp.array[float],
-        joint_target_q_in: wp.array[float],
-        hist_out: wp.array[vec_p],
-    ):
-        """Row ``s``'s inputs (zeros past the last row): its env, table row, DOF, position error, velocity, limits
-        and stored history."""
-        env = s // wp.static(N)
-        r = row0 + s - env * wp.static(N)
-        di = int(0)
-        err = float(0.0)
-        qd = float(0.0)
-        lim = float(0.0)
-        sat = float(0.0)
-        vl = float(0.0)
-        old = vec_p()
-        if s < num_rows:
-            di, err, qd, lim, sat, vl = row_input(io, wp.static(L.q_lin), wp.static(L.qd_lin), env, r, r - row0,
-                                                  joint_q_in, joint_qd_in, joint_target_q_in)  # fmt: skip
-            if wp.static(PAST > 0):
-                old = hist_out[s]
-        return env, r, di, err, qd, lim, sat, vl, old
-
-    fetch.__annotations__["hist_out"] = wp.array[vec_p]
-    fetch = wp.func(fetch, name="wpctrl_actuator_net_mma_fetch_" + digest, module="unique", inline=True)
-
     def net(
         row0: int,  # the network's rows: row0 .. row0 + n in the mode's tables
-        num_rows: int,  # num_envs * n
-        num_warps: int,  # the launch's warps (launch_warps): warp w takes the 32-row groups w, w + num_warps, ...
+        num_rows: int,  # num_envs * n (the launch is whole warps: launch_dim)
         io: NetIO,
         wfrag: wp.array[wp.vec4],  # the packed weights (pack)
         bfrag: wp.array[wp.vec2],
@@ -391,36 +406,30 @@ def _make(L: NetLayout, scales: tuple[float, float, float]) -> wp.Kernel:
         lane = i % 32
         g = lane // 4
         t = lane % 4
-        # the lane's row in each group: the row whose output its fragments hand it (row 16m + g + 8h: lane 4g + 2m + h)
+        # the lane's row: the one whose output its fragments hand it (row 16m + g + 8h of the warp's 32 is lane
+        # 4g + 2m + h's)
         s = i - lane + 16 * (t // 2) + g + 8 * (t % 2)
-        env, r, di, err, qd, lim, sat, vl, old = fetch(s, row0, num_rows, io, joint_q_in, joint_qd_in,
-                                                       joint_target_q_in, hist_out)  # fmt: skip
-        step = num_warps * 32
-        while i - lane < num_rows:  # (warp-uniform: the group's first row)
-            # the next group's inputs, loaded while this group's network runs
-            s_n = s + step
-            env_n, r_n, di_n, err_n, qd_n, lim_n, sat_n, vl_n, old_n = fetch(s_n, row0, num_rows, io, joint_q_in,
-                                                                             joint_qd_in, joint_target_q_in,
-                                                                             hist_out)  # fmt: skip
-            x = vec_x()
-            if s < num_rows:
-                x, new = mlp_x(err, qd, old)
-                if wp.static(PAST > 0):
-                    hist_out[s] = new
-            y = net_fn(x, wfrag, bfrag)  # every lane of the warp, rows past the end with zero inputs
-            if s < num_rows:
-                write_effort(_scaled(y, wp.static(TS)), qd, env, r, di, lim, sat, vl, joint_f_out, io)
-            s = s_n
-            env = env_n
-            r = r_n
-            di = di_n
-            err = err_n
-            qd = qd_n
-            lim = lim_n
-            sat = sat_n
-            vl = vl_n
-            old = old_n
-            i = i + step
+        env = s // wp.static(N)
+        j = s - env * wp.static(N)
+        r = row0 + j
+        x = vec_x()
+        di = int(0)
+        qd = float(0.0)
+        lim = float(0.0)
+        sat = float(0.0)
+        vl = float(0.0)
+        if s < num_rows:
+            di, err, qd, lim, sat, vl = row_input(io, wp.static(L.q_lin), wp.static(L.qd_lin), env, r, j, joint_q_in,
+                                                  joint_qd_in, joint_target_q_in)  # fmt: skip
+            old = vec_p()
+            if wp.static(PAST > 0):
+                old = hist_out[s]
+            x, new = mlp_x(err, qd, old)
+            if wp.static(PAST > 0):
+                hist_out[s] = new
+        y = net_fn(x, wfrag, bfrag)  # every lane of the warp, rows past the end with zero inputs
+        if s < num_rows:
+            write_effort(_scaled(y, wp.static(TS)), qd, env, r, di, lim, sat, vl, joint_f_out, io)
 
     net.__annotations__["hist_out"] = wp.array[vec_p]
     return wp.kernel(

@@ -264,7 +264,6 @@ class _NetGroup:
                 "wfrag": wp.array(wfrag.reshape(-1, 4), dtype=wp.vec4, device=dev),
                 "bfrag": wp.array(bfrag.reshape(-1, 2), dtype=wp.vec2, device=dev),
                 "num_rows": E * n,
-                "num_warps": actuator_net_mma.launch_warps(E * n, dev),
             }
         elif self.kernel_kind == "split":
             self.kernel = actuator_net_split.split_kernel(self.layout, net.weights, scales, self.lanes)
@@ -311,7 +310,7 @@ class _NetGroup:
             elif self.kernel_kind == "split":
                 dim, block_dim = self.blocks * self.block_dim, self.block_dim
             elif self.kernel_kind == "3xtf32":
-                dim, block_dim = 32 * self._extra["num_warps"], actuator_net_mma.BLOCK_DIM
+                dim, block_dim = actuator_net_mma.launch_dim(engine.num_envs * self.n), actuator_net_mma.BLOCK_DIM
             else:
                 dim, block_dim = engine.num_envs * self.n, actuator_net_unrolled.BLOCK_DIM
             self._launch = engine._launch(self.kernel, dim, per_call, block_dim)

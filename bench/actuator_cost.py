@@ -100,7 +100,7 @@ def _mma_options(options: str) -> None:
     """The tensor-core kernel's build options of a variant ``mlp_3xtf32@<options>`` (the defaults without one):
     ``t<n>`` tiles per pass, ``r<n>`` register cap (0: none), ``f<0|1>`` fenced weight loads, ``i<0|1>`` interleaved
     products, ``s<0|1>`` separate accumulators for the small products, ``b<n>`` threads per block, ``v<0|1>`` weight
-    loads in program order; e.g. ``mlp_3xtf32@t1r128``."""
+    loads in program order, ``h<n>`` tensor-core warps of every 4 (the others FP32); e.g. ``mlp_3xtf32@t1h2``."""
     from wpctrl.kernels import actuator_net_mma as mma
 
     names = {
@@ -111,10 +111,11 @@ def _mma_options(options: str) -> None:
         "s": "SPLIT_ACC",
         "b": "BLOCK_DIM",
         "v": "IN_ORDER_LOADS",
+        "h": "MMA_WARPS",
     }
     for name in names.values():
         setattr(mma, name, _MMA_DEFAULTS.setdefault(name, getattr(mma, name)))
-    for key, value in re.findall(r"([trfisbv])(\d+)", options):
+    for key, value in re.findall(r"([trfisbvh])(\d+)", options):
         setattr(mma, names[key], int(value))
 
 

@@ -32,7 +32,7 @@ import numpy as np
 import warp as wp
 
 from .actuator_net import NetIO, NetLayout, dense_matrices, row_input, write_effort
-from .actuator_net_unrolled import _scaled, mlp_input
+from .actuator_net_unrolled import _scaled, mlp_input, unrolled_row
 
 wp.set_module_options({"enable_backward": False})
 
@@ -65,6 +65,10 @@ accumulator registers."""
 IN_ORDER_LOADS = False
 """Load each k-tile's weights where the code reads them (a volatile load): the compiler otherwise issues a layer's or
 the whole network's weight loads at once, each weight then held in registers."""
+
+MMA_WARPS = 4
+"""Of every 4 warps, how many run their rows on the tensor cores; the others run theirs on the FP32 units with the
+unrolled kernel's code (weights compiled in), so that both pipes work at once."""
 
 MIN_SM = 80
 """The oldest CUDA architecture with TF32 tensor cores (sm_80)."""
@@ -129,15 +133,17 @@ def pack(layout: NetLayout, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return np.concatenate(wf).astype(np.float32), np.concatenate(bf).astype(np.float32)
 
 
-def mma_kernel(layout: NetLayout, scales: tuple[float, float, float]) -> wp.Kernel:
+def mma_kernel(layout: NetLayout, scales: tuple[float, float, float], weights: np.ndarray) -> wp.Kernel:
     """The kernel of ``layout`` (an MLP, :func:`supports`) with ``scales`` (``pos_scale``, ``vel_scale``,
     ``torque_scale``) compiled in; the weights are its ``wfrag`` / ``bfrag`` arguments (:func:`pack`). Launched over
     :func:`launch_dim` threads with ``block_dim = BLOCK_DIM``."""
     scales = tuple(float(np.float32(x)) for x in scales)
-    key = (layout, scales, TILES_PER_PASS, MAX_REGISTERS, FENCE_LOADS, INTERLEAVE, SPLIT_ACC, BLOCK_DIM, IN_ORDER_LOADS)
+    w = np.ascontiguousarray(weights, dtype=np.float32)
+    opts = (TILES_PER_PASS, MAX_REGISTERS, FENCE_LOADS, INTERLEAVE, SPLIT_ACC, BLOCK_DIM, IN_ORDER_LOADS, MMA_WARPS)
+    key = (layout, scales, opts, w.tobytes() if MMA_WARPS < 4 else None)
     k = _KERNELS.get(key)
     if k is None:
-        k = _KERNELS[key] = _make(layout, scales)
+        k = _KERNELS[key] = _make(layout, scales, w)
     return k
 
 
@@ -368,8 +374,10 @@ class _Native:
         return decorate
 
 
-def _make(L: NetLayout, scales: tuple[float, float, float]) -> wp.Kernel:
+def _make(L: NetLayout, scales: tuple[float, float, float], weights: np.ndarray | None) -> wp.Kernel:
     N = L.rows
+    MW = int(MMA_WARPS)
+    simt_row = unrolled_row(L, weights, scales) if MW < 4 else None
     PS, VS, TS = scales
     K0 = _pad8(L.dense[0][0])
     vec_x = wp.types.vector(length=K0, dtype=wp.float32)
@@ -377,7 +385,7 @@ def _make(L: NetLayout, scales: tuple[float, float, float]) -> wp.Kernel:
     mlp_x = mlp_input(L, (PS, VS), vec_x)
     tiles, regs, fence = int(TILES_PER_PASS), int(MAX_REGISTERS), bool(FENCE_LOADS)
     inter, split, order = bool(INTERLEAVE), bool(SPLIT_ACC), bool(IN_ORDER_LOADS)
-    opts = (BLOCK_DIM, tiles, regs, fence, inter, split, order)
+    opts = (BLOCK_DIM, tiles, regs, fence, inter, split, order, MW, None if MW == 4 else weights.tobytes())
     digest = hashlib.sha256(repr((L, scales, opts)).encode()).hexdigest()[:16]
 
     snippet = _snippet(L, digest, tiles, fence, inter, split, order)
@@ -403,6 +411,16 @@ def _make(L: NetLayout, scales: tuple[float, float, float]) -> wp.Kernel:
         joint_f_out: wp.array[float],
     ):
         i = wp.tid()
+        if wp.static(MW < 4):
+            if (i // 32) % 4 >= wp.static(MW):  # an FP32 warp: a row per lane, the unrolled kernel's code
+                if i < num_rows:
+                    env_ = i // wp.static(N)
+                    r_ = row0 + i - env_ * wp.static(N)
+                    di_, err_, qd_, lim_, sat_, vl_ = row_input(io, wp.static(L.q_lin), wp.static(L.qd_lin), env_, r_,
+                                                                r_ - row0, joint_q_in, joint_qd_in,
+                                                                joint_target_q_in)  # fmt: skip
+                    simt_row(i, env_, r_, di_, err_, qd_, lim_, sat_, vl_, io, hist_out, joint_f_out)
+                return
         lane = i % 32
         g = lane // 4
         t = lane % 4

@@ -19,6 +19,8 @@ One control step = ``set_action`` + K x ``before_simulation_step`` (K = 5), Mani
   64-row tiles, each layer a ``wp.tile_matmul``);
 * ``mlp_3xtf32``: the MLP with ``kernel="3xtf32"`` (each layer a warp-wide tensor-core product at float32 accuracy,
   32 rows per warp; its own launch after the substep kernel's);
+* ``mlpwide_tiled`` / ``mlpwide_3xtf32``: a 6-80-80-1 softsign MLP (6,960 multiply-adds per row, past what
+  ``"auto"`` compiles into the unrolled kernel) with ``kernel="tiled"`` / ``"3xtf32"``;
 * ``mlp_fused`` / ``lstm_fused``: ``kernel="unrolled"``, ``launch="fused"``: the unrolled kernel's network code run in
   the substep kernel's launch (one launch per substep in place of two; what the defaults run here);
 * ``torch_mlp`` / ``torch_lstm``: the same control step with the network's substep written in torch on the same
@@ -42,7 +44,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import re
 import sys
 import time
 from pathlib import Path
@@ -72,7 +73,7 @@ from bench.common import (  # noqa: E402
 
 VARIANTS = ("plain", "dc_motor", "position_limit", "mlp", "lstm", "mlp_unrolled", "lstm_unrolled", "mlp_split2",
             "lstm_split2", "mlp_split4", "lstm_split4", "mlp_tiled", "lstm_tiled", "mlp_fused", "lstm_fused",
-            "mlp_3xtf32", "torch_mlp", "torch_lstm", "newton_dc")  # fmt: skip
+            "mlp_3xtf32", "mlpwide_tiled", "mlpwide_3xtf32", "torch_mlp", "torch_lstm", "newton_dc")  # fmt: skip
 LABELS = {
     "plain": "plain explicit step",
     "dc_motor": "DCMotor",
@@ -89,6 +90,8 @@ LABELS = {
     "lstm_tiled": "ActuatorNet (LSTM, tiled kernel)",
     "mlp_fused": "ActuatorNet (MLP, in the substep's launch)",
     "mlp_3xtf32": "ActuatorNet (MLP, tensor cores, 3xTF32)",
+    "mlpwide_tiled": "ActuatorNet (MLP 6-80-80-1, tiled kernel)",
+    "mlpwide_3xtf32": "ActuatorNet (MLP 6-80-80-1, tensor cores)",
     "lstm_fused": "ActuatorNet (LSTM, in the substep's launch)",
     "torch_mlp": "MLP in torch",
     "torch_lstm": "LSTM in torch",
@@ -96,50 +99,26 @@ LABELS = {
 }
 
 
-def _mma_options(options: str) -> None:
-    """The tensor-core kernel's build options of a variant ``mlp_3xtf32@<options>`` (the defaults without one):
-    ``t<n>`` tiles per pass, ``r<n>`` register cap (0: none), ``f<0|1>`` fenced weight loads, ``i<0|1>`` interleaved
-    products, ``s<0|1>`` separate accumulators for the small products, ``b<n>`` threads per block, ``v<0|1>`` weight
-    loads in program order, ``h<n>`` tensor-core warps of every 4 (the others FP32); e.g. ``mlp_3xtf32@t1h2``."""
-    from wpctrl.kernels import actuator_net_mma as mma
-
-    names = {
-        "t": "TILES_PER_PASS",
-        "r": "MAX_REGISTERS",
-        "f": "FENCE_LOADS",
-        "i": "INTERLEAVE",
-        "s": "SPLIT_ACC",
-        "b": "BLOCK_DIM",
-        "v": "IN_ORDER_LOADS",
-        "h": "MMA_WARPS",
-    }
-    for name in names.values():
-        setattr(mma, name, _MMA_DEFAULTS.setdefault(name, getattr(mma, name)))
-    for key, value in re.findall(r"([trfisbvh])(\d+)", options):
-        setattr(mma, names[key], int(value))
-
-
-_MMA_DEFAULTS: dict = {}
-
-
 def _actuator(name: str):
     import wpctrl
 
     torch_baseline = name.startswith("torch_")
     name, _, kernel = name.removeprefix("torch_").partition("_")
-    kernel, _, options = kernel.partition("@")
-    if kernel == "3xtf32":
-        _mma_options(options)
 
     if name == "dc_motor":
         return wpctrl.DCMotor(87.0, 2.6)
     if name == "position_limit":
         return wpctrl.PositionBasedEffortLimit(np.linspace(-2.8, 2.8, 8).tolist(), [20, 40, 60, 87, 87, 60, 40, 20])
-    if name in ("mlp", "lstm"):
+    if name in ("mlp", "lstm", "mlpwide"):
         import torch
 
         torch.manual_seed(0)
-        if name == "mlp":
+        if name == "mlpwide":
+            net = torch.nn.Sequential(
+                torch.nn.Linear(6, 80), torch.nn.Softsign(), torch.nn.Linear(80, 80), torch.nn.Softsign(),
+                torch.nn.Linear(80, 1),
+            )  # fmt: skip
+        elif name == "mlp":
             net = torch.nn.Sequential(
                 torch.nn.Linear(6, 32), torch.nn.Softsign(), torch.nn.Linear(32, 32), torch.nn.Softsign(),
                 torch.nn.Linear(32, 1),
@@ -203,6 +182,8 @@ def _reference(name: str) -> str | None:
     net, _, kernel = name.partition("_")
     if net in ("mlp", "lstm") and kernel != "unrolled":
         return f"{net}_unrolled"
+    if net == "mlpwide" and kernel != "tiled":  # (past the unrolled kernel's size)
+        return "mlpwide_tiled"
     return None
 
 
@@ -359,7 +340,7 @@ def markdown(meta: dict, rows: list[dict], args) -> str:
     body = [
         [
             fmt_envs(r["envs"]) + ("*" if r["layout"] == "synthetic" else ""),
-            LABELS.get(r["variant"], r["variant"]) + ("†" if r.get("torch_capture") == "two graphs" else ""),
+            LABELS[r["variant"]] + ("†" if r.get("torch_capture") == "two graphs" else ""),
             r["replay"],
             fmt_us(r["us"] * 1e-6),
             fmt_ratio(r["x_plain"]),
@@ -425,7 +406,7 @@ def main(argv=None):
             break
         for r in got:
             print(
-                f"[{fmt_envs(n)}] {LABELS.get(r['variant'], r['variant']):>32} {r['replay']:>5}: "
+                f"[{fmt_envs(n)}] {LABELS[r['variant']]:>32} {r['replay']:>5}: "
                 f"{r['us']:10.2f} us  x plain "
                 f"{fmt_ratio(r['x_plain']):>7}",
                 flush=True,

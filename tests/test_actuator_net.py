@@ -335,20 +335,6 @@ def test_partial_tile_or_block_on_cpu_blocks(tmp_path, monkeypatch, kind, kernel
     _check_against_torch(act, net, lstm, envs=13, kernel=_kind(kernel))
 
 
-@pytest.mark.parametrize("mma_warps", [1, 2, 3])
-def test_tensor_core_kernel_with_fp32_warps(monkeypatch, mma_warps):
-    """The tensor-core kernel with ``mma_warps`` of every 4 warps on the tensor cores and the rest on the FP32 units
-    (the unrolled kernel's code): 13 envs x 7 joints = 91 rows in 3 warps, each kind taking whole 32-row groups, the
-    last one 27 rows full; every row gets torch's effort, with the history and a partial reset."""
-    from wpctrl.kernels import actuator_net_mma as KM
-
-    monkeypatch.setattr(KM, "MMA_WARPS", mma_warps)
-    make, kw, lstm = NETWORKS["trained"]
-    net = make()
-    act = wpctrl.ActuatorNet(net, kernel="3xtf32", **kw)
-    _check_against_torch(act, net, lstm, envs=13, kernel="3xtf32")
-
-
 @pytest.mark.skipif(not HAS_CUDA, reason="needs a CUDA device: the kernels' GPU build (fast math, 64-row tiles)")
 @pytest.mark.parametrize("kernel", [*MLP_KERNELS, "auto"])
 @pytest.mark.parametrize("name", ["trained", "activations", "lstm_2x8", "odd_widths", "lstm_2x3", "wide"])

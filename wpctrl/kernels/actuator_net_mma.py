@@ -32,7 +32,7 @@ import numpy as np
 import warp as wp
 
 from .actuator_net import NetIO, NetLayout, dense_matrices, row_input, write_effort
-from .actuator_net_unrolled import _scaled, mlp_input, unrolled_row
+from .actuator_net_unrolled import _scaled, mlp_input
 
 wp.set_module_options({"enable_backward": False})
 
@@ -43,32 +43,6 @@ MAX_WIDTH = 128
 """The widest layer (inputs or units, padded to a multiple of 8) the kernel takes: its operand and accumulator
 fragments live in registers, 8 per 8 units each."""
 
-TILES_PER_PASS = 2
-"""16-row tiles each pass through the layers carries (1 or 2; the warp's 32 rows are two tiles): 2 interleaves both
-tiles' products (more independent work per warp), 1 takes one tile after the other (fewer registers, more warps)."""
-
-MAX_REGISTERS = 0
-"""A cap on the kernel's registers per thread (0: the compiler's choice); fewer registers, more warps per SM."""
-
-FENCE_LOADS = False
-"""Keep each k-tile's weight loads after the previous k-tile's products (a compiler barrier): the compiler otherwise
-issues a layer's weight loads together, in registers."""
-
-INTERLEAVE = True
-"""Order a k-tile's products by kind (all ``lo*hi``, then all ``hi*lo``, then all ``hi*hi``) so that products into
-the same accumulator are ``2 * tiles * n-tiles`` instructions apart, not back to back."""
-
-SPLIT_ACC = False
-"""Accumulate the two small products apart from ``hi*hi`` (summed after the layer): chains half as long, twice the
-accumulator registers."""
-
-IN_ORDER_LOADS = False
-"""Load each k-tile's weights where the code reads them (a volatile load): the compiler otherwise issues a layer's or
-the whole network's weight loads at once, each weight then held in registers."""
-
-MMA_WARPS = 4
-"""Of every 4 warps, how many run their rows on the tensor cores; the others run theirs on the FP32 units with the
-unrolled kernel's code (weights compiled in), so that both pipes work at once."""
 
 MIN_SM = 80
 """The oldest CUDA architecture with TF32 tensor cores (sm_80)."""
@@ -133,17 +107,15 @@ def pack(layout: NetLayout, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return np.concatenate(wf).astype(np.float32), np.concatenate(bf).astype(np.float32)
 
 
-def mma_kernel(layout: NetLayout, scales: tuple[float, float, float], weights: np.ndarray) -> wp.Kernel:
+def mma_kernel(layout: NetLayout, scales: tuple[float, float, float]) -> wp.Kernel:
     """The kernel of ``layout`` (an MLP, :func:`supports`) with ``scales`` (``pos_scale``, ``vel_scale``,
     ``torque_scale``) compiled in; the weights are its ``wfrag`` / ``bfrag`` arguments (:func:`pack`). Launched over
     :func:`launch_dim` threads with ``block_dim = BLOCK_DIM``."""
     scales = tuple(float(np.float32(x)) for x in scales)
-    w = np.ascontiguousarray(weights, dtype=np.float32)
-    opts = (TILES_PER_PASS, MAX_REGISTERS, FENCE_LOADS, INTERLEAVE, SPLIT_ACC, BLOCK_DIM, IN_ORDER_LOADS, MMA_WARPS)
-    key = (layout, scales, opts, w.tobytes() if MMA_WARPS < 4 else None)
+    key = (layout, scales)
     k = _KERNELS.get(key)
     if k is None:
-        k = _KERNELS[key] = _make(layout, scales, w)
+        k = _KERNELS[key] = _make(layout, scales)
     return k
 
 
@@ -176,22 +148,12 @@ def _act(v: str, code: int, a: float) -> str:
     return v
 
 
-def _snippet(
-    layout: NetLayout,
-    tag: str,
-    tiles: int,
-    fence: bool = False,
-    interleave: bool = True,
-    split_acc: bool = False,
-    in_order: bool = False,
-) -> str:
-    """The network's native code: on CUDA the warp's 32 rows as two 16-row tiles, ``tiles`` (1 or 2) of them per pass
-    through the layers (2: both tiles' products interleaved; 1: one tile after the other, half the registers); on the
-    CPU one row."""
+def _snippet(layout: NetLayout, tag: str) -> str:
+    """The network's native code: on CUDA the warp's 32 rows as two 16-row tiles through every layer (the two tiles'
+    products interleaved), on the CPU one row."""
     dims = [(_pad8(d[0]), _pad8(d[1]), int(d[2]), float(d[3])) for d in layout.dense]
     K0 = dims[0][0]
     warps = BLOCK_DIM // 32
-    MT = int(tiles)
     cu = [
         "__syncwarp();",
         "const int lane = threadIdx.x & 31, g = lane >> 2, t = lane & 3;",
@@ -201,8 +163,14 @@ def _snippet(
         "const int own = 16 * (t >> 1) + g + 8 * (t & 1);  // this lane's row in the warp's 32",
         f"#pragma unroll\nfor (int k = 0; k < {K0}; ++k) xw[own][k] = x.c[k];",
         "__syncwarp();",
-        "const float4* wf_all = reinterpret_cast<const float4*>(wfrag.data);",
-        "const float2* bf_all = reinterpret_cast<const float2*>(bfrag.data);",
+        f"float a0[2][{K0 // 8}][4];",
+        f"#pragma unroll\nfor (int m = 0; m < 2; ++m)\n#pragma unroll\nfor (int k = 0; k < {K0 // 8}; ++k) {{",
+        "  const int r = 16 * m + g;",
+        "  a0[m][k][0] = xw[r][8 * k + 2 * t]; a0[m][k][1] = xw[r + 8][8 * k + 2 * t];",
+        "  a0[m][k][2] = xw[r][8 * k + 2 * t + 1]; a0[m][k][3] = xw[r + 8][8 * k + 2 * t + 1];",
+        "}",
+        "const float4* wf = reinterpret_cast<const float4*>(wfrag.data);",
+        "const float2* bf = reinterpret_cast<const float2*>(bfrag.data);",
         "auto mma = [](float* d, const unsigned* a, unsigned b0, unsigned b1) {",
         '  asm("mma.sync.aligned.m16n8k8.row.col.f32.tf32.tf32.f32 {%0,%1,%2,%3}, {%4,%5,%6,%7}, {%8,%9}, '
         '{%0,%1,%2,%3};"',
@@ -211,29 +179,10 @@ def _snippet(
         "};",
         # hi: v rounded to TF32 (nearest, ties away: cvt.rna's result for finite v, in two integer instructions
         # where cvt.rna.tf32 is four); lo: the rest, truncated to TF32 (~2^-23 of v lost)
-        # a weight tile's load: __ldg, or (in_order) a volatile load the compiler keeps where it is written
-        "auto ldw = [](const float4* p) -> float4 {",
-        '  float4 w; asm volatile("ld.global.nc.v4.f32 {%0,%1,%2,%3}, [%4];" : "=f"(w.x), "=f"(w.y), "=f"(w.z), '
-        '"=f"(w.w) : "l"(p));'
-        if in_order
-        else "  const float4 w = __ldg(p);",
-        "  return w;",
-        "};",
         "auto split = [](float v, unsigned& h, unsigned& l) {",
         "  h = (__float_as_uint(v) + 0x1000u) & 0xffffe000u;",
         "  l = __float_as_uint(v - __uint_as_float(h)) & 0xffffe000u;",
         "};",
-        "float out = 0.0f;",
-        ("#pragma unroll 1" if MT == 1 else "#pragma unroll") + f"\nfor (int m0 = 0; m0 < 2; m0 += {MT}) {{",
-        # (the weights' address depends on the pass through the arrays' ndim - 1, 0 but unknown to the compiler:
-        # else it hoists every weight load out of the passes' loop, each weight then held in registers)
-        "const float4* wf = wf_all + (wfrag.ndim - 1) * m0; const float2* bf = bf_all + (bfrag.ndim - 1) * m0;",
-        f"float a0[{MT}][{K0 // 8}][4];",
-        f"#pragma unroll\nfor (int m = 0; m < {MT}; ++m)\n#pragma unroll\nfor (int k = 0; k < {K0 // 8}; ++k) {{",
-        "  const int r = 16 * (m0 + m) + g;",
-        "  a0[m][k][0] = xw[r][8 * k + 2 * t]; a0[m][k][1] = xw[r + 8][8 * k + 2 * t];",
-        "  a0[m][k][2] = xw[r][8 * k + 2 * t + 1]; a0[m][k][3] = xw[r + 8][8 * k + 2 * t + 1];",
-        "}",
     ]
     cpu = [
         "auto bits = [](float v, unsigned add) -> float {",
@@ -250,54 +199,29 @@ def _snippet(
         p = li - 1
         if li == last:
             break
-        small = f"s{li}" if split_acc else f"c{li}"
         cu += [
-            f"float c{li}[{MT}][{NT}][4];",
+            f"float c{li}[2][{NT}][4];",
             f"#pragma unroll\nfor (int n = 0; n < {NT}; ++n) {{",
             f"  const float2 b = __ldg(bf + ({boff} + n) * 32 + lane);",
-            f"  #pragma unroll\n  for (int m = 0; m < {MT}; ++m) {{ c{li}[m][n][0] = b.x; c{li}[m][n][1] = b.y; "
+            f"  #pragma unroll\n  for (int m = 0; m < 2; ++m) {{ c{li}[m][n][0] = b.x; c{li}[m][n][1] = b.y; "
             f"c{li}[m][n][2] = b.x; c{li}[m][n][3] = b.y; }}",
             "}",
-            f"float s{li}[{MT}][{NT}][4] = {{}};" if split_acc else "",
             f"#pragma unroll\nfor (int k = 0; k < {KT}; ++k) {{",
-            '  asm volatile("" ::: "memory");' if fence else "",
-            f"  unsigned hi[{MT}][4], lo[{MT}][4];",
-            f"  #pragma unroll\n  for (int m = 0; m < {MT}; ++m)\n  #pragma unroll\n  for (int i = 0; i < 4; ++i) "
+            "  unsigned hi[2][4], lo[2][4];",
+            "  #pragma unroll\n  for (int m = 0; m < 2; ++m)\n  #pragma unroll\n  for (int i = 0; i < 4; ++i) "
             f"split(a{p}[m][k][i], hi[m][i], lo[m][i]);",
-            f"  unsigned wh[{NT}][2], wl[{NT}][2];",
             f"  #pragma unroll\n  for (int n = 0; n < {NT}; ++n) {{",
-            f"    const float4 w = ldw(wf + ({woff} + k * {NT} + n) * 32 + lane);",
-            "    wh[n][0] = __float_as_uint(w.x); wh[n][1] = __float_as_uint(w.y);",
-            "    wl[n][0] = __float_as_uint(w.z); wl[n][1] = __float_as_uint(w.w);",
+            f"    const float4 w = __ldg(wf + ({woff} + k * {NT} + n) * 32 + lane);",
+            "    const unsigned h0 = __float_as_uint(w.x), h1 = __float_as_uint(w.y);",
+            "    const unsigned l0 = __float_as_uint(w.z), l1 = __float_as_uint(w.w);",
+            "    #pragma unroll\n    for (int m = 0; m < 2; ++m) {",
+            f"      mma(c{li}[m][n], lo[m], h0, h1); mma(c{li}[m][n], hi[m], l0, l1); mma(c{li}[m][n], hi[m], h0, h1);",
+            "    }",
             "  }",
-        ]
-        each = f"  #pragma unroll\n  for (int n = 0; n < {NT}; ++n)\n  #pragma unroll\n  for (int m = 0; m < {MT}; ++m)"
-        if interleave:  # each product kind over every (n, m) before the next: 2 * NT * MT independent mma apart
-            cu += [
-                each,
-                f"    mma({small}[m][n], lo[m], wh[n][0], wh[n][1]);",
-                each,
-                f"    mma({small}[m][n], hi[m], wl[n][0], wl[n][1]);",
-                each,
-                f"    mma(c{li}[m][n], hi[m], wh[n][0], wh[n][1]);",
-            ]
-        else:
-            cu += [
-                each + " {",
-                f"    mma({small}[m][n], lo[m], wh[n][0], wh[n][1]); mma({small}[m][n], hi[m], wl[n][0], wl[n][1]);",
-                f"    mma(c{li}[m][n], hi[m], wh[n][0], wh[n][1]);",
-                "  }",
-            ]
-        cu += ["}"]
-        if split_acc:
-            cu += [
-                f"#pragma unroll\nfor (int m = 0; m < {MT}; ++m)\n#pragma unroll\nfor (int n = 0; n < {NT}; ++n)\n"
-                f"#pragma unroll\nfor (int i = 0; i < 4; ++i) c{li}[m][n][i] += s{li}[m][n][i];",
-            ]
-        cu += [
+            "}",
             # the accumulator (rows g, g+8; units 2t, 2t+1) is the next operand (cols t, t+4 = units 2t, 2t+1)
-            f"float a{li}[{MT}][{NT}][4];",
-            f"#pragma unroll\nfor (int m = 0; m < {MT}; ++m)\n#pragma unroll\nfor (int n = 0; n < {NT}; ++n) {{",
+            f"float a{li}[2][{NT}][4];",
+            f"#pragma unroll\nfor (int m = 0; m < 2; ++m)\n#pragma unroll\nfor (int n = 0; n < {NT}; ++n) {{",
             "  float v;",
             f"  v = c{li}[m][n][0]; a{li}[m][n][0] = {_act('v', code, a)};",
             f"  v = c{li}[m][n][2]; a{li}[m][n][1] = {_act('v', code, a)};",
@@ -322,29 +246,25 @@ def _snippet(
         ]
         woff += KT * NT
         boff += NT
-    # The output unit: each lane's dot product over its inputs (8k + 2t, 8k + 2t + 1) of rows g and g + 8 of the
-    # pass's tiles, summed over the group's four lanes (t) by two butterfly shuffles; every lane of group g then holds
-    # those rows' sums, and the owner of row 16m + g + 8h (lane 4g + 2m + h) takes its own.
+    # The output unit: each lane's dot product over its inputs (8k + 2t, 8k + 2t + 1) of rows g and g + 8 of both
+    # tiles, summed over the group's four lanes (t) by two butterfly shuffles; every lane of group g then holds its
+    # four rows' sums, and the owner of row 16m + g + 8h (lane 4g + 2m + h) takes its own.
     p = last - 1
     cu += [
-        f"float y[{MT}][2];",
-        f"#pragma unroll\nfor (int m = 0; m < {MT}; ++m) {{ y[m][0] = 0.0f; y[m][1] = 0.0f; }}",
+        "float y[2][2] = {{0.0f, 0.0f}, {0.0f, 0.0f}};",
         f"#pragma unroll\nfor (int k = 0; k < {KT}; ++k) {{",
         f"  const float4 w = __ldg(wf + ({woff} + k) * 32 + lane);",
-        f"  #pragma unroll\n  for (int m = 0; m < {MT}; ++m) {{",
+        "  #pragma unroll\n  for (int m = 0; m < 2; ++m) {",
         f"    y[m][0] = fmaf(a{p}[m][k][0], w.x, y[m][0]); y[m][0] = fmaf(a{p}[m][k][2], w.y, y[m][0]);",
         f"    y[m][1] = fmaf(a{p}[m][k][1], w.x, y[m][1]); y[m][1] = fmaf(a{p}[m][k][3], w.y, y[m][1]);",
         "  }",
         "}",
-        f"#pragma unroll\nfor (int m = 0; m < {MT}; ++m) {{",
-        "  #pragma unroll\n  for (int h = 0; h < 2; ++h) {",
-        "    y[m][h] += __shfl_xor_sync(0xffffffffu, y[m][h], 1);",
-        "    y[m][h] += __shfl_xor_sync(0xffffffffu, y[m][h], 2);",
-        "  }",
-        "  if ((t >> 1) == m0 + m) out = (t & 1) ? y[m][1] : y[m][0];",
+        "#pragma unroll\nfor (int m = 0; m < 2; ++m)\n#pragma unroll\nfor (int h = 0; h < 2; ++h) {",
+        "  y[m][h] += __shfl_xor_sync(0xffffffffu, y[m][h], 1);",
+        "  y[m][h] += __shfl_xor_sync(0xffffffffu, y[m][h], 2);",
         "}",
-        "}",  # the passes
-        f"float v = out + __ldg(bf_all + {boff} * 32 + lane).x;",
+        "float v = (t >> 1) ? ((t & 1) ? y[1][1] : y[1][0]) : ((t & 1) ? y[0][1] : y[0][0]);",
+        f"v += __ldg(bf + {boff} * 32 + lane).x;",
         f"return {_act('v', code, a)};",
     ]
     cpu += [
@@ -374,23 +294,16 @@ class _Native:
         return decorate
 
 
-def _make(L: NetLayout, scales: tuple[float, float, float], weights: np.ndarray | None) -> wp.Kernel:
+def _make(L: NetLayout, scales: tuple[float, float, float]) -> wp.Kernel:
     N = L.rows
-    MW = int(MMA_WARPS)
-    simt_row = unrolled_row(L, weights, scales) if MW < 4 else None
     PS, VS, TS = scales
     K0 = _pad8(L.dense[0][0])
     vec_x = wp.types.vector(length=K0, dtype=wp.float32)
     vec_p = wp.types.vector(length=max(2 * L.past, 1), dtype=wp.float32)
     mlp_x = mlp_input(L, (PS, VS), vec_x)
-    tiles, regs, fence = int(TILES_PER_PASS), int(MAX_REGISTERS), bool(FENCE_LOADS)
-    inter, split, order = bool(INTERLEAVE), bool(SPLIT_ACC), bool(IN_ORDER_LOADS)
-    opts = (BLOCK_DIM, tiles, regs, fence, inter, split, order, MW, None if MW == 4 else weights.tobytes())
-    digest = hashlib.sha256(repr((L, scales, opts)).encode()).hexdigest()[:16]
+    digest = hashlib.sha256(repr((L, scales, BLOCK_DIM)).encode()).hexdigest()[:16]
 
-    snippet = _snippet(L, digest, tiles, fence, inter, split, order)
-
-    @_Native.func_native(snippet, "wpctrl_actuator_net_mma_" + digest, vec_x)
+    @_Native.func_native(_snippet(L, digest), "wpctrl_actuator_net_mma_" + digest, vec_x)
     def net_fn(x: vec_x, wfrag: wp.array[wp.vec4], bfrag: wp.array[wp.vec2]) -> float: ...
 
     PAST = L.past
@@ -411,16 +324,6 @@ def _make(L: NetLayout, scales: tuple[float, float, float], weights: np.ndarray 
         joint_f_out: wp.array[float],
     ):
         i = wp.tid()
-        if wp.static(MW < 4):
-            if (i // 32) % 4 >= wp.static(MW):  # an FP32 warp: a row per lane, the unrolled kernel's code
-                if i < num_rows:
-                    env_ = i // wp.static(N)
-                    r_ = row0 + i - env_ * wp.static(N)
-                    di_, err_, qd_, lim_, sat_, vl_ = row_input(io, wp.static(L.q_lin), wp.static(L.qd_lin), env_, r_,
-                                                                r_ - row0, joint_q_in, joint_qd_in,
-                                                                joint_target_q_in)  # fmt: skip
-                    simt_row(i, env_, r_, di_, err_, qd_, lim_, sat_, vl_, io, hist_out, joint_f_out)
-                return
         lane = i % 32
         g = lane // 4
         t = lane % 4
@@ -457,5 +360,4 @@ def _make(L: NetLayout, scales: tuple[float, float, float], weights: np.ndarray 
         grid_stride=False,
         module="unique",
         module_options={"fast_math": True},
-        **({"cuda_max_registers": regs} if regs else {}),
     )

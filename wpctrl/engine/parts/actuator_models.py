@@ -257,7 +257,7 @@ class _NetGroup:
             extra = {"hist_out": actuator_net_unrolled.history_vectors(self.hist)}
         elif self.kernel_kind == "3xtf32":
             _check_mma(self.layout, dev)
-            self.kernel = actuator_net_mma.mma_kernel(self.layout, scales, net.weights)
+            self.kernel = actuator_net_mma.mma_kernel(self.layout, scales)
             wfrag, bfrag = actuator_net_mma.pack(self.layout, net.weights)
             extra = {
                 "hist_out": actuator_net_unrolled.history_vectors(self.hist),

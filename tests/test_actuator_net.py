@@ -362,7 +362,14 @@ def test_kernel_choice_and_size_limit():
                          taps=(0, 1, 2), history=3, pos_first=True, rows=7)  # fmt: skip
     assert small.macs == 6 * 32 + 32 * 32 + 32 and KN.choose_kernel(small, "auto") == "unrolled"
     big = small._replace(dense=((6, 64, 5, 0.0, 0, 0), (64, 64, 5, 0.0, 0, 0), (64, 1, 0, 0.0, 0, 0)))
-    assert big.macs > KN.UNROLLED_MAX_MACS and KN.choose_kernel(big, "auto") == "tiled"
+    assert big.macs > KN.UNROLLED_MAX_MACS and KN.choose_kernel(big, "auto") == "tiled"  # the CPU
+    # past the unrolled kernel's size an MLP runs on the tensor cores of sm_80 or later, if its layers fit them
+    assert [KN.choose_kernel(big, "auto", arch) for arch in (75, 80, 90)] == ["tiled", "3xtf32", "3xtf32"]
+    assert KN.choose_kernel(small, "auto", 90) == "unrolled"
+    wide = big._replace(dense=((6, 136, 5, 0.0, 0, 0), (136, 32, 5, 0.0, 0, 0), (32, 1, 0, 0.0, 0, 0)))
+    assert wide.macs > KN.UNROLLED_MAX_MACS and KN.choose_kernel(wide, "auto", 90) == "tiled"
+    assert KN.mma_unsupported(wide) == "a layer 136 wide (padded to 8; at most 128)"
+    assert KN.mma_unsupported(big._replace(dense=((6, 128, 5, 0.0, 0, 0), (128, 1, 0, 0.0, 0, 0)))) is None
     assert KN.choose_kernel(big, "unrolled") == "unrolled"
     # "auto" never splits (measured slower at every size); the split kernel only when named. "split" without a
     # count: 4 threads per row while that fits 1,024 threads per SM, else 2 (split_lanes 1: not even 2 fit)
@@ -371,6 +378,7 @@ def test_kernel_choice_and_size_limit():
     assert [KS.split_lanes(rows, 132) for rows in (7, 4096 * 7, 33_792, 33_793, 67_584, 67_585)] == [4, 4, 4, 2, 2, 1]
     lstm = small._replace(dense=((32, 1, 0, 0.0, 0, 0),), lstm=((2, 32, 0, 0, 0, 0), (32, 32, 0, 0, 0, 0)), taps=())
     assert lstm.macs == 4 * 32 * 34 + 4 * 32 * 64 + 32 and KN.choose_kernel(lstm, "auto") == "tiled"
+    assert KN.choose_kernel(lstm, "auto", 90) == "tiled"  # the tensor-core kernel runs MLPs only
     model = build_panda(1)
     # on the CPU without Warp's cooperative CPU blocks, "split" runs the unrolled kernel (the same results)
     act = wpctrl.ActuatorNet(_mlp(torch.nn.Linear(6, 1)), kernel="split")

@@ -96,7 +96,8 @@ class ActuatorNet:
     of every layer; measured slower than ``"unrolled"`` at every size on an H200, kept for comparison on other GPUs;
     ``"split2"`` / ``"split4"`` force the number, ``"split"`` takes 4 while 4 threads per row fit 1,024 per SM, else
     2 (on the CPU it needs Warp's cooperative CPU blocks, else the unrolled kernel runs).
-    ``"auto"``: unrolled up to 4,096 multiply-adds per row, else tiled."""
+    ``"auto"``: unrolled up to 4,096 multiply-adds per row; past that ``"3xtf32"`` for an MLP of layers up to 128
+    wide on CUDA sm_80 or later, else tiled."""
     launch: Literal["auto", "fused", "separate"] = "auto"
     """Where the network runs in each substep. ``"fused"``: in the substep kernel's launch (one launch per substep:
     the network's rows are threads of the same grid as the per-env substep threads); it needs the unrolled kernel, the

@@ -39,14 +39,6 @@ wp.set_module_options({"enable_backward": False})
 BLOCK_DIM = 64
 """CUDA threads per block: two warps, each with its own slice of the block's shared memory for the row inputs."""
 
-MAX_WIDTH = 128
-"""The widest layer (inputs or units, padded to a multiple of 8) the kernel takes: its operand and accumulator
-fragments live in registers, 8 per 8 units each."""
-
-
-MIN_SM = 80
-"""The oldest CUDA architecture with TF32 tensor cores (sm_80)."""
-
 _KERNELS: dict[tuple, wp.Kernel] = {}
 
 
@@ -59,17 +51,6 @@ def tf32(a: np.ndarray) -> np.ndarray:
     nearest, ties away from zero (an increment of the magnitude's bit pattern)."""
     u = np.ascontiguousarray(a, dtype=np.float32).view(np.uint32)
     return ((u + np.uint32(0x1000)) & np.uint32(0xFFFFE000)).view(np.float32)
-
-
-def supports(layout: NetLayout) -> str | None:
-    """Why ``layout`` cannot run on this kernel, or None: it takes MLPs (no LSTM) of layers up to :data:`MAX_WIDTH`
-    wide."""
-    if layout.lstm:
-        return "an LSTM (this kernel runs MLPs)"
-    widths = [_pad8(d[0]) for d in layout.dense] + [_pad8(d[1]) for d in layout.dense]
-    if max(widths) > MAX_WIDTH:
-        return f"a layer {max(widths)} wide (padded to 8; at most {MAX_WIDTH})"
-    return None
 
 
 def pack(layout: NetLayout, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -108,9 +89,9 @@ def pack(layout: NetLayout, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray
 
 
 def mma_kernel(layout: NetLayout, scales: tuple[float, float, float]) -> wp.Kernel:
-    """The kernel of ``layout`` (an MLP, :func:`supports`) with ``scales`` (``pos_scale``, ``vel_scale``,
-    ``torque_scale``) compiled in; the weights are its ``wfrag`` / ``bfrag`` arguments (:func:`pack`). Launched over
-    :func:`launch_dim` threads with ``block_dim = BLOCK_DIM``."""
+    """The kernel of ``layout`` (an MLP: :func:`.actuator_net.mma_unsupported`) with ``scales`` (``pos_scale``,
+    ``vel_scale``, ``torque_scale``) compiled in; the weights are its ``wfrag`` / ``bfrag`` arguments (:func:`pack`).
+    Launched over :func:`launch_dim` threads with ``block_dim = BLOCK_DIM``."""
     scales = tuple(float(np.float32(x)) for x in scales)
     key = (layout, scales)
     k = _KERNELS.get(key)

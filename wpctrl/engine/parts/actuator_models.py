@@ -217,7 +217,8 @@ class _NetGroup:
             qd_lin=_consecutive(plan.qd_idx, plan.strided, row0, n),
         )
         cpu = wp.get_device(dev).is_cpu
-        self.kernel_kind = actuator_net.choose_kernel(self.layout, spec.kernel)
+        arch = 0 if cpu else wp.get_device(dev).arch
+        self.kernel_kind = actuator_net.choose_kernel(self.layout, spec.kernel, arch)
         if self.kernel_kind == "split":
             # split2 / split4 as named; "split": 4 while that fits 1,024 threads per SM, else 2 (the CPU: 2)
             lanes = 1 if cpu else actuator_net_split.split_lanes(E * n, wp.get_device(dev).sm_count)
@@ -335,13 +336,13 @@ class _NetGroup:
 
 def _check_mma(layout, device) -> None:
     """Refuse what the tensor-core kernel cannot run: an LSTM or too wide a layer, a GPU older than sm_80."""
-    why = actuator_net_mma.supports(layout)
+    why = actuator_net.mma_unsupported(layout)
     if why is not None:
         raise ConfigError(f"actuator.kernel: expected another kernel than '3xtf32' for {why}, got '3xtf32'")
     d = wp.get_device(device)
-    if d.is_cuda and d.arch < actuator_net_mma.MIN_SM:
+    if d.is_cuda and d.arch < actuator_net.MMA_MIN_SM:
         raise ConfigError(
-            f"actuator.kernel: '3xtf32' needs TF32 tensor cores (sm_{actuator_net_mma.MIN_SM} or later), "
+            f"actuator.kernel: '3xtf32' needs TF32 tensor cores (sm_{actuator_net.MMA_MIN_SM} or later), "
             f"got {d.name} (sm_{d.arch})"
         )
 

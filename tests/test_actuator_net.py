@@ -357,6 +357,17 @@ def test_networks_equal_torch_on_cuda(name, kernel):
     _check_against_torch(act, net, lstm, envs=13, device="cuda:0", kernel=kind)
 
 
+@pytest.mark.skipif(not HAS_CUDA, reason="needs a CUDA device: the tensor-core kernel's GPU build")
+def test_large_mlp_runs_on_the_tensor_cores_by_default_on_cuda():
+    """An MLP past the unrolled kernel's size (6-80-80-1: 6,960 multiply-adds per row) runs, with ``kernel="auto"``,
+    on the tensor cores of an sm_80+ GPU (else tiled) and gives torch's efforts: 91 rows, the last warp partly full."""
+    net = _mlp(torch.nn.Linear(6, 80), torch.nn.Softsign(), torch.nn.Linear(80, 80), torch.nn.Softsign(),
+               torch.nn.Linear(80, 1))  # fmt: skip
+    act = wpctrl.ActuatorNet(net, input_idx=(0, 1, 2), pos_scale=1.2, vel_scale=0.3, torque_scale=5.0)
+    want = "3xtf32" if wp.get_device("cuda:0").arch >= KN.MMA_MIN_SM else "tiled"
+    _check_against_torch(act, net, None, envs=13, device="cuda:0", kernel=want)
+
+
 def test_kernel_choice_and_size_limit():
     small = KN.NetLayout(dense=((6, 32, 5, 0.0, 0, 0), (32, 32, 5, 0.0, 0, 0), (32, 1, 0, 0.0, 0, 0)), lstm=(),
                          taps=(0, 1, 2), history=3, pos_first=True, rows=7)  # fmt: skip

@@ -4,8 +4,8 @@ Private module. A network's rows run in one launch after the substep kernel (the
 substep's, interpolated and delayed as the targets of any other row). Each thread of the launch is one (env, joint)
 row: it gathers ``joint_q`` / ``joint_qd`` / ``joint_target_q``, advances the history (or the recurrent state),
 evaluates the network, applies the DC-motor envelope and the force limit, and writes ``joint_f`` and the effort
-readout; no intermediate row buffer leaves the thread (or, in the tiled kernel, the block's shared memory). Three
-kernels evaluate the network, all compiled for its shape:
+readout; no intermediate row buffer leaves the thread (or, in the tiled and tensor-core kernels, the block's shared
+memory and the warp's registers). Four kernels evaluate the network, all compiled for its shape:
 
 - :mod:`.actuator_net_unrolled` (networks of up to :data:`UNROLLED_MAX_MACS` multiply-adds per row): the weights are
   compiled into the kernel as immediate operands, so each multiply-add is one fused multiply-add instruction with no
@@ -14,6 +14,9 @@ kernels evaluate the network, all compiled for its shape:
 - :mod:`.actuator_net_split` (the same networks, on request only): the unrolled kernel's code with each row split
   over 2 or 4 warps of a block, each computing a slice of every layer's units; the slices meet in shared memory.
   Measured slower than the unrolled kernel at every size, so ``"auto"`` never picks it.
+- :mod:`.actuator_net_mma` (MLPs of layers up to :data:`MMA_MAX_WIDTH` wide, CUDA sm_80 or later): one warp per
+  32 rows, each layer a warp-wide tensor-core product at float32 accuracy (3xTF32). The weights are data. What
+  ``"auto"`` runs for an MLP past :data:`UNROLLED_MAX_MACS` on such a GPU.
 - :mod:`.actuator_net_tiled` (any size up to :data:`TILED_MAX_WEIGHTS` weights): the weights are staged once per
   block in shared memory (``wp.tile_load``), each block evaluates tiles of rows as matrix products
   (``wp.tile_matmul``), one tile per block pass. Compiled per network shape; the weights are data.

@@ -1,27 +1,32 @@
 """The MLP actuator network on tensor cores at float32 accuracy (3xTF32): each layer a warp-wide matrix product.
 
-Private module (see :mod:`.actuator_net`). The unrolled kernel runs an MLP at the FP32 units' rate: at a million
-robots a 6-32-32-1 network is 1,248 fused multiply-adds per row and the SMs issue an instruction in nine cycles of
-ten. Tensor cores do the same products several times faster, but in TF32 (a 10-bit mantissa). This kernel keeps
-float32 accuracy the way CUTLASS's "3xTF32" does: each operand ``v`` is split into ``hi = tf32(v)`` and ``lo =
-tf32(v - hi)``, and each product is ``lo_a*hi_b + hi_a*lo_b + hi_a*hi_b`` accumulated in float32 (the dropped
-``lo*lo`` is ~2^-22 of the product), three ``mma.sync.m16n8k8`` instructions where TF32 takes one.
+Private module (see :mod:`.actuator_net`). Tensor cores multiply in TF32 (a 10-bit mantissa). This kernel keeps
+float32 accuracy the way CUTLASS's "3xTF32" does: each operand ``v`` is split into ``hi = tf32(v)`` and a remainder
+``lo = tf32(v - hi)``, and each product is ``lo_a*hi_b + hi_a*lo_b + hi_a*hi_b`` accumulated in float32 (the dropped
+``lo*lo`` is ~2^-22 of the product): three ``mma.sync.m16n8k8`` instructions where TF32 takes one. The weights are
+split on the host (rounded to nearest, ties away, as ``cvt.rna.tf32``); an activation's ``hi`` is rounded the same
+way in two integer instructions and its remainder truncated to TF32.
 
-One warp evaluates 32 rows (two 16-row tiles) per pass; a lane is one row's owner. It gathers its row and advances
-its history exactly as the unrolled kernel does (the same code, :func:`.actuator_net_unrolled.mlp_input`), writes the
-row's inputs to the warp's slice of shared memory, and reads its fragments of both tiles back. From there the
-activations stay in registers: a layer's accumulator fragment is the next layer's operand fragment because the
-weights' input order is permuted on the host to match (a lane holds output units ``2t`` and ``2t + 1`` of each 8-unit
-tile, and reads operand columns ``t`` and ``t + 4``: column ``t`` of tile ``k`` is unit ``8k + 2t``, column ``t + 4``
-unit ``8k + 2t + 1``). The weights are data: per layer, tile and lane a float4 ``(b0_hi, b1_hi, b0_lo, b1_lo)`` read
-through the read-only cache, the biases a float2 per lane (:func:`pack`). The output goes back to the row's owner by
-four shuffles, which scales, clamps and writes ``joint_f`` as the unrolled kernel does. Layer widths are padded to
-multiples of 8 with zero weights.
+One warp evaluates 32 rows, two 16-row tiles; each lane owns one row. It gathers the row and advances its history
+with the unrolled kernel's code (:func:`.actuator_net_unrolled.mlp_row_input`), writes the row's inputs to the warp's
+slice of shared memory and reads its fragments of both tiles back. From there the activations stay in registers: a
+layer's accumulator fragment is the next layer's operand fragment, because the weights' input order is permuted on
+the host to match (a lane holds output units ``2t`` and ``2t + 1`` of each 8-unit tile, and reads operand columns
+``t`` and ``t + 4``: column ``t`` of tile ``k`` stands for unit ``8k + 2t``, column ``t + 4`` for unit
+``8k + 2t + 1``). The weights are data: per layer, tile and lane a float4 ``(b0_hi, b1_hi, b0_lo, b1_lo)`` read
+through the read-only cache, the biases a float2 per lane (:func:`pack`). The output unit is a float32 dot product
+per lane over its share of the last hidden layer, summed over the lane's group of four by two shuffles; the row's
+owner then scales, clamps and writes ``joint_f`` as the unrolled kernel does. Layer widths are padded to multiples of
+8 with zero weights.
 
-Compiled per network shape (the weights are arguments). CUDA needs sm_80 or later (``cvt.rna.tf32``, TF32 ``mma``).
-On the CPU the same snippet evaluates each row alone with the same split and rounding (round to nearest, ties away,
-as ``cvt.rna``) and the same packed weights, so the packing and the split are tested there; the warp-level data
-movement runs only on a GPU.
+What it is worth, measured on an H100 (``docs/performance.md``): through ``mma.sync`` one float32-accurate
+multiply-add (three TF32 products) costs about what an FP32 fused multiply-add costs, so for an actuator-sized MLP
+this kernel is no faster than the unrolled one (whose weights are instruction operands); for an MLP too large to
+compile in it is 5-7x faster than the tiled kernel, and ``kernel="auto"`` runs it there.
+
+Compiled per network shape (the weights are arguments). CUDA needs sm_80 or later (TF32 ``mma``). On the CPU the
+same snippet evaluates each row alone with the same splits and roundings and the same packed weights, so the packing
+and the split are tested there; the warp-level data movement runs only on a GPU.
 """
 
 from __future__ import annotations
@@ -32,7 +37,7 @@ import numpy as np
 import warp as wp
 
 from .actuator_net import NetIO, NetLayout, dense_matrices, row_input, write_effort
-from .actuator_net_unrolled import _scaled, mlp_input
+from .actuator_net_unrolled import _scaled, mlp_row_input
 
 wp.set_module_options({"enable_backward": False})
 
@@ -281,13 +286,11 @@ def _make(L: NetLayout, scales: tuple[float, float, float]) -> wp.Kernel:
     K0 = _pad8(L.dense[0][0])
     vec_x = wp.types.vector(length=K0, dtype=wp.float32)
     vec_p = wp.types.vector(length=max(2 * L.past, 1), dtype=wp.float32)
-    mlp_x = mlp_input(L, (PS, VS), vec_x)
+    mlp_x = mlp_row_input(L, (PS, VS), vec_x)
     digest = hashlib.sha256(repr((L, scales, BLOCK_DIM)).encode()).hexdigest()[:16]
 
     @_Native.func_native(_snippet(L, digest), "wpctrl_actuator_net_mma_" + digest, vec_x)
     def net_fn(x: vec_x, wfrag: wp.array[wp.vec4], bfrag: wp.array[wp.vec2]) -> float: ...
-
-    PAST = L.past
 
     def net(
         row0: int,  # the network's rows: row0 .. row0 + n in the mode's tables
@@ -323,12 +326,7 @@ def _make(L: NetLayout, scales: tuple[float, float, float]) -> wp.Kernel:
         if s < num_rows:
             di, err, qd, lim, sat, vl = row_input(io, wp.static(L.q_lin), wp.static(L.qd_lin), env, r, j, joint_q_in,
                                                   joint_qd_in, joint_target_q_in)  # fmt: skip
-            old = vec_p()
-            if wp.static(PAST > 0):
-                old = hist_out[s]
-            x, new = mlp_x(err, qd, old)
-            if wp.static(PAST > 0):
-                hist_out[s] = new
+            x = mlp_x(s, err, qd, hist_out)
         y = net_fn(x, wfrag, bfrag)  # every lane of the warp, rows past the end with zero inputs
         if s < num_rows:
             write_effort(_scaled(y, wp.static(TS)), qd, env, r, di, lim, sat, vl, joint_f_out, io)

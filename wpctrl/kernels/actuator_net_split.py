@@ -34,7 +34,7 @@ import numpy as np
 import warp as wp
 
 from .actuator_net import NetIO, NetLayout, activate, dense_matrices, lstm_cell, lstm_matrices, row_input, write_effort
-from .actuator_net_unrolled import _floats, _scaled
+from .actuator_net_unrolled import _floats, _scaled, mlp_input
 
 wp.set_module_options({"enable_backward": False})
 
@@ -81,10 +81,10 @@ def _chunk(n: int, lanes: int) -> int:
 
 
 def _make(L: NetLayout, weights: np.ndarray, scales: tuple[float, float, float], S: int) -> wp.Kernel:
-    N, TAPS, POS_FIRST, PAST = L.rows, L.taps, bool(L.pos_first), L.past
+    N, POS_FIRST, PAST = L.rows, bool(L.pos_first), L.past
     PS, VS, TS = scales
     MLP = not L.lstm
-    T = len(TAPS)
+    T = len(L.taps)
     dense = dense_matrices(L, weights)
     lstm = lstm_matrices(L, weights)
     DW = tuple(_floats(w) for w, _, _, _ in dense)
@@ -106,12 +106,10 @@ def _make(L: NetLayout, weights: np.ndarray, scales: tuple[float, float, float],
     LAST_FROM_SLICE = ND > 1 or NL > 0
     vec_w = wp.types.vector(length=width, dtype=wp.float32)
     vec_m = wp.types.vector(length=M, dtype=wp.float32)
-    vec_t = wp.types.vector(length=max(L.history, 1), dtype=wp.float32)
     vec_s = wp.types.vector(length=max(NL * H, 1), dtype=wp.float32)
     vec_o = wp.types.vector(length=max(NL * MH, 1), dtype=wp.float32)
     vec_p = wp.types.vector(length=max(2 * PAST, 1), dtype=wp.float32)
-    POS_AT = tuple((t if POS_FIRST else T + t) for t in range(T))
-    VEL_AT = tuple((T + t if POS_FIRST else t) for t in range(T))
+    mlp_x = mlp_input(L, (PS, VS), vec_w)
     # units of warp l in a layer of n units: (first, count); UH: each warp's first LSTM unit
     SLICE = {n: tuple((lo * _chunk(n, S), max(0, min(n, (lo + 1) * _chunk(n, S)) - lo * _chunk(n, S))) for lo in
                       range(S)) for n in {H, *DOUT, *DIN}}  # fmt: skip
@@ -165,20 +163,10 @@ def _make(L: NetLayout, weights: np.ndarray, scales: tuple[float, float, float],
         # All state is read here and written at the end, after the last block synchronisation: another warp of the
         # block may still be reading a row's state when this one has its results.
         if wp.static(MLP):
-            hp = vec_t()
-            hv = vec_t()
-            hp[0] = err
-            hv[0] = qd
+            old = vec_p()
             if wp.static(PAST > 0):
                 old = hist_out[s]
-                for k in range(wp.static(PAST)):
-                    hp[k + 1] = old[k]
-                    hv[k + 1] = old[wp.static(PAST) + k]
-                    new[k] = hp[k]
-                    new[wp.static(PAST) + k] = hv[k]
-            for k in range(wp.static(T)):
-                x[wp.static(POS_AT[k])] = _scaled(hp[wp.static(TAPS[k])], wp.static(PS))
-                x[wp.static(VEL_AT[k])] = _scaled(hv[wp.static(TAPS[k])], wp.static(VS))
+            x, new = mlp_x(err, qd, old)
         else:
             if wp.static(POS_FIRST):
                 x[0] = _scaled(err, wp.static(PS))

@@ -111,6 +111,26 @@ def mlp_input(L: NetLayout, scales: tuple[float, float], vec_x) -> wp.Function:
     return wp.func(x_of, name="wpctrl_actuator_net_input_" + digest, module="unique", inline=True)
 
 
+def mlp_row_input(L: NetLayout, scales: tuple[float, float], vec_x) -> wp.Function:
+    """:func:`mlp_input` with the row's history read and written in place: ``(s, err, qd, hist_out) -> x``."""
+    PAST = L.past
+    vec_p = wp.types.vector(length=max(2 * PAST, 1), dtype=wp.float32)
+    x_of = mlp_input(L, scales, vec_x)
+
+    def row_x(s: int, err: float, qd: float, hist_out: wp.array[vec_p]):
+        old = vec_p()
+        if wp.static(PAST > 0):
+            old = hist_out[s]
+        x, new = x_of(err, qd, old)
+        if wp.static(PAST > 0):
+            hist_out[s] = new
+        return x
+
+    row_x.__annotations__["hist_out"] = wp.array[vec_p]
+    digest = hashlib.sha256(repr((L.taps, L.pos_first, PAST, scales, vec_x._length_)).encode()).hexdigest()[:16]
+    return wp.func(row_x, name="wpctrl_actuator_net_row_input_" + digest, module="unique", inline=True)
+
+
 def _make(L: NetLayout, weights: np.ndarray, scales: tuple[float, float, float]) -> tuple[wp.Function, wp.Kernel]:
     N, TAPS, POS_FIRST, PAST = L.rows, L.taps, bool(L.pos_first), L.past
     PS, VS, TS = scales
@@ -134,7 +154,7 @@ def _make(L: NetLayout, weights: np.ndarray, scales: tuple[float, float, float])
     vec_g = wp.types.vector(length=4 * H, dtype=wp.float32)
     vec_s = wp.types.vector(length=max(len(L.lstm) * H, 1), dtype=wp.float32)
     vec_p = wp.types.vector(length=max(2 * PAST, 1), dtype=wp.float32)
-    mlp_x = mlp_input(L, (PS, VS), vec_w)
+    mlp_x = mlp_row_input(L, (PS, VS), vec_w)
 
     def net_row(
         s: int,  # (env, joint) row, joint fastest
@@ -153,12 +173,7 @@ def _make(L: NetLayout, weights: np.ndarray, scales: tuple[float, float, float])
     ):
         x = vec_w()
         if wp.static(MLP):
-            old = vec_p()
-            if wp.static(PAST > 0):
-                old = hist_out[s]
-            x, new = mlp_x(err, qd, old)
-            if wp.static(PAST > 0):
-                hist_out[s] = new
+            x = mlp_x(s, err, qd, hist_out)
         else:
             if wp.static(POS_FIRST):
                 x[0] = _scaled(err, wp.static(PS))

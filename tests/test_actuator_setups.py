@@ -235,6 +235,46 @@ def test_lstm_with_input_scales_on_a_later_controller_equals_torch(order, kernel
     assert np.abs(tau[0, 3:]).max() <= 2.0 + 1e-5 and np.abs(u[0]).max() > 2.0  # env 0's own force limit bound
 
 
+@pytest.mark.parametrize("kernel", ["auto", "3xtf32"])
+def test_mlp_with_history_and_per_env_envelope_on_a_later_controller_equals_torch(kernel):
+    """An MLP actuator (history taps (0, 2), input scales not 1) on the second controller, whose rows start at the
+    arm's fourth joint, with a DC envelope and force limits that differ per env: torch's MLP on the scaled history,
+    times torque_scale, then Newton's ClampingDCMotor at each env's values. Also on the tensor-core kernel (on the
+    CPU: its per-row build of the same splits and packed weights)."""
+    from newton.actuators import ClampingDCMotor
+
+    mlp = init(torch.nn.Sequential(torch.nn.Linear(4, 16), torch.nn.Softsign(), torch.nn.Linear(16, 1)), seed=6)
+    idx, ps, vs, ts = (0, 2), 1.7, 0.4, 30.0
+    act = wpctrl.ActuatorNet(mlp, input_idx=idx, pos_scale=ps, vel_scale=vs, torque_scale=ts, saturation_effort=50.0,
+                             velocity_limit=8.0, kernel=kernel)  # fmt: skip
+    model = build_panda(E)
+    mode = {"a": pos(ARM_A, 200.0, 10.0, 45.0), "b": pos(ARM_B, 0.0, 0.0, 60.0, actuator=act)}
+    ctrl = wpctrl.build_controller(mode, model, 100, 100, actuation="explicit", track_effort=True)
+    assert ctrl._engine.part("actuator_models").nets[0].kernel_kind == ("unrolled" if kernel == "auto" else kernel)
+    sat = np.array([[50.0], [20.0], [5.0]], f32) * np.ones((E, 4), f32)
+    vmax = np.array([[8.0], [1.0], [3.0]], f32) * np.ones((E, 4), f32)
+    lim = np.array([[2.0], [60.0], [60.0]], f32) * np.ones((E, 4), f32)  # env 0's force limit binds first
+    ctrl["b"].set_drive_properties(saturation_effort=sat, velocity_limit=vmax, force_limit=lim)
+    hist_e = np.zeros((E, 3, 4), f32)
+    hist_v = np.zeros((E, 3, 4), f32)
+    rng = np.random.default_rng(8)
+    for q, qd, tq, tau in substeps(ctrl, model, PANDA_ARM_JOINTS, rng, 5):
+        hist_e = np.roll(hist_e, 1, axis=1)
+        hist_v = np.roll(hist_v, 1, axis=1)
+        hist_e[:, 0], hist_v[:, 0] = (tq - q)[:, 3:], qd[:, 3:]
+        x = np.concatenate([np.stack([hist_e[:, i] for i in idx], 2).reshape(E * 4, 2) * f32(ps),
+                            np.stack([hist_v[:, i] for i in idx], 2).reshape(E * 4, 2) * f32(vs)], axis=1)  # fmt: skip
+        with torch.no_grad():
+            u = mlp(torch.from_numpy(x)).numpy().reshape(E, 4) * f32(ts)
+        np.testing.assert_allclose(ctrl["b"].computed_effort.numpy(), u, rtol=1e-4, atol=1e-4)
+        envelope = ClampingDCMotor(wp.array(sat.ravel()), wp.array(vmax.ravel()), wp.array(lim.ravel()))
+        np.testing.assert_allclose(tau[:, 3:], newton_clamp(envelope, u, q[:, 3:], qd[:, 3:]), rtol=1e-4, atol=1e-4)
+        pd = f32(200.0) * (tq - q)[:, :3] + f32(10.0) * (f32(0.0) - qd[:, :3])
+        np.testing.assert_allclose(tau[:, :3], np.clip(pd, -45.0, 45.0), rtol=1e-5, atol=1e-4)
+    assert np.abs(u).max() > 5.0  # real torques (a test of something)
+    assert np.abs(tau[0, 3:]).max() <= 2.0 + 1e-5 and np.abs(u[0]).max() > 2.0  # env 0's own force limit bound
+
+
 def test_effort_controller_after_a_gripper_with_per_env_limits():
     """A JointEffortController as the mode's second controller, per-joint bounds, force limits that differ per env:
     its columns scale onto its own bounds and each env's torque is clamped to that env's limits, in both actuations."""

@@ -845,8 +845,8 @@ MUTATIONS: list[Mutation] = [
     M(
         "net_fused_target_of_first_rows",
         "wpctrl/kernels/actuator_net_fused.py",
-        "    err = target_qpos_in[env, r] - q\n",
-        "    err = target_qpos_in[env, j] - q\n",
+        "    return di, target_qpos_in[env, r] - q, qd, lim, sat, vl\n",
+        "    return di, target_qpos_in[env, j] - q, qd, lim, sat, vl\n",
         "a network run in the substep's launch reads its targets from the mode's first rows",
         ("tests/test_actuator_net_fused.py",),
     ),

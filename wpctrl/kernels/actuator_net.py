@@ -219,6 +219,23 @@ def row_index(io: NetIO, q_lin: int, qd_lin: int, env: int, r: int, j: int):
 
 
 @wp.func
+def row_state(
+    io: NetIO,
+    q_lin: int,
+    qd_lin: int,
+    env: int,
+    r: int,
+    j: int,
+    joint_q_in: wp.array[float],
+    joint_qd_in: wp.array[float],
+):
+    """The row's coordinate and DOF index (:func:`row_index`'s), position and velocity, force limit and DC-motor
+    envelope: what a network row reads besides its position target (:func:`row_input`)."""
+    qi, di = row_index(io, q_lin, qd_lin, env, r, j)
+    return qi, di, joint_q_in[qi], joint_qd_in[di], io.force_limit[env, r], io.sat_effort[env, r], io.vel_limit[env, r]
+
+
+@wp.func
 def row_input(
     io: NetIO,
     q_lin: int,
@@ -231,12 +248,10 @@ def row_input(
     joint_target_q_in: wp.array[float],
 ):
     """Everything the row reads, all before the network so that the loads are in flight together: its DOF index,
-    position error ``q* - q`` and velocity, its force limit and DC-motor envelope (saturation effort, velocity limit);
-    the indices are :func:`row_index`'s."""
-    qi, di = row_index(io, q_lin, qd_lin, env, r, j)
-    q = joint_q_in[qi]
-    err = joint_target_q_in[qi] - q
-    return di, err, joint_qd_in[di], io.force_limit[env, r], io.sat_effort[env, r], io.vel_limit[env, r]
+    position error ``q* - q`` (the target from ``joint_target_q``) and velocity, its force limit and DC-motor envelope
+    (saturation effort, velocity limit); the indices are :func:`row_index`'s."""
+    qi, di, q, qd, lim, sat, vl = row_state(io, q_lin, qd_lin, env, r, j, joint_q_in, joint_qd_in)
+    return di, joint_target_q_in[qi] - q, qd, lim, sat, vl
 
 
 @wp.func

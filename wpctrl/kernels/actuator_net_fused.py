@@ -26,7 +26,7 @@ import warp as wp
 
 from ..config.actuator_models import ACT_NET
 from ..config.rows import FLAG_INTERPOLATE
-from .actuator_net import NetIO, NetLayout, row_index
+from .actuator_net import NetIO, NetLayout, row_state
 from .actuator_net_unrolled import unrolled_row
 from .pd_step import substep_func
 from .step_layout import StepLayout
@@ -66,10 +66,8 @@ def _table_input(
 ):
     """:func:`.actuator_net.row_input` with the position target read from the mode's target table (the value the
     substep kernel writes to ``joint_target_q`` for a row neither interpolated nor delayed)."""
-    qi, di = row_index(io, q_lin, qd_lin, env, r, j)
-    q = joint_q_in[qi]
-    err = target_qpos_in[env, r] - q
-    return di, err, joint_qd_in[di], io.force_limit[env, r], io.sat_effort[env, r], io.vel_limit[env, r]
+    qi, di, q, qd, lim, sat, vl = row_state(io, q_lin, qd_lin, env, r, j, joint_q_in, joint_qd_in)
+    return di, target_qpos_in[env, r] - q, qd, lim, sat, vl
 
 
 def fused_kernel(

@@ -78,8 +78,9 @@ def mlp_input(L: NetLayout, scales: tuple[float, float], vec_x) -> wp.Function:
     """An MLP row's input vector and its next history, as a function ``(err, qd, old) -> (x, new)`` of the row's
     position error and velocity and its stored past samples ``old`` (the history array's row, :func:`history_vectors`):
     ``x`` (``vec_x``) holds the scaled samples in the network's order, zero past them; ``new`` is what the row's
-    history becomes. Shared by the kernels that compile an MLP's layout in (the unrolled and the tensor-core ones);
-    the caller reads and writes the history (with no past samples kept, ``new`` is unused)."""
+    history becomes. The caller reads and writes the history (with no past samples kept, ``new`` is unused): the split
+    kernel reads it before its block synchronisations and writes it after them; the unrolled and tensor-core kernels
+    use :func:`mlp_row_input`."""
     TAPS, POS_FIRST, PAST = L.taps, bool(L.pos_first), L.past
     PS, VS = (float(np.float32(x)) for x in scales)
     T = len(TAPS)

@@ -1327,6 +1327,9 @@ MUTATIONS: list[Mutation] = [
         "the replay's success agreement counts ManiSkill's failed episodes too",
         ("tests/test_tasks.py", "tests/test_tasks_replay.py"),
     ),
+    # -- envs, worlds and controllers that differ: operational-space and joint impedance --
+    # -- a second controller, a floating base: actuator networks and the elided-substep targets; option ranges --
+    # -- tasks, evaluation rounds, the gymnasium API and the tasks' range edges --
 ]
 
 

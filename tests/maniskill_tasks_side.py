@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from wpctrl.tasks.maniskill_side import make_maniskill, no_visuals
 
-__all__ = ["IKFeasible", "make_maniskill", "no_visuals", "record_episode", "state_dict_lists"]
+__all__ = ["IKFeasible", "make_maniskill", "no_visuals", "record_episode", "replay_shifted", "state_dict_lists"]
 
 
 def state_dict_lists(state: dict) -> dict:
@@ -76,3 +76,23 @@ def record_episode(env, policy, seed: int, steps: int = 50) -> dict:
         ep["cube_pose"].append(cube.pose.raw_pose[0].tolist())
     ep["success_at_end"] = ep["info"]["success"][-1]
     return ep
+
+
+def replay_shifted(env, episode: dict, shift) -> list:
+    """ManiSkill replaying its own recorded ``episode`` open-loop from the recorded initial state with the cube moved
+    by ``shift`` (x, y metres) on the table: the cube's final position. Its distance from the recorded one is
+    PhysX's own sensitivity to a start that differs by that much (its noise floor for a replay's cube error)."""
+    import torch
+
+    base = env.unwrapped
+    env.reset(seed=episode["seed"])
+    state = base.get_state_dict()
+    for group in ("actors", "articulations"):
+        for name, value in episode["init_state_dict"][group].items():
+            state[group][name] = torch.tensor([value])
+    state["actors"]["cube"][0, :2] += torch.tensor(shift, dtype=torch.float32)
+    base.set_state_dict(state)
+    for action in episode["actions"]:
+        env.step(torch.tensor([action]))
+    cube = base.obj if hasattr(base, "obj") else base.cube
+    return cube.pose.raw_pose[0, :3].tolist()

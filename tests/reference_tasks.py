@@ -31,7 +31,8 @@ def push_dense(tcp_p, cube_p, goal_p, success):
 
 def pick_evaluate(cube_p, goal_p, qvel, grasped):
     placed = np.linalg.norm(goal_p - cube_p, axis=1) <= 0.025
-    static = np.abs(qvel[:, :7]).max(axis=1) <= 0.2
+    # ManiSkill compares float32 velocities with the Python float 0.2, which torch takes as float32
+    static = np.abs(qvel[:, :7]).astype(np.float32).max(axis=1) <= np.float32(0.2)
     return {"success": placed & static, "is_obj_placed": placed, "is_robot_static": static, "is_grasped": grasped}
 
 

@@ -20,7 +20,7 @@ import pytest
 torch = pytest.importorskip("torch")
 pytest.importorskip("mani_skill")
 
-from maniskill_tasks_side import make_maniskill, record_episode  # noqa: E402
+from maniskill_tasks_side import make_maniskill, record_episode, replay_shifted  # noqa: E402
 
 import wpctrl.tasks as T  # noqa: E402
 from wpctrl.tasks.definitions import PANDA_REST_QPOS, PANDA_ROOT_POSE, PICK_CUBE, PUSH_CUBE, TABLE  # noqa: E402
@@ -187,18 +187,30 @@ def test_one_control_step_from_the_same_state_lands_where_maniskills_does(pair):
 
 def test_scripted_maniskill_episodes_replay_on_newton(pair):
     """Episodes the real ManiSkill generates with the scripted policy (closed loop on PhysX, actions guarded against
-    IK failure as in ManiSkill's recordings), replayed open-loop on Newton: every successful one succeeds on Newton
-    and the cube ends within 1 cm (PushCube) / 2 cm (PickCube) of PhysX's in the median.
+    IK failure as in ManiSkill's recordings), replayed open-loop on Newton: every successful one succeeds on Newton,
+    and the cube's final position is, in the median, at most 1 cm further from PhysX's than PhysX's own is when its
+    replay starts with the cube 5 mm away (PhysX's noise floor, measured in the same run: each episode replayed in
+    ManiSkill from four starts shifted by 5 mm in +-x and +-y).
 
-    Measured with the default physics (pd_ee_delta_pos, the PushCube solve of ManiSkill's recordings: push at 3 cm
-    height at up to 8 cm per control step): these seeds give 0.61 cm (PushCube) and 0.39 cm (PickCube); three more
-    sets of 10 PushCube seeds gave 0.86, 1.11 and 1.00 cm (0.93 cm over all 36 episodes, max 5.9 cm: a cube struck at
-    full speed that veers sideways on one simulator and not on the other), all successes kept."""
+    Why a floor and not a fixed bound: a struck cube's last centimetre depends on the strike's last millimetre. PhysX
+    replaying its own episode from the reloaded state already lands up to 5 mm away; 1 mm of start shift moves the
+    cube 0.3 cm in the median and up to 5 cm (PushCube, seeds 10-21); 5 mm moves it 0.5 cm (PushCube) / 0.3 cm
+    (PickCube). Newton's error on the same episodes: 0.91 cm (PushCube, 12 episodes; 0.2-7.2 cm each) and 0.40 cm
+    (PickCube, 6), so a median over 6 PushCube episodes swings between 0.6 and 1.3 cm with the seeds, the CPU and the
+    versions. 12 PushCube episodes halve that swing; PickCube's 6 are steady. A broken drive, friction or contact
+    moves the cube by several centimetres (and loses successes)."""
     task, ms, _ = pair
     policy = policy_for(task)
-    episodes = [record_episode(ms, policy, seed) for seed in (10, 11, 12, 13, 14, 15)]
+    seeds = range(10, 22) if task == "PushCube-v1" else range(10, 16)
+    episodes = [record_episode(ms, policy, seed) for seed in seeds]
     assert all(ep["success_at_end"] for ep in episodes), "the scripted policy solves the task on ManiSkill"
     data = {"header": {"task": task, "control_mode": "pd_ee_delta_pos"}, "episodes": episodes}
     report = T.replay(data)
     assert report.success_agreement == 1.0, report.format()
-    assert report.median_final_cube_error <= (0.01 if task == "PushCube-v1" else 0.02), report.format()
+    floor = []
+    for ep in episodes:
+        final = np.asarray(ep["cube_pose"][-1][:3])
+        shifted = [replay_shifted(ms, ep, s) for s in ((5e-3, 0), (-5e-3, 0), (0, 5e-3), (0, -5e-3))]
+        floor.append(np.mean([np.linalg.norm(np.asarray(p) - final) for p in shifted]))
+    bound = float(np.median(floor)) + 0.01
+    assert report.median_final_cube_error <= bound, (bound, np.round(floor, 4).tolist(), report.format())

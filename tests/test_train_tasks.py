@@ -266,6 +266,75 @@ def test_evaluation_counts_success_at_any_step_and_at_the_last_separately():
     assert r["mean_first_success_step"] == pytest.approx(sum(firsts) / len(firsts))
 
 
+class _GoalOnce:
+    """A policy (gripper open, arm still) that, at the tenth step of its first round only, puts env 0's cube on its
+    goal: that env succeeds in that episode and in no other. It records each round's first observation."""
+
+    def __init__(self, env, steps: int):
+        self.env, self.steps, self.t, self.first = env, steps, 0, []
+
+    def __call__(self, obs):
+        k, r = self.t % self.steps, self.t // self.steps
+        if k == 0:
+            self.first.append(obs.clone())
+        if (r, k) == (0, 9):
+            state = self.env.get_state_dict()
+            state["actors"]["cube"][0, :2] = state["actors"]["goal_region"][0, :2]
+            self.env.set_state_dict(state)
+        self.t += 1
+        a = torch.zeros(obs.shape[0], 8)
+        a[:, -1] = 1.0
+        return a
+
+
+def test_evaluation_over_several_rounds_draws_new_episodes_and_counts_each_once():
+    """Five episodes on two envs: three rounds, the last counting env 0 alone. Each round starts from
+    ``reset(seed=seed + round)`` (the first observations against a fresh env reset that way, every round's
+    different), and a success in the first round's env 0 counts for that episode only: 1 of 5 at any step and at
+    the end, first at step 10 (ManiSkill's success_once is per episode)."""
+    from wpctrl.train.task_ppo import evaluate_policy
+
+    def env():
+        return T.make("PushCube-v1", num_envs=2, control_mode="pd_joint_delta_pos", auto_reset=False,
+                      ignore_terminations=True, physics=T.TaskPhysics(substeps=SUBSTEPS))  # fmt: skip
+
+    e = env()
+    policy = _GoalOnce(e, e.max_episode_steps)
+    r = evaluate_policy(policy, e, episodes=5, seed=20)
+    assert r["episodes"] == 5 and len(policy.first) == 3
+    ref = env()
+    for k, first in enumerate(policy.first):
+        obs, _ = ref.reset(seed=20 + k)
+        np.testing.assert_array_equal(first.numpy(), obs.numpy())
+        for j in range(k):
+            assert not np.allclose(first.numpy(), policy.first[j].numpy())
+    assert r["success_rate"] == pytest.approx(1 / 5)
+    assert r["success_at_end_rate"] == pytest.approx(1 / 5)
+    assert r["mean_first_success_step"] == 10
+
+
+def test_adapter_statistics_count_success_once_per_episode():
+    """Without partial resets (episodes end at the time limit) two episodes of two envs each, cut to three steps.
+    Env 0's cube sits on its goal in the first episode only: the first episodes' statistics give success 1 of 2 at
+    any step and at the end; the second episodes', 0 of 2 (success_once starts afresh with each episode)."""
+    vec = TaskVecEnv("PushCube-v1", 2, seed=5, substeps=SUBSTEPS, partial_reset=False)
+    hold = torch.zeros(2, 8)
+    hold[:, -1] = 1.0
+    for episode in range(2):
+        vec.episode_length_buf = torch.full((2,), vec.max_episode_length - 3, dtype=torch.int32)
+        if episode == 0:
+            state = vec.env.get_state_dict()
+            state["actors"]["cube"][0, :2] = state["actors"]["goal_region"][0, :2]
+            vec.env.set_state_dict(state)
+        for _ in range(3):
+            _, _, dones, extras = vec.step(hold)
+        assert dones.tolist() == [True, True]
+        stats = vec.take_stats()
+        assert stats["episodes"] == 2
+        assert stats["success_rate"] == (0.5 if episode == 0 else 0.0), (episode, stats)
+        assert stats["success_at_end_rate"] == (0.5 if episode == 0 else 0.0), (episode, stats)
+
+
 def test_evaluate_on_newton_reports_a_hand_rolled_episodes_metrics(smoke_run, exported, tmp_path):
     from wpctrl.__main__ import main
 

@@ -227,12 +227,12 @@ def _effective(children: dict, actuation, explicit_pd, nan_policy, inertia_updat
     inertia = inertia_update if (accel or law in ("stable", "coupled")) else None
     rng = _ranged(opts.get("delay"))
     if rng is None or rng[0] == rng[1]:
-        opts.pop("seed", None)
+        opts.pop("delay_seed", None)
     if not any(isinstance(c, (wpctrl.PDJointPosControllerConfig, *EE_CONFIGS)) for c in children.values()):
         opts.pop("clip_targets", None)
     if all(isinstance(c, wpctrl.PassiveControllerConfig) for c in children.values()):
         opts.pop("delay", None)
-        opts.pop("seed", None)
+        opts.pop("delay_seed", None)
         nan_policy = "hold"
     return law, nan_policy, inertia, opts
 
@@ -302,7 +302,7 @@ class Harness:
             r += rc.n
         self.rows = r
         # The device RNG's draw counter: the build's own reset draws the delays of a range (draw 0).
-        self.seed = int(opts.get("seed", 0))
+        self.seed = int(opts.get("delay_seed", 0))
         self.rng_counter = 0
         self.expect_delays(np.ones(num_envs, bool))
         self.nan_policy = nan_policy

@@ -206,7 +206,7 @@ def test_delays_are_warps_rng_of_the_build_seed(seed):
     (the build's own reset is draw 0): the values of the numpy port (reference_np.delay_draws)."""
     from reference_np import delay_draws
 
-    h = Harness({"arm": delta_arm(use_target=True)}, num_envs=16, delay=(1, 4), seed=seed)
+    h = Harness({"arm": delta_arm(use_target=True)}, num_envs=16, delay=(1, 4), delay_seed=seed)
     np.testing.assert_array_equal(h.ctrl.delay.numpy(), delay_draws(seed, 0, 16, 1, 4))
     h.ctrl.reset(h.state)
     np.testing.assert_array_equal(h.ctrl.delay.numpy(), delay_draws(seed, 1, 16, 1, 4))
@@ -216,7 +216,7 @@ def test_delays_are_warps_rng_of_the_build_seed(seed):
     h.ctrl.reset(h.state, env_ids=mask)
     want = np.where(mask, delay_draws(seed, 3, 16, 1, 4), before)
     np.testing.assert_array_equal(h.ctrl.delay.numpy(), want)
-    other = Harness({"arm": delta_arm(use_target=True)}, num_envs=16, delay=(1, 4), seed=seed + 1)
+    other = Harness({"arm": delta_arm(use_target=True)}, num_envs=16, delay=(1, 4), delay_seed=seed + 1)
     assert not np.array_equal(other.ctrl.delay.numpy(), delay_draws(seed, 0, 16, 1, 4))
 
 
@@ -278,7 +278,7 @@ def test_delay_shifts_the_command_sequence_per_env(actuation):
 
 
 def test_delay_drawn_per_env_at_reset_and_history_cleared():
-    h = Harness({"arm": delta_arm(use_target=True)}, num_envs=64, delay=(1, 4), seed=5)
+    h = Harness({"arm": delta_arm(use_target=True)}, num_envs=64, delay=(1, 4), delay_seed=5)
     h.ctrl.reset(h.state)
     d0 = h.ctrl.delay.numpy().copy()
     assert d0.min() >= 1 and d0.max() <= 4 and len(np.unique(d0)) == 4
@@ -426,7 +426,7 @@ def test_bad_actuation_inputs(call, fragments):
         ({"delay": 1.5}, ["delay", "1.5"]),
         ({"clip_targets": "limits"}, ["clip_targets", "'joint_limits'", "'limits'"]),
         ({"track_effort": 1}, ["track_effort", "bool", "1"]),
-        ({"seed": "a"}, ["seed", "'a'"]),
+        ({"delay_seed": "a"}, ["delay_seed", "'a'"]),
     ],
 )
 def test_bad_build_options(kw, fragments):

@@ -135,7 +135,7 @@ DELAY_CASES = list(itertools.product((None, 0, 2, (0, 3), (1, 1)), (None, 0, 5),
 
 @pytest.mark.parametrize("delay, seed, kind", DELAY_CASES)
 def test_delay_combinations(model, delay, seed, kind):
-    by_keywords = lambda: _build(model, kind, delay=delay, seed=seed)  # noqa: E731
+    by_keywords = lambda: _build(model, kind, delay=delay, delay_seed=seed)  # noqa: E731
     rng = None if delay is None else ((delay, delay) if isinstance(delay, int) else delay)
     if seed is not None and (rng is None or rng[0] == rng[1]):  # nothing is drawn: the seed would not be used
         _refused(by_keywords, "seed")
@@ -158,8 +158,8 @@ def test_delay_combinations(model, delay, seed, kind):
 
 def test_the_seed_keys_the_draws(model):
     """Two seeds draw different per-env delays (so the case above cannot pass with the seed ignored)."""
-    a = _build(model, "force", delay=(0, 7), seed=1).delay.numpy()
-    b = _build(model, "force", delay=(0, 7), seed=2).delay.numpy()
+    a = _build(model, "force", delay=(0, 7), delay_seed=1).delay.numpy()
+    b = _build(model, "force", delay=(0, 7), delay_seed=2).delay.numpy()
     assert (a != b).any()
 
 
@@ -194,7 +194,7 @@ def test_diagnostics_combinations(model, track, nan, clip, kind):
 BOTH_WAYS = [
     ({"actuation": wpctrl.Actuation("explicit")}, "explicit_pd", "stable"),
     ({"actuation": wpctrl.Actuation("explicit", "stable")}, "inertia_update", "substep"),
-    ({"delay": wpctrl.Delay((0, 2))}, "seed", 3),
+    ({"delay": wpctrl.Delay((0, 2))}, "delay_seed", 3),
     ({"diagnostics": wpctrl.Diagnostics()}, "track_effort", True),
     ({"diagnostics": wpctrl.Diagnostics()}, "nan_policy", "raise"),
     ({"diagnostics": wpctrl.Diagnostics()}, "clip_targets", "joint_limits"),
@@ -242,7 +242,7 @@ def test_balance_passive_force_combinations(model, entry, keyword):
 
 def test_children_report_the_parent_options(model):
     mode = {"arm": _config("acceleration"), "balance_passive_force": False}
-    ctrl = wpctrl.build_controller(mode, model, actuation="explicit", explicit_pd="stable", delay=(0, 1), seed=4)
+    ctrl = wpctrl.build_controller(mode, model, actuation="explicit", explicit_pd="stable", delay=(0, 1), delay_seed=4)
     assert ctrl["arm"].options == ctrl.options
     assert ctrl["arm"].explicit_pd == "stable" and ctrl["arm"].inertia_update == "control"
 

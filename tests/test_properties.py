@@ -232,7 +232,7 @@ def actuation_options(draw):
     if draw(st.booleans()):
         opts["clip_targets"] = "joint_limits"
     if draw(st.booleans()):
-        opts["seed"] = draw(st.integers(-(2**31), 2**31 - 1))  # keys the per-env delay draws
+        opts["delay_seed"] = draw(st.integers(-(2**31), 2**31 - 1))  # keys the per-env delay draws
     return opts
 
 

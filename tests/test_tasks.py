@@ -42,7 +42,7 @@ def push_env():
 
 def _random_state(env, rng, n=N) -> dict:
     """A valid ManiSkill state dict: the Panda near rest, the cube somewhere on the table (any yaw, small velocity)."""
-    spec = env.spec
+    spec = env.task_spec
     qpos = np.asarray(PANDA_REST_QPOS) + rng.normal(0, 0.15, (n, 9))
     qpos[:, 7:] = rng.uniform(0.0, 0.04, (n, 2))
     qvel = rng.normal(0, 0.3, (n, 9))
@@ -206,7 +206,8 @@ def test_state_dict_round_trips_exactly_and_obs_reward_follow_maniskills_definit
             for k, v in state[group].items():
                 torch.testing.assert_close(back[group][k], v, rtol=0, atol=0)
         obs = env.get_obs().numpy()
-        parts = R.state_parts({g: {k: v.numpy() for k, v in d.items()} for g, d in state.items()}, env.spec.goal_name)
+        arrays = {g: {k: v.numpy() for k, v in d.items()} for g, d in state.items()}
+        parts = R.state_parts(arrays, env.task_spec.goal_name)
         tcp_pose = obs[:, 19:26] if task == "PickCube-v1" else obs[:, 18:25]
         grasped = np.zeros(N, bool)  # a state just set has no contact force yet
         np.testing.assert_allclose(obs, R.flat_obs(task, parts, tcp_pose, grasped), atol=1e-6)
@@ -304,7 +305,7 @@ def test_pick_dense_reward_while_the_cube_is_held():
     cube_p = state["actors"]["cube"][:, :3].numpy().astype(np.float64)
     goal_p = state["actors"]["goal_site"][:, :3].numpy().astype(np.float64)
     qvel = state["articulations"]["panda"][:, 22:31].numpy().astype(np.float64)
-    tcp_p = obs[:, env.spec.obs_slices()["extra"]["tcp_pose"]][:, :3].numpy().astype(np.float64)
+    tcp_p = obs[:, env.task_spec.obs_slices()["extra"]["tcp_pose"]][:, :3].numpy().astype(np.float64)
     expected = R.pick_dense(tcp_p, cube_p, goal_p, qvel, info)
     np.testing.assert_allclose(env.reward_dense.numpy(), expected, atol=1e-4)
     assert (expected > 2.0).all()  # reaching, grasped and some of place
@@ -320,7 +321,7 @@ def test_state_dict_obs_mode_is_the_flat_vector_split():
     obs, _ = env.reset(seed=5)
     flat = T.make("PickCube-v1", num_envs=2, physics=FAST)
     flat_obs, _ = flat.reset(seed=5)
-    s = env.spec.obs_slices()
+    s = env.task_spec.obs_slices()
     for group, fields in s.items():
         for name, sl in fields.items():
             got = obs[group][name]
@@ -399,7 +400,7 @@ def test_reset_draws_follow_maniskills_distributions(pick_env, push_env):
             env.reset(seed=seed)
             s = env.get_state_dict()
             draws.append((s["articulations"]["panda"][:, 13:22].numpy(), s["actors"]["cube"].numpy(),
-                          s["actors"][env.spec.goal_name][:, :3].numpy()))  # fmt: skip
+                          s["actors"][env.task_spec.goal_name][:, :3].numpy()))  # fmt: skip
         qpos = np.concatenate([d[0] for d in draws])
         cube = np.concatenate([d[1] for d in draws])
         goal = np.concatenate([d[2] for d in draws])
@@ -410,7 +411,7 @@ def test_reset_draws_follow_maniskills_distributions(pick_env, push_env):
         np.testing.assert_allclose(cube[:, 2], 0.02, atol=1e-7)
         yaw = 2 * np.arctan2(cube[:, 6], cube[:, 3])
         np.testing.assert_allclose(cube[:, 4:6], 0.0, atol=1e-7)
-        if env.spec.env_id == "PushCube-v1":
+        if env.task_spec.env_id == "PushCube-v1":
             np.testing.assert_allclose(goal[:, :2], cube[:, :2] + [0.2, 0.0], atol=1e-6)
             np.testing.assert_allclose(goal[:, 2], 1e-3, atol=1e-7)
             np.testing.assert_allclose(yaw, 0.0, atol=1e-6)

@@ -119,7 +119,7 @@ def test_same_state_gives_maniskills_obs_reward_and_evaluation(pair):
         for k, v in ev.items():
             assert bool(v[0]) == bool(info[k][0]), k
         assert nw.reward_dense.numpy()[0] == pytest.approx(dense, abs=1e-5)
-        assert nw.reward_dense.numpy()[0] / nw.spec.max_reward == pytest.approx(normalized, abs=1e-5)
+        assert nw.reward_dense.numpy()[0] / nw.task_spec.max_reward == pytest.approx(normalized, abs=1e-5)
         back = nw.get_state_dict()
         for group in ("actors", "articulations"):
             for k, v in state[group].items():
@@ -138,7 +138,7 @@ def test_reset_distributions_match_maniskills(pair):
             s = get()
             qn.append(s["articulations"]["panda"][0, 13:20].numpy() - np.asarray(PANDA_REST_QPOS[:7]))
             cube.append(s["actors"]["cube"][0, :2].numpy())
-            goal.append(s["actors"][nw.spec.goal_name][0, :3].numpy())
+            goal.append(s["actors"][nw.task_spec.goal_name][0, :3].numpy())
         return np.array(qn), np.array(cube), np.array(goal)
 
     theirs = draws(lambda s: ms.reset(seed=s), ms.unwrapped.get_state_dict)

@@ -108,7 +108,7 @@ def test_rollout_bootstraps_every_episode_end_with_the_critics_value_of_its_fina
     lengths[2] = vec.max_episode_length - 2  # env 2 times out at the rollout's second step
     vec.episode_length_buf = lengths
     state = vec.env.get_state_dict()
-    goal = state["actors"][vec.env.spec.goal_name]
+    goal = state["actors"][vec.env.task_spec.goal_name]
     state["actors"]["cube"][1, :2] = goal[1, :2]  # env 1's cube on its goal: success ends its episode at the first step
     vec.env.set_state_dict(state)
     recorded = []

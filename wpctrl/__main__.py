@@ -9,8 +9,14 @@ COMMANDS = {
     "demo": ("wpctrl.demo", "run a ManiSkill control mode on Newton Pandas and report tracking (CPU or GPU)"),
     "train": ("wpctrl.train.cli", "train a PPO policy (rsl-rl) through wpctrl on a vectorised Newton task"),
     "replay": ("wpctrl.tasks.replay", "replay ManiSkill's recorded PushCube / PickCube episodes on Newton"),
-    "export": ("wpctrl.train.export", "export a trained PushCube / PickCube policy as TorchScript (and ONNX)"),
-    "evaluate": ("wpctrl.train.evaluate", "evaluate an exported policy in the real ManiSkill or on Newton"),
+    "export": (
+        "wpctrl.train.commands:export_main",
+        "export a trained PushCube / PickCube policy as TorchScript (and ONNX)",
+    ),
+    "evaluate": (
+        "wpctrl.train.commands:evaluate_main",
+        "evaluate an exported policy in the real ManiSkill or on Newton",
+    ),
 }
 
 
@@ -31,9 +37,10 @@ def main(argv=None) -> int:
         return 2
     import importlib
 
-    module = importlib.import_module(COMMANDS[argv[0]][0])  # light: warp loads after the command's first line
+    path, _, func = COMMANDS[argv[0]][0].partition(":")  # "module" (its main) or "module:function"
+    module = importlib.import_module(path)  # light: warp and torch load after the command's first line
     try:
-        return module.main(argv[1:])
+        return getattr(module, func or "main")(argv[1:])
     except SystemExit as e:  # argparse and the commands' checks exit 2 with a one-line message
         return e.code if isinstance(e.code, int) else 1
 

@@ -298,10 +298,13 @@ def _check_args(parser, args) -> None:
         if not wp.is_cuda_available():
             _fail(parser, f"--device {args.device}: no CUDA device is available on this machine")
         if args.device != "cuda":  # 'cuda' means cuda:LOCAL_RANK under torchrun, checked when the rank starts
+            from ..config import ConfigError
+            from ..devices import check_device
+
             try:
-                wp.get_device(args.device)
-            except Exception as e:  # noqa: BLE001 - report any unknown device the same way
-                _fail(parser, f"--device {args.device}: {e}")
+                check_device(args.device, "--device")
+            except ConfigError as e:
+                _fail(parser, str(e))
 
 
 def _check_extras(args) -> None:

@@ -47,7 +47,7 @@ def run(args) -> dict:
     build_s = time.perf_counter() - t0
     policy = policy_for(args.task)
     obs, info = env.reset(seed=args.seed)
-    s = env.spec.obs_slices()["extra"]
+    s = env.task_spec.obs_slices()["extra"]
     height, dist, success = [], [], []
     t1 = time.perf_counter()
     for _ in range(env.max_episode_steps):

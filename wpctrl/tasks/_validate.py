@@ -7,7 +7,7 @@ import warp as wp
 
 from ..config import ConfigError
 
-__all__ = ["action_tensor", "env_mask", "seed_value"]
+__all__ = ["action_tensor", "env_mask", "reset_options", "seed_value"]
 
 
 def action_tensor(action, num_envs: int, action_dim: int, device):
@@ -54,3 +54,16 @@ def seed_value(seed) -> int:
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
         raise ConfigError(f"reset: seed expected an int, got {seed!r}")
     return int(seed) % (2**31)
+
+
+def reset_options(options, known: tuple[str, ...]) -> dict:
+    """``reset``'s ``options`` as a dict (None: empty); a key outside ``known`` is refused (it would be ignored)."""
+    if options is None:
+        return {}
+    if not isinstance(options, dict):
+        raise ConfigError(f"reset: options expected a dict with keys from {list(known)} or None, got "
+                          f"{type(options).__name__}")  # fmt: skip
+    unknown = sorted((k for k in options if k not in known), key=str)
+    if unknown:
+        raise ConfigError(f"reset: unknown options key(s) {unknown}; expected keys from {list(known)}")
+    return options

@@ -24,9 +24,11 @@ from .physics import TaskPhysics
 from .scene import build_scene
 from .state_dict import StateDictMixin
 
-__all__ = ["REWARD_MODES", "TaskEnv"]
+__all__ = ["RESET_OPTIONS", "REWARD_MODES", "TaskEnv"]
 
 REWARD_MODES = ("normalized_dense", "dense", "sparse", "none")
+RESET_OPTIONS = ("env_idx",)
+"""The keys :meth:`TaskEnv.reset` takes in ``options``."""
 _REWARD_CODE = {"dense": 0, "normalized_dense": 1, "sparse": 2, "none": 3}
 
 
@@ -60,7 +62,7 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
         import wpctrl
         from wpctrl.robots import panda_control_modes
 
-        self.spec = spec
+        self.task_spec = spec
         self.physics = physics
         self.control_mode = control_mode
         self.obs_mode = obs_mode
@@ -236,7 +238,7 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
         wp.launch(
             K.episode_kernel,
             dim=self.num_envs,
-            inputs=[self.max_episode_steps, self.spec.max_reward, _REWARD_CODE[self.reward_mode],
+            inputs=[self.max_episode_steps, self.task_spec.max_reward, _REWARD_CODE[self.reward_mode],
                     int(self.ignore_terminations), self.flags["success"], self.reward_dense],
             outputs=[self.elapsed, self.reward_buf, self.terminated, self.truncated, self.done],
             device=self.wp_device,
@@ -254,6 +256,12 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
     def unwrapped(self):
         return self
 
+    def __repr__(self) -> str:
+        return (
+            f"TaskEnv({self.task_spec.env_id}, num_envs={self.num_envs}, device={self.wp_device.alias}, "
+            f"control_mode={self.control_mode}, obs_mode={self.obs_mode}, reward_mode={self.reward_mode})"
+        )
+
     @property
     def elapsed_steps(self):
         """(num_envs,) int32 torch view: control steps taken in each env's episode."""
@@ -262,13 +270,13 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
     def _info(self, final: bool) -> dict:
         t = self._t
         info = {"success": t["success"].clone(), "fail": self._fail.clone(), "elapsed_steps": t["elapsed"].clone()}
-        for k in self.spec.info_keys:
+        for k in self.task_spec.info_keys:
             info[k] = t[k].clone()
         if final and self.auto_reset:
             done = t["terminated"] | t["truncated"]
             fin = {"success": t["final_success"].clone(), "fail": self._fail.clone(),
                    "elapsed_steps": t["final_elapsed"].clone()}  # fmt: skip
-            for k in self.spec.info_keys:
+            for k in self.task_spec.info_keys:
                 fin[k] = t["final_" + k].clone()
             info.update(final_observation=self._format_obs(t["final_obs"].clone()), final_info=fin,
                         _final_info=done, _final_observation=done.clone(), _elapsed_steps=done.clone())  # fmt: skip
@@ -278,23 +286,26 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
         if self.obs_mode == "state":
             return flat
         out = {}
-        for group, fields_ in self.spec.obs_slices().items():
+        for group, fields_ in self.task_spec.obs_slices().items():
             out[group] = {name: flat[:, s] for name, s in fields_.items()}
-        if self.spec.kind == K.PICK and "extra" in out:
+        if self.task_spec.kind == K.PICK and "extra" in out:
             out["extra"]["is_grasped"] = out["extra"]["is_grasped"][:, 0] > 0.5
         return out
 
     def reset(self, *, seed=None, options: dict | None = None):
         """Start new episodes: every env, or ``options["env_idx"]``'s (a partial reset). ``seed``: an int seeds the
-        draws of every env from now on (env e's episodes differ from env e'"s); returns ``obs, info`` of all envs."""
-        from ._validate import env_mask, seed_value
+        draws of every env from now on (env e's episodes differ from env e'"s); returns ``obs, info`` of all envs.
+        Other ``options`` keys are refused (:data:`RESET_OPTIONS` lists those it takes)."""
+        from ._validate import env_mask, reset_options, seed_value
 
-        if seed is not None:
-            self.seed_buf.fill_(seed_value(seed))
-            self.reset_count.zero_()
+        options = reset_options(options, RESET_OPTIONS)
+        seed = None if seed is None else seed_value(seed)
         mask = self._all
-        if options and options.get("env_idx") is not None:
+        if options.get("env_idx") is not None:
             mask = env_mask(options["env_idx"], self.num_envs, self.wp_device)
+        if seed is not None:
+            self.seed_buf.fill_(seed)
+            self.reset_count.zero_()
         self._reset_envs(mask)
         return self._format_obs(self._t["obs"].clone()), self._info(final=False)
 
@@ -321,7 +332,7 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
         """ManiSkill's ``evaluate()`` of the current state: ``success`` and the task's flags (torch bool)."""
         self._observe()
         out = {"success": self._t["success"].clone()}
-        for k in self.spec.info_keys:
+        for k in self.task_spec.info_keys:
             out[k] = self._t[k].clone()
         return out
 

@@ -43,7 +43,8 @@ def make(
     Args:
         env_id: ``"PushCube-v1"`` or ``"PickCube-v1"`` (the Panda).
         num_envs: Parallel envs (separate Newton worlds).
-        device: Warp device (``"cpu"``, ``"cuda:0"``); the torch tensors in and out live there.
+        device: Warp device (``"cpu"``, ``"cuda:0"``); the torch tensors in and out live there. A device this machine
+            does not have is refused (:class:`~wpctrl.config.ConfigError` listing those it has).
         control_mode: One of the Panda's ManiSkill control modes (:data:`CONTROL_MODES`).
         obs_mode: ``"state"`` (ManiSkill's flattened state vector) or ``"state_dict"`` (the nested dict).
         reward_mode: ``"normalized_dense"`` (ManiSkill's default), ``"dense"``, ``"sparse"`` (success) or ``"none"``.
@@ -80,7 +81,9 @@ def make(
         physics = TaskPhysics()
     elif not isinstance(physics, TaskPhysics):
         raise ConfigError(f"make: physics expected a TaskPhysics, got {type(physics).__name__}")
+    from ..devices import check_device
     from ._validate import seed_value
 
+    device = check_device(device, "make: device")
     options = (bool(auto_reset), bool(ignore_terminations), physics, controller_semantics, asset_dir, graph)
     return TaskEnv(TASKS[env_id], num_envs, device, control_mode, obs_mode, reward_mode, seed_value(seed), *options)

@@ -147,8 +147,8 @@ def replay(source, device="cpu", physics=None, asset_dir: str | None = None, env
     if env is None:
         env = make(header["task"], num_envs=n, device=device, control_mode=header["control_mode"],
                    auto_reset=False, ignore_terminations=True, physics=physics, asset_dir=asset_dir)  # fmt: skip
-    elif (env.spec.env_id, env.control_mode, env.num_envs) != (header["task"], header["control_mode"], n):
-        raise ConfigError(f"replay: env is {env.spec.env_id} / {env.control_mode} / {env.num_envs} envs, the file "
+    elif (env.task_spec.env_id, env.control_mode, env.num_envs) != (header["task"], header["control_mode"], n):
+        raise ConfigError(f"replay: env is {env.task_spec.env_id} / {env.control_mode} / {env.num_envs} envs, the file "
                           f"{header['task']} / {header['control_mode']} / {n} episodes")  # fmt: skip
     state = {}
     for group in ("actors", "articulations"):

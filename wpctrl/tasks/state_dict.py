@@ -50,7 +50,7 @@ class StateDictMixin:
     @property
     def actor_names(self) -> list[str]:
         """ManiSkill's non-static actors of the task, in its state-dict order."""
-        return [TABLE.name, "cube", self.spec.goal_name]
+        return [TABLE.name, "cube", self.task_spec.goal_name]
 
     def get_state_dict(self) -> dict:
         """The current state in ManiSkill's layout (new torch tensors on the env's device)."""
@@ -68,7 +68,7 @@ class StateDictMixin:
             "actors": {
                 TABLE.name: table,
                 "cube": cube.clone(),
-                self.spec.goal_name: torch.cat([goal, gq, zeros6], dim=1).clone(),
+                self.task_spec.goal_name: torch.cat([goal, gq, zeros6], dim=1).clone(),
             },
             "articulations": {"panda": robot.clone()},
         }
@@ -104,7 +104,7 @@ class StateDictMixin:
         robot = entries["panda"]
         q[idx, r : r + PANDA_DOF] = robot[:, 13 : 13 + PANDA_DOF]
         qd[idx, rd : rd + PANDA_DOF] = robot[:, 13 + PANDA_DOF :]
-        g = entries[self.spec.goal_name]
+        g = entries[self.task_spec.goal_name]
         goal[idx] = g[:, 0:3]
         gq[idx] = g[:, 3:7]
         self._after_state_write(mask)

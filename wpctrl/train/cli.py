@@ -15,7 +15,8 @@ import sys
 import time
 from pathlib import Path
 
-from .ppo_config import runner_cfg
+from .commands import missing_train_extra
+from .ppo_config import MANISKILL_MINIBATCHES, MANISKILL_STEPS_PER_ENV, batch_error, runner_cfg
 
 MANISKILL_TASKS = ("PushCube-v1", "PickCube-v1")
 TASKS = ("reach",) + MANISKILL_TASKS
@@ -23,14 +24,18 @@ CONTROL_MODES = ("pd_ee_delta_pos", "pd_joint_delta_pos")
 """The reach task's control modes (the ManiSkill tasks take every Panda mode of :data:`wpctrl.tasks.CONTROL_MODES`)."""
 
 
-def train_cfg(num_steps_per_env: int = 24, seed: int = 0) -> dict:
+REACH_STEPS_PER_ENV = 24
+REACH_MINIBATCHES = 4
+
+
+def train_cfg(num_steps_per_env: int = REACH_STEPS_PER_ENV, seed: int = 0) -> dict:
     """rsl-rl's PPO configuration: Isaac Lab's settings for its Franka reach task (``FrankaReachPPORunnerCfg``)."""
     return runner_cfg(
         seed=seed,
         num_steps_per_env=num_steps_per_env,
         algorithm={
             "num_learning_epochs": 8,
-            "num_mini_batches": 4,
+            "num_mini_batches": REACH_MINIBATCHES,
             "learning_rate": 1.0e-3,
             "schedule": "adaptive",
             "gamma": 0.99,
@@ -177,19 +182,45 @@ def parse(argv):
             p.error(f"--no-partial-reset: only for the ManiSkill tasks {list(MANISKILL_TASKS)}")
         if args.control_mode is not None and args.control_mode not in CONTROL_MODES:
             p.error(f"--control-mode: expected one of {list(CONTROL_MODES)} for reach, got {args.control_mode!r}")
+    _check_device_and_batch(p, args)
     return args
+
+
+def _check_device_and_batch(p: argparse.ArgumentParser, args) -> None:
+    """The device exists, and the rollout (``--envs`` x ``--steps-per-env``) fills PPO's mini-batches: checked here,
+    before any env is built, with the defaults that depend on the device resolved as training resolves them."""
+    import warp as wp
+
+    from ..config import ConfigError
+    from ..devices import check_device
+
+    wp.config.log_level = wp.LOG_WARNING
+    if args.device is not None:
+        try:
+            check_device(args.device, "--device")
+        except ConfigError as e:
+            p.error(str(e))
+    cuda = (args.device or ("cuda:0" if wp.is_cuda_available() else "cpu")).startswith("cuda")
+    envs = args.envs or (4096 if cuda else 64)
+    if args.task in MANISKILL_TASKS:
+        # ManiSkill's PPO normalises the advantages per mini-batch: 2 samples at least for a defined std
+        why = batch_error(envs, args.steps_per_env or MANISKILL_STEPS_PER_ENV,
+                          args.minibatches or MANISKILL_MINIBATCHES, 2, "--minibatches")  # fmt: skip
+    else:  # the reach task normalises them over the whole batch: every one of its mini-batches needs a sample
+        why = batch_error(envs, args.steps_per_env or REACH_STEPS_PER_ENV, REACH_MINIBATCHES, 1, None)
+    if why:
+        p.error(why)
 
 
 def main(argv=None) -> int:
     t_main = time.perf_counter()
     args = parse(list(sys.argv[1:] if argv is None else argv))
-    try:
-        import torch
-        from rsl_rl.runners import OnPolicyRunner
-    except ImportError as e:
-        print(f'wpctrl train: needs the train extra (pip install "wpctrl[train]"): {e}', file=sys.stderr)
+    if hint := missing_train_extra("train"):
+        print(hint, file=sys.stderr)
         return 2
+    import torch
     import warp as wp
+    from rsl_rl.runners import OnPolicyRunner
 
     wp.config.log_level = wp.LOG_WARNING
     if args.task in MANISKILL_TASKS:
@@ -197,7 +228,7 @@ def main(argv=None) -> int:
 
         return train(args, t_main)
     args.control_mode = args.control_mode or "pd_ee_delta_pos"
-    args.steps_per_env = args.steps_per_env or 24
+    args.steps_per_env = args.steps_per_env or REACH_STEPS_PER_ENV
     device = args.device or ("cuda:0" if wp.is_cuda_available() else "cpu")
     cuda = device.startswith("cuda")
     envs = args.envs or (4096 if cuda else 64)

@@ -12,7 +12,6 @@ success rate (success at any step, ManiSkill's ``success_once``), the success ra
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -20,10 +19,9 @@ from pathlib import Path
 
 import torch
 
+from .commands import evaluate_parser
+
 __all__ = ["evaluate_maniskill", "load_policy", "main"]
-
-SIMS = ("maniskill", "newton")
-
 
 class PolicyError(ValueError):
     """A policy file that cannot drive the requested task (the message says what differs)."""
@@ -107,27 +105,8 @@ def _summary(records: list, seconds: float) -> dict:
     }
 
 
-def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="python -m wpctrl evaluate",
-        description="Evaluate an exported policy (policy.ts from `wpctrl export`) on fresh episodes of ManiSkill's "
-        "PushCube-v1 / PickCube-v1, in the real ManiSkill (PhysX CPU) or on Newton through wpctrl.",
-    )
-    p.add_argument("--policy", required=True, help="the exported TorchScript policy (policy.ts)")
-    p.add_argument("--task", default=None, help="PushCube-v1 or PickCube-v1 (default: the policy's own)")
-    p.add_argument("--sim", choices=SIMS, required=True, help="the simulator")
-    p.add_argument("--episodes", type=int, default=100, help="episodes to run (default: 100)")
-    p.add_argument("--seed", type=int, default=0, help="episode seeds (ManiSkill: seed + i for episode i)")
-    p.add_argument("--device", default="cpu", help="newton: Warp / torch device (default: cpu)")
-    p.add_argument("--envs", type=int, default=None, help="newton: envs at a time (default: min(episodes, 256))")
-    p.add_argument("--substeps", type=int, default=None, help="newton: MuJoCo-Warp steps per physics step "
-                   "(default: the policy's training value, else wpctrl.tasks.TaskPhysics's)")  # fmt: skip
-    p.add_argument("--out", default=None, help="write the result (with every episode on ManiSkill) as JSON here")
-    return p
-
-
 def main(argv=None) -> int:
-    p = _parser()
+    p = evaluate_parser()
     args = p.parse_args(argv)
     for name in ("episodes", "envs", "substeps"):
         v = getattr(args, name)
@@ -135,7 +114,15 @@ def main(argv=None) -> int:
             p.error(f"--{name}: expected a positive number, got {v}")
     import warp as wp
 
+    from ..config import ConfigError
+    from ..devices import check_device
+
     wp.config.log_level = wp.LOG_WARNING
+    if args.sim == "newton":
+        try:
+            check_device(args.device, "--device")
+        except ConfigError as e:
+            p.error(str(e))
     device = args.device if args.sim == "newton" else "cpu"
     try:
         policy, meta = load_policy(args.policy, args.task, device)

@@ -10,7 +10,6 @@ name the task, control mode, observation layout and action bounds.
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import io
 import json
@@ -19,6 +18,8 @@ import warnings
 from pathlib import Path
 
 import torch
+
+from .commands import export_parser
 
 __all__ = ["EXTRA_FILE", "TaskPolicy", "export", "load_actor", "main"]
 
@@ -163,21 +164,8 @@ def _export_onnx(actor, meta: dict, path: Path, obs, reference) -> dict:
     return {"policy.onnx": str(path), "onnx_max_abs_diff": float(abs(got - reference.numpy()).max())}
 
 
-def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="python -m wpctrl export",
-        description="Export the policy of a `wpctrl train --task PushCube-v1 | PickCube-v1` run as TorchScript "
-        "(policy.ts, loadable with torch alone) and ONNX (policy.onnx, if the onnx package is importable): "
-        "ManiSkill's flattened state observation -> deterministic action, observation normaliser included.",
-    )
-    p.add_argument("run_dir", help="the training run's --out folder (holds policy.pt)")
-    p.add_argument("--out", default=None, help="folder for policy.ts / policy.onnx / policy.json (default: run_dir)")
-    p.add_argument("--no-onnx", action="store_true", help="write the TorchScript module only")
-    return p
-
-
 def main(argv=None) -> int:
-    args = _parser().parse_args(argv)
+    args = export_parser().parse_args(argv)
     try:
         result = export(args.run_dir, args.out, onnx=not args.no_onnx)
     except (ExportError, ImportError) as e:

@@ -4,6 +4,11 @@
 
 from __future__ import annotations
 
+MANISKILL_STEPS_PER_ENV = 4
+MANISKILL_EPOCHS = 8
+MANISKILL_MINIBATCHES = 32
+"""ManiSkill's PPO baseline: steps per env and iteration, epochs, mini-batches per epoch (:mod:`.task_ppo`)."""
+
 
 def runner_cfg(*, seed: int, num_steps_per_env: int, algorithm: dict, mlp: dict, distribution: dict) -> dict:
     """rsl-rl's ``OnPolicyRunner`` configuration: PPO with ``algorithm``'s settings, actor and critic the same
@@ -19,3 +24,31 @@ def runner_cfg(*, seed: int, num_steps_per_env: int, algorithm: dict, mlp: dict,
         "critic": dict(mlp),
         "check_for_nan": False,
     }
+
+
+def batch_error(envs: int, steps: int, minibatches: int, min_samples: int, minibatch_flag: str | None) -> str | None:
+    """Why a rollout of ``envs`` x ``steps`` samples cannot be split into ``minibatches`` mini-batches of at least
+    ``min_samples`` samples each (rsl-rl's mini-batch is ``batch // minibatches`` samples), naming the flags that
+    fix it; None when it can. ``minibatch_flag``: the option that sets the mini-batch count, None when fixed."""
+    batch = envs * steps
+    per = batch // minibatches
+    if per >= min_samples:
+        return None
+    need = min_samples * minibatches
+    split = f"{minibatch_flag} {minibatches} mini-batches" if minibatch_flag else f"{minibatches} mini-batches (fixed)"
+    if min_samples >= 2:
+        why = (
+            f"PPO normalises the advantages per mini-batch, and their std needs at least {min_samples} samples per "
+            "mini-batch (the std of one sample is undefined: NaN, and training ends in a NaN policy)"
+        )
+    else:
+        why = f"PPO needs at least {min_samples} sample per mini-batch (an empty one makes the losses NaN)"
+    fixes = [f"raise --envs to {-(-need // steps)}", f"--steps-per-env to {-(-need // envs)}"]
+    if minibatch_flag and batch >= min_samples:
+        fixes.append(f"lower {minibatch_flag} to {batch // min_samples}")
+    return (
+        f"--envs {envs} x --steps-per-env {steps} = a batch of {batch} samples per iteration, split into "
+        f"{split}, leaves {per} sample{'s' * (per != 1)} per mini-batch; {why}. "
+        f"The rule: envs x steps per env >= {min_samples} x mini-batches = {need}. Fix: "
+        f"{', or '.join(fixes)}"
+    )

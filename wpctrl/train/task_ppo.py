@@ -17,16 +17,15 @@ import time
 
 import torch
 
+from .ppo_config import MANISKILL_EPOCHS as EPOCHS
+from .ppo_config import MANISKILL_MINIBATCHES as MINIBATCHES
+from .ppo_config import MANISKILL_STEPS_PER_ENV as STEPS_PER_ENV
 from .ppo_config import runner_cfg
 from .ppo_update import CapturedUpdate
 from .sampling import SAMPLINGS, act, sync_free
 from .task_env import TaskVecEnv
 
 __all__ = ["Collector", "checkpoint_infos", "evaluate_policy", "maniskill_init", "maniskill_ppo_cfg", "train"]
-
-STEPS_PER_ENV = 4
-EPOCHS = 8
-MINIBATCHES = 32
 
 
 def maniskill_ppo_cfg(
@@ -220,10 +219,6 @@ def train(args, t_main: float) -> int:
                       physics=T.TaskPhysics(substeps=env.substeps), graph=graph)  # fmt: skip
     cfg = maniskill_ppo_cfg(steps, args.epochs or EPOCHS, args.minibatches or MINIBATCHES, args.seed,
                             obs_normalization=args.obs_normalization == "on")  # fmt: skip
-    if envs * steps < cfg["algorithm"]["num_mini_batches"]:
-        print(f"wpctrl train: --minibatches: {cfg['algorithm']['num_mini_batches']} mini-batches of a rollout of "
-              f"{envs * steps} samples (--envs x --steps-per-env) leave some empty", file=sys.stderr)  # fmt: skip
-        return 2
     with contextlib.redirect_stdout(io.StringIO()):  # rsl-rl prints its observation sets and both networks
         runner = OnPolicyRunner(env, cfg, log_dir=None, device=device)
     alg = runner.alg

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pytest
 from conftest import PANDA_URDF, build_panda
+from user_models import indices, put
 
 import wpctrl
 from wpctrl.robots import PANDA_ARM_JOINTS, PANDA_GRIPPER_JOINTS, panda_control_modes
@@ -191,8 +192,8 @@ BOUNDS: dict[str, dict[str, Bound]] = {
             wrong_type=("dc", 50.0, {"saturation_effort": 1.0, "velocity_limit": 1.0}),
         ),
         "ema": Bound(
-            inside=(None, 1.0, 0.5, 1e-6, 1),
-            outside=(0.0, -0.1, up(1.0), 2, math.nan, math.inf),
+            inside=(None, 1.0, 0.5, 1e-6, 1, up(0.0)),  # up(0.0): the smallest positive float32
+            outside=(0.0, -0.0, -0.1, up(1.0), 2, math.nan, math.inf, 1e-46),  # 1e-46: 0 in float32
             wrong_type=(True, "0.5", [0.5]),
         ),
         "binary": Bound(
@@ -568,14 +569,33 @@ BOUNDS: dict[str, dict[str, Bound]] = {
     },
     # Actuator models (on the arm of a PDJointPos config, explicit actuation).
     "DCMotor": {
+        # base: DCMotor(50.0, 2.0); the kernels read float32 (1e39 is inf there, 1e-46 is 0)
         "saturation_effort": Bound(
-            inside=(0.0, [0.0] * N_ARM, F32_MAX),
-            outside=(down(0.0), math.inf, math.nan, [1.0] * (N_ARM + 1)),
+            inside=(0.0, [0.0] * N_ARM, F32_MAX, [50.0] * (N_ARM - 1) + [F32_MAX], 1e-46),
+            outside=(
+                down(0.0),
+                math.inf,
+                math.nan,
+                [1.0] * (N_ARM + 1),
+                V(1e39, label="inf in float32"),
+                V([50.0] * (N_ARM - 1) + [down(0.0)], label="one joint below 0"),
+                V([50.0] * (N_ARM - 1) + [1e39], label="one joint inf in float32"),
+            ),
             wrong_type=("1.0", None, True),
         ),
         "velocity_limit": Bound(
-            inside=(1e-6, [1e-6] * N_ARM, F32_MAX),
-            outside=(0.0, -1.0, math.inf, math.nan, [1.0] * 2),
+            inside=(1e-6, [1e-6] * N_ARM, F32_MAX, up(0.0)),
+            outside=(
+                0.0,
+                -0.0,
+                -1.0,
+                math.inf,
+                math.nan,
+                [1.0] * 2,
+                V(1e39, label="inf in float32"),
+                V(1e-46, label="0 in float32"),
+                V([2.0] * (N_ARM - 1) + [0.0], label="one joint at 0"),
+            ),
             wrong_type=("1.0", None, True),
         ),
     },
@@ -590,12 +610,20 @@ BOUNDS: dict[str, dict[str, Bound]] = {
                 [0.0, math.inf],
                 V(list(np.linspace(-3, 3, 65)), {"efforts": [1.0] * 65}),
                 V([], {"efforts": []}),
+                V([-1e39, 0.0], label="-inf in float32"),
+                V([0.0, 1e39], label="inf in float32"),
             ),
             wrong_type=(["a", "b"], None, [[0.0, 1.0], [2.0]]),
         ),
         "efforts": Bound(
-            inside=([0.0, 0.0], [F32_MAX, 0.0]),
-            outside=([down(0.0), 1.0], [1.0, 2.0, 3.0], [1.0, math.inf], [1.0, math.nan]),
+            inside=([0.0, 0.0], [F32_MAX, 0.0], [1e-46, 1.0]),
+            outside=(
+                [down(0.0), 1.0],
+                [1.0, 2.0, 3.0],
+                [1.0, math.inf],
+                [1.0, math.nan],
+                V([1.0, 1e39], label="inf in float32"),
+            ),
             wrong_type=(["a", "b"], None),
         ),
     },
@@ -623,18 +651,43 @@ BOUNDS: dict[str, dict[str, Bound]] = {
             outside=((0, 1, 64), (0, 1, -1), (), (0, 1)),  # (0, 1): 4 inputs for a 6-input network
             wrong_type=((0, 1, True), (0, 1, 2.0), ("0", 1, 2)),
         ),
-        "pos_scale": Bound(inside=(0.0, -2.5, 1e30, 3), outside=(math.inf, math.nan), wrong_type=(True, "1", None)),
-        "vel_scale": Bound(inside=(0.0, -2.5, 1e30, 3), outside=(math.inf, math.nan), wrong_type=(True, "1", None)),
-        "torque_scale": Bound(inside=(0.0, -2.5, 1e30, 3), outside=(-math.inf, math.nan), wrong_type=(True, "1")),
+        # the scales are float32 in the kernels: up to +-F32_MAX, 1e39 would be inf
+        "pos_scale": Bound(
+            inside=(0.0, -2.5, 1e30, 3, F32_MAX, -F32_MAX),
+            outside=(math.inf, math.nan, 1e39, -1e39),
+            wrong_type=(True, "1", None),
+        ),
+        "vel_scale": Bound(
+            inside=(0.0, -2.5, 1e30, 3, F32_MAX),
+            outside=(math.inf, math.nan, 1e39, -1e39),
+            wrong_type=(True, "1", None),
+        ),
+        "torque_scale": Bound(
+            inside=(0.0, -2.5, 1e30, 3, -F32_MAX),
+            outside=(-math.inf, math.nan, 1e39, -1e39),
+            wrong_type=(True, "1"),
+        ),
         "input_order": Bound(inside=("pos_vel", "vel_pos"), outside=("pos", "velpos"), wrong_type=(1, None)),
         "saturation_effort": Bound(
-            inside=(math.inf, 0.0, V(5.0, {"velocity_limit": 2.0}), [math.inf] * N_ARM),
-            outside=(down(0.0), math.nan, V(math.inf, {"velocity_limit": 2.0})),  # inf stall effort at finite speed
+            # 1e39: inf in float32, as the (default) speed: no envelope
+            inside=(math.inf, 0.0, V(5.0, {"velocity_limit": 2.0}), [math.inf] * N_ARM, 1e39),
+            outside=(
+                down(0.0),
+                math.nan,
+                V(math.inf, {"velocity_limit": 2.0}),  # inf stall effort at finite speed
+                V(1e39, {"velocity_limit": 2.0}, label="inf in float32 at finite speed"),
+            ),
             wrong_type=("1.0", None),
         ),
         "velocity_limit": Bound(
-            inside=(math.inf, V(1e-6, {"saturation_effort": 5.0})),
-            outside=(V(0.0, {"saturation_effort": 5.0}), -1.0, math.nan),
+            inside=(math.inf, V(1e-6, {"saturation_effort": 5.0}), V(1e39, {"saturation_effort": 5.0})),
+            outside=(
+                V(0.0, {"saturation_effort": 5.0}),
+                -1.0,
+                math.nan,
+                V(1e-46, {"saturation_effort": 5.0}, label="0 in float32"),
+                V(2.0, label="finite speed, inf stall effort"),
+            ),
             wrong_type=("1.0", None),
         ),
         "kind": Bound(
@@ -668,7 +721,12 @@ BOUNDS: dict[str, dict[str, Bound]] = {
             wrong_type=(V(1, {"mode": "explicit"}),),
         ),
         "inertia_update": Bound(
-            inside=(None, V("substep", {"mode": "explicit", "explicit_pd": "stable"})),
+            inside=(
+                None,
+                V("substep", {"mode": "explicit", "explicit_pd": "stable"}),
+                V("control", {"mode": "explicit", "explicit_pd": "stable"}),
+                V("control", {"mode": "explicit", "explicit_pd": "coupled"}),
+            ),
             outside=(
                 V("control", label="no inertia computed"),
                 V("often", {"mode": "explicit", "explicit_pd": "stable"}),
@@ -678,19 +736,44 @@ BOUNDS: dict[str, dict[str, Bound]] = {
     },
     "Delay": {
         # base: Delay(2)
+        # substeps: 0 <= min <= max <= 1024, each edge of a fixed delay and of a range
         "substeps": Bound(
-            inside=(0, 1024, (0, 1024), np.int64(3)),
-            outside=(-1, 1025, (3, 1), (0, 1, 2)),
-            wrong_type=(1.5, "1", True, None),
-        ),  # fmt: skip
+            inside=(0, 1024, (0, 1024), np.int64(3), (3, 3), (1024, 1024), (1023, 1024), (0, 0), [0, 2]),
+            outside=(
+                -1,
+                1025,
+                (3, 1),
+                (0, 1, 2),
+                V((0, 1025), label="max past the bound"),
+                V((-1, 2), label="min below 0"),
+                V((-1, -1), label="a range of -1"),
+                V((4, 3), label="max one below min"),
+                V((1025, 1025), label="a range of 1025"),
+                V((1025, 1024), label="min past the bound"),
+                V((0, 2**40), label="max far past the bound"),
+                V((), label="no value"),
+                V((2,), label="one value"),
+            ),
+            wrong_type=(1.5, "1", True, None, (1.0, 2), (0, True), (0, None), "12", {0: 1, 1: 2}),
+        ),
         "seed": Bound(
-            inside=(None, V(2**31 - 1, {"substeps": (0, 2)}), V(-(2**31), {"substeps": (0, 2)})),
-            outside=(V(2**31, {"substeps": (0, 2)}), V(3, label="fixed delay")),
+            inside=(
+                None,
+                V(2**31 - 1, {"substeps": (0, 2)}),
+                V(-(2**31), {"substeps": (0, 2)}),
+                V(np.int64(7), {"substeps": (3, 4)}),
+            ),
+            outside=(
+                V(2**31, {"substeps": (0, 2)}),
+                V(-(2**31) - 1, {"substeps": (0, 2)}),
+                V(3, label="fixed delay"),
+                V(3, {"substeps": (2, 2)}, label="a range of one value"),
+            ),
             wrong_type=(V("a", {"substeps": (0, 2)}), V(True, {"substeps": (0, 2)}), V(1.5, {"substeps": (0, 2)})),
         ),
     },
     "Diagnostics": {
-        "track_effort": BOOL,
+        "track_effort": Bound(inside=(True, False, np.bool_(True)), wrong_type=(1, "True", None, 0.0)),
         "nan_policy": Bound(inside=("hold", "raise"), outside=("ignore",), wrong_type=(1, None)),
         "clip_targets": Bound(inside=("none", "joint_limits"), outside=("limits",), wrong_type=(True, None)),
     },
@@ -875,3 +958,91 @@ def test_every_config_field_declares_its_boundary():
     names = {c.__name__ for c in config_classes()}
     assert {"PDJointPosControllerConfig", "PDEEPoseControllerConfig", "DCMotor", "ActuatorNet"} <= names
     assert set(BOUNDS) - {"ControllerConfig"} <= names, "BOUNDS names a class the package no longer exports"
+
+
+# -- Delay: each edge of its range, named in the message, and a delay of the maximum at work -------------------------
+
+_MOST = r"delay\.substeps: expected at most 1024 substeps \(the history holds max \+ 1 targets\), got 1025"
+_ORDER = r"delay\.substeps: expected 0 <= min_substeps <= max_substeps, got \({}\)"
+_FIXED_SEED = r"delay\.seed: expected None for a fixed delay of 3 substeps \(nothing is drawn\), got 1"
+
+DELAY_REFUSED = [
+    # (substeps, seed, the message: the field, what is expected, what was given)
+    pytest.param((0, 1025), None, _MOST, id="max past the bound"),
+    pytest.param(1025, None, _MOST, id="fixed past the bound"),
+    pytest.param((1025, 1025), None, _MOST, id="range of one value past the bound"),
+    pytest.param((-1, 2), None, _ORDER.format("-1, 2"), id="min below 0"),
+    pytest.param(-1, None, _ORDER.format("-1, -1"), id="fixed below 0"),
+    pytest.param((4, 3), None, _ORDER.format("4, 3"), id="max one below min"),
+    pytest.param((1025, 1024), None, _ORDER.format("1025, 1024"), id="min past the bound, above max"),
+    pytest.param((3, 3), 1, _FIXED_SEED, id="seed for a range of one value"),
+    pytest.param(3, 1, _FIXED_SEED, id="seed for a fixed delay"),
+    pytest.param((0, 2), 2**31, r"delay\.seed: expected an int32, got 2147483648", id="seed past int32"),
+    pytest.param((0, 2), -(2**31) - 1, r"delay\.seed: expected an int32, got -2147483649", id="seed below int32"),
+]
+
+
+@pytest.mark.parametrize(("substeps", "seed", "message"), DELAY_REFUSED)
+def test_delay_refuses_each_edge_naming_expected_and_received(substeps, seed, message, models):
+    """Just outside each edge of ``Delay`` (0 <= min <= max <= 1024, a seed only for a range that draws, int32): the
+    error names the field, the rule and the value given, for the object and for build_controller's keywords."""
+    with pytest.raises(wpctrl.ConfigError, match=message):
+        wpctrl.Delay(substeps, seed)
+    with pytest.raises(wpctrl.ConfigError, match=message):
+        wpctrl.build_controller(_arm_pos(), models["panda"], delay=substeps, delay_seed=seed)
+
+
+DELAY_ACCEPTED = [
+    # (substeps, seed, its (min, max))
+    pytest.param(0, None, (0, 0), id="fixed 0"),
+    pytest.param(1024, None, (1024, 1024), id="fixed at the bound"),
+    pytest.param((1024, 1024), None, (1024, 1024), id="range of one value at the bound"),
+    pytest.param((0, 1024), -(2**31), (0, 1024), id="the widest range, the lowest seed"),
+    pytest.param((1023, 1024), 2**31 - 1, (1023, 1024), id="the highest range, the highest seed"),
+    pytest.param((3, 3), None, (3, 3), id="range of one value"),
+]
+
+
+@pytest.mark.parametrize(("substeps", "seed", "want"), DELAY_ACCEPTED)
+def test_delay_accepts_each_edge_and_runs_its_range(substeps, seed, want, models):
+    """Just inside each edge: the Delay reports its range, the controller keeps it, each env's drawn delay lies in it,
+    and ``ctrl.delay`` takes the range's max (and refuses max + 1 and -1, naming them)."""
+    d = wpctrl.Delay(substeps, seed)
+    assert d.range == (d.min, d.max) == want and d.drawn == (want[1] > want[0])
+    ctrl = wpctrl.build_controller(_arm_pos(), build_panda(4), delay=substeps, delay_seed=seed)
+    assert ctrl.options.delay.range == want
+    drawn = ctrl.delay.numpy()
+    assert ((drawn >= want[0]) & (drawn <= want[1])).all(), drawn
+    ctrl.delay = np.full(4, want[1], np.int32)
+    np.testing.assert_array_equal(ctrl.delay.numpy(), want[1])
+    for bad in (want[1] + 1, -1):
+        with pytest.raises(wpctrl.ConfigError, match=rf"delay: expected 4 ints in \[0, {want[1]}\] .*got"):
+            ctrl.delay = np.full(4, bad, np.int32)
+    np.testing.assert_array_equal(ctrl.delay.numpy(), want[1])  # a refused value changes nothing
+
+
+def test_a_delay_of_1024_substeps_holds_the_reset_pose_for_exactly_that_many():
+    """The longest delay at work, per env: with a history of 1024 + 1 targets, env 0 delayed 1023 substeps and env 1
+    1024, the drive targets (implicit: ``Control.joint_target_q``) stay at each env's reset pose until substep 1023
+    (env 0) / 1024 (env 1) and are the commanded targets from the next substep on."""
+    model = build_panda(2)
+    cfg = wpctrl.PDJointPosControllerConfig(list(PANDA_ARM_JOINTS), None, None, 100.0, 10.0, normalize_action=False)
+    ctrl = wpctrl.build_controller(cfg, model, 100, 100, delay=(0, 1024), delay_seed=3)
+    rng = np.random.default_rng(0)
+    s, c = model.state(), model.control()
+    q0 = rng.uniform(-1.0, 1.0, (2, N_ARM)).astype(np.float32)
+    put(s, model, PANDA_ARM_JOINTS, q0)
+    ctrl.reset(s, control=c)
+    ctrl.delay = np.array([1023, 1024], np.int32)
+    target = rng.uniform(-1.0, 1.0, (2, N_ARM)).astype(np.float32)
+    ctrl.set_action(target, s)
+    coord, _ = indices(model, PANDA_ARM_JOINTS)
+    seen = {}
+    for k in range(1, 1026):
+        ctrl.before_simulation_step(s, c)
+        if k in (1, 1023, 1024, 1025):
+            seen[k] = c.joint_target_q.numpy()[coord]
+    np.testing.assert_array_equal(seen[1], q0)
+    np.testing.assert_array_equal(seen[1023], q0)
+    np.testing.assert_array_equal(seen[1024], np.stack([target[0], q0[1]]))
+    np.testing.assert_array_equal(seen[1025], target)

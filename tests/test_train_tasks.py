@@ -316,7 +316,8 @@ def test_evaluation_over_several_rounds_draws_new_episodes_and_counts_each_once(
 def test_adapter_statistics_count_success_once_per_episode():
     """Without partial resets (episodes end at the time limit) two episodes of two envs each, cut to three steps.
     Env 0's cube sits on its goal in the first episode only: the first episodes' statistics give success 1 of 2 at
-    any step and at the end; the second episodes', 0 of 2 (success_once starts afresh with each episode)."""
+    any step and at the end; the second episodes', 0 of 2 (success_once starts afresh with each episode). Each
+    episode's mean return is the rewards of its own three steps, summed by hand."""
     vec = TaskVecEnv("PushCube-v1", 2, seed=5, substeps=SUBSTEPS, partial_reset=False)
     hold = torch.zeros(2, 8)
     hold[:, -1] = 1.0
@@ -326,13 +327,16 @@ def test_adapter_statistics_count_success_once_per_episode():
             state = vec.env.get_state_dict()
             state["actors"]["cube"][0, :2] = state["actors"]["goal_region"][0, :2]
             vec.env.set_state_dict(state)
+        total = torch.zeros(2, dtype=torch.float64)
         for _ in range(3):
-            _, _, dones, extras = vec.step(hold)
+            _, reward, dones, extras = vec.step(hold)
+            total += reward.to(torch.float64)
         assert dones.tolist() == [True, True]
         stats = vec.take_stats()
         assert stats["episodes"] == 2
         assert stats["success_rate"] == (0.5 if episode == 0 else 0.0), (episode, stats)
         assert stats["success_at_end_rate"] == (0.5 if episode == 0 else 0.0), (episode, stats)
+        assert stats["mean_episode_reward"] == pytest.approx(float(total.mean()), rel=1e-6), (episode, stats)
 
 
 def test_evaluate_on_newton_reports_a_hand_rolled_episodes_metrics(smoke_run, exported, tmp_path):

@@ -61,6 +61,8 @@ FAST_TESTS = (
     "tests/test_construction_orders.py",
     "tests/test_distributed_ranks.py",
     "tests/test_impedance.py",
+    "tests/test_impedance_envs.py",
+    "tests/test_second_controller.py",
 )
 """The fast tests a mutation runs after its own targeted ones (a minute or less each on a 2-core CPU, warm cache)."""
 
@@ -628,16 +630,16 @@ MUTATIONS: list[Mutation] = [
     M(
         "ema_zero_accepted",
         "wpctrl/config/actuator_models.py",
-        "not (0.0 < float(ema) <= 1.0)",
-        "not (0.0 <= float(ema) <= 1.0)",
+        "not (0.0 < _f32(ema) <= 1.0)",
+        "not (0.0 <= _f32(ema) <= 1.0)",
         "ema=0 (targets that never move) is accepted",
         ("tests/test_config_boundaries.py",),
     ),
     M(
         "ema_one_refused",
         "wpctrl/config/actuator_models.py",
-        "not (0.0 < float(ema) <= 1.0)",
-        "not (0.0 < float(ema) < 1.0)",
+        "not (0.0 < _f32(ema) <= 1.0)",
+        "not (0.0 < _f32(ema) < 1.0)",
         "ema=1 (no smoothing, the boundary inside the range) is refused",
         ("tests/test_config_boundaries.py",),
     ),
@@ -1633,6 +1635,14 @@ MUTATIONS: list[Mutation] = [
         "        self._success_once.masked_fill_(dones, False)\n",
         "",
         "the training statistics' success_once is not cleared when an episode ends",
+        ("tests/test_train_tasks.py::test_adapter_statistics_count_success_once_per_episode",),
+    ),
+    M(
+        "train_stats_return_kept",
+        "wpctrl/train/task_env.py",
+        "        self._return.masked_fill_(dones, 0.0)\n",
+        "",
+        "an episode's return in the training statistics carries the last episode's rewards",
         ("tests/test_train_tasks.py::test_adapter_statistics_count_success_once_per_episode",),
     ),
 ]

@@ -112,6 +112,12 @@ class ActuatorNet:
 ACTUATOR_TYPES = (DCMotor, PositionBasedEffortLimit, ActuatorNet)
 
 
+def _f32(x) -> float:
+    """``x`` as the kernels read it: a float32 (inf beyond its range, 0 below its smallest subnormal)."""
+    with np.errstate(over="ignore"):
+        return float(np.float32(x))
+
+
 # Row codes of the actuator model (the step kernels specialise on them).
 ACT_NONE = 0
 ACT_DC_MOTOR = 1
@@ -135,7 +141,7 @@ def actuator_rows(config, n: int) -> dict:
     }
     ema = getattr(config, "ema", None)
     if ema is not None:
-        if isinstance(ema, bool) or not isinstance(ema, (int, float)) or not (0.0 < float(ema) <= 1.0):
+        if isinstance(ema, bool) or not isinstance(ema, (int, float)) or not (0.0 < _f32(ema) <= 1.0):
             raise ConfigError(f"{_name(config)}.ema: expected a number 0 < alpha <= 1 (or None), got {ema!r}")
         out["ema_alpha"][:] = float(ema)
     if act is None:
@@ -150,6 +156,8 @@ def actuator_rows(config, n: int) -> dict:
     def envelope(sat, vlim, allow_inf: bool):
         s = _per_joint(config, "actuator.saturation_effort", sat, n)
         v = _per_joint(config, "actuator.velocity_limit", vlim, n)
+        with np.errstate(over="ignore"):  # checked as the kernels read them: 1e39 is inf in float32, 1e-46 is 0
+            s, v = s.astype(np.float32), v.astype(np.float32)
         if (s < 0).any():
             raise ConfigError(f"{where}.saturation_effort: expected values >= 0, got {sat!r}")
         if (v <= 0).any():
@@ -170,6 +178,8 @@ def actuator_rows(config, n: int) -> dict:
             eff = np.asarray(act.efforts, dtype=np.float64).reshape(-1)
         except (TypeError, ValueError) as e:
             raise ConfigError(f"{where}: expected numeric positions and efforts, got {act!r}") from e
+        with np.errstate(over="ignore"):  # checked as the kernel reads them: 1e39 is inf in float32
+            pos, eff = pos.astype(np.float32), eff.astype(np.float32)
         if pos.size == 0 or pos.size != eff.size:
             raise ConfigError(
                 f"{where}: expected positions and efforts of the same non-zero length, got {pos.size} and {eff.size}"
@@ -191,8 +201,8 @@ def actuator_rows(config, n: int) -> dict:
             raise ConfigError(f"{where}.input_idx: expected substep indices in [0, 63], got {act.input_idx!r}")
         for f in ("pos_scale", "vel_scale", "torque_scale"):
             v = getattr(act, f)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise ConfigError(f"{where}.{f}: expected a finite number, got {v!r}")
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(_f32(v)):
+                raise ConfigError(f"{where}.{f}: expected a finite number (within float32 range), got {v!r}")
         if act.kernel not in ("auto", "unrolled", "3xtf32", "split", "split2", "split4", "tiled"):
             kernels = "'auto', 'unrolled', '3xtf32', 'split', 'split2', 'split4' or 'tiled'"
             raise ConfigError(f"{where}.kernel: expected {kernels}, got {act.kernel!r}")

@@ -64,6 +64,7 @@ def _combinations():
                 yield solver, actuation, pd
 
 
+@pytest.mark.slow  # every solver x actuation x law the demo offers (CI runs it)
 @pytest.mark.parametrize("solver, actuation, pd", list(_combinations()))
 def test_every_offered_combination_tracks_or_is_refused(solver, actuation, pd, tmp_path, capsys):
     out = tmp_path / "demo"
@@ -269,6 +270,7 @@ def test_robot_modes_table_is_maniskills():
             assert sorted([*modes, *refused]) == sorted(load_robot(robot).control_modes), robot
 
 
+@pytest.mark.slow  # ManiSkill's robots in MuJoCo-Warp (CI runs it)
 @pytest.mark.parametrize(
     "robot, groups",
     [

@@ -56,6 +56,7 @@ def _no_constant(name):
     raise ValueError(f"bare {name} in summary.json")
 
 
+@pytest.mark.slow  # two processes under torchrun (CI runs it)
 def test_demo_under_torchrun_two_cpu_processes(tmp_path):
     """torchrun --nproc-per-node=2 -m wpctrl demo --device cpu: 2 gloo ranks, 2 envs each; rank 0 reduces and
     writes. (Each process loads the compiled kernels from Warp's cache, warm from the other demo tests.)"""

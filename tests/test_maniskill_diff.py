@@ -22,7 +22,7 @@ import pytest
 import wpctrl
 
 pytest.importorskip("mani_skill", reason="the maniskill extra (mani-skill) is not installed")  # a dev dependency
-pytestmark = pytest.mark.filterwarnings("ignore")
+pytestmark = [pytest.mark.filterwarnings("ignore"), pytest.mark.slow]  # the real ManiSkill side by side
 
 from maniskill_side import AGENTS, CANNOT_RUN, ManiSkillSide  # noqa: E402
 

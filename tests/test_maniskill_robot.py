@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 pytest.importorskip("mani_skill", reason="the maniskill extra (mani-skill) is not installed")  # a dev dependency
-pytestmark = pytest.mark.filterwarnings("ignore")
+pytestmark = [pytest.mark.filterwarnings("ignore"), pytest.mark.slow]  # the real ManiSkill side by side
 
 from maniskill_side import AGENTS, ManiSkillSide  # noqa: E402
 

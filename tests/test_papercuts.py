@@ -124,6 +124,16 @@ sys.exit(main(sys.argv[1:]))
 """
 
 
+def test_make_without_torch_names_the_tasks_extra(tmp_path):
+    """A base install (no torch): ``wpctrl.tasks.make`` says which extra it needs and how to install it, after the
+    torch build of one's choice."""
+    code = ("import sys\nsys.modules['torch'] = None\nimport wpctrl.tasks as T\n"
+            "try:\n    T.make('PushCube-v1')\nexcept ImportError as e:\n    print(e)\n")  # fmt: skip
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    assert done.stdout.startswith("wpctrl.tasks.make needs the tasks extra: install the torch build you want first")
+    assert 'pip install -e ".[tasks]" in a source checkout, or pip install "wpctrl[tasks]"' in done.stdout
+
+
 @pytest.mark.parametrize("command, argv", [("export", ["run"]), ("evaluate", ["--policy", "p.ts", "--sim", "newton"]),
                                            ("train", ["--task", "reach", "--device", "cpu"])])  # fmt: skip
 def test_commands_without_torch_print_the_install_line(command, argv, tmp_path):
@@ -135,7 +145,8 @@ def test_commands_without_torch_print_the_install_line(command, argv, tmp_path):
     assert helped.returncode == 0 and "usage:" in helped.stdout and "Traceback" not in helped.stderr, helped.stderr
     done = run(argv)
     assert done.returncode == 2, (done.stdout, done.stderr)
-    assert f'wpctrl {command}: needs the train extra (pip install "wpctrl[train]")' in done.stderr, done.stderr
+    assert f"wpctrl {command} needs the train extra: install the torch build you want first" in done.stderr, done.stderr
+    assert 'pip install -e ".[train]" in a source checkout, or pip install "wpctrl[train]"' in done.stderr
     assert "Traceback" not in done.stderr
 
 

@@ -19,6 +19,7 @@ import pytest
 
 torch = pytest.importorskip("torch")
 pytest.importorskip("mani_skill")
+pytestmark = pytest.mark.slow  # the real ManiSkill side by side: `-m slow` (CI runs it)
 
 from maniskill_tasks_side import make_maniskill, record_episode, replay_shifted  # noqa: E402
 

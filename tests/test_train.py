@@ -178,6 +178,7 @@ def _strict_json(text):
     return json.loads(text, parse_constant=refuse)
 
 
+@pytest.mark.slow  # a PPO run (CI runs it)
 def test_ppo_learns_on_the_cpu(tmp_path):
     """A short run: it finishes, train.json is strict JSON, and the mean step reward of the last 3 iterations exceeds
     that of the first 3 by a clear margin (MARGIN, measured below)."""

@@ -159,6 +159,7 @@ def _strict_json(text):
     return json.loads(text, parse_constant=refuse)
 
 
+@pytest.mark.slow  # needs the PPO smoke run (CI runs it)
 def test_ppo_learns_pushcube_on_the_cpu(smoke_run):
     summary = _strict_json((smoke_run / "train.json").read_text())
     assert summary["iterations"] == 12 and summary["env_steps"] == 12 * 64 * 8 and summary["substeps"] == 4
@@ -178,6 +179,7 @@ def exported(smoke_run):
     return export(smoke_run)
 
 
+@pytest.mark.slow  # needs the PPO smoke run (CI runs it)
 def test_exported_policy_is_the_actors_deterministic_action(smoke_run, exported):
     """TorchScript and ONNX (checked with ONNX's own reference evaluator) against the rsl-rl actor, on 1,000
     random observations of the training data's scale; the metadata names the task."""
@@ -208,6 +210,7 @@ def test_exported_policy_is_the_actors_deterministic_action(smoke_run, exported)
         np.testing.assert_allclose(got, reference.numpy(), rtol=0, atol=1e-5)
 
 
+@pytest.mark.slow  # needs the PPO smoke run (CI runs it)
 def test_exported_policy_loads_with_torch_alone(exported):
     """A fresh interpreter where wpctrl, rsl-rl, tensordict and Warp cannot be imported runs policy.ts."""
     code = (
@@ -339,6 +342,7 @@ def test_adapter_statistics_count_success_once_per_episode():
         assert stats["mean_episode_reward"] == pytest.approx(float(total.mean()), rel=1e-6), (episode, stats)
 
 
+@pytest.mark.slow  # needs the PPO smoke run (CI runs it)
 def test_evaluate_on_newton_reports_a_hand_rolled_episodes_metrics(smoke_run, exported, tmp_path):
     from wpctrl.__main__ import main
 
@@ -364,6 +368,7 @@ def test_evaluate_on_newton_reports_a_hand_rolled_episodes_metrics(smoke_run, ex
     assert r["success_at_end_rate"] == float(info["success"].float().mean())
 
 
+@pytest.mark.slow  # needs the PPO smoke run (CI runs it)
 def test_evaluate_in_the_real_maniskill_reports_a_hand_rolled_episodes_metrics(exported, tmp_path):
     pytest.importorskip("mani_skill")
     from wpctrl.__main__ import main
@@ -416,6 +421,7 @@ def test_train_refuses_bad_options_naming_them(argv, message, capsys, tmp_path):
     assert message in capsys.readouterr().err
 
 
+@pytest.mark.slow  # needs the PPO smoke run (CI runs it)
 def test_export_refuses_what_it_cannot_export(smoke_run, tmp_path, capsys):
     from wpctrl.__main__ import main
 
@@ -436,6 +442,7 @@ def test_export_refuses_what_it_cannot_export(smoke_run, tmp_path, capsys):
     assert "do not fit its recorded observation / action sizes (42 / 8)" in err
 
 
+@pytest.mark.slow  # needs the PPO smoke run (CI runs it)
 def test_evaluate_refuses_a_policy_of_another_task_or_observation_size(exported, tmp_path, capsys):
     from wpctrl.__main__ import main
 

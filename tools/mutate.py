@@ -1731,7 +1731,8 @@ def run_tests(copy: Path, tests: list[str], mod: str, marker: str, args) -> dict
     if args.warp_cache:
         env["WARP_CACHE_PATH"] = args.warp_cache
     cmd = [sys.executable, "-c", _CHILD, str(copy), str(out), mod, marker]
-    cmd += ["-x", "-q", "-p", "no:cacheprovider", "--no-header", "--no-cov", *tests]  # no coverage in a mutant
+    cmd += ["-x", "-q", "-p", "no:cacheprovider", "--no-header", "--no-cov", "-m", "slow or not slow", *tests]
+    # no coverage in a mutant; every test it names runs, the slow ones too
     t0 = time.time()
     try:
         proc = subprocess.run(cmd, cwd=copy, env=env, capture_output=True, text=True, timeout=args.timeout)

@@ -23,7 +23,11 @@ COMMANDS = {
 def _usage() -> str:
     lines = ["usage: python -m wpctrl <command> [options]", "", "commands:"]
     lines += [f"  {name:8s} {help}" for name, (_, help) in COMMANDS.items()]
-    lines += ["", "python -m wpctrl <command> --help lists a command's options."]
+    lines += [
+        "",
+        "python -m wpctrl <command> --help lists a command's options. Every command is quiet unless given "
+        "--verbose\n(then Warp prints its banner and a line per kernel module it loads).",
+    ]
     return "\n".join(lines)
 
 
@@ -38,7 +42,7 @@ def main(argv=None) -> int:
     import importlib
 
     path, _, func = COMMANDS[argv[0]][0].partition(":")  # "module" (its main) or "module:function"
-    module = importlib.import_module(path)  # light: warp and torch load after the command's first line
+    module = importlib.import_module(path)  # light: warp and torch load once the command's arguments are checked
     try:
         return getattr(module, func or "main")(argv[1:])
     except SystemExit as e:  # argparse and the commands' checks exit 2 with a one-line message

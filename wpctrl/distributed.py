@@ -54,8 +54,10 @@ def _require_torch():
         import torch
         import torch.distributed as dist
     except ImportError as e:
+        from .extras import TORCH_BUILDS
+
         raise ImportError(
-            "wpctrl.distributed: running under torchrun needs torch (pip install torch); a single process does not"
+            f"wpctrl.distributed: running under torchrun needs torch ({TORCH_BUILDS}); a single process does not"
         ) from e
     if not dist.is_available():
         raise RuntimeError("wpctrl.distributed: this torch build has no torch.distributed")

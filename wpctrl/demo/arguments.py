@@ -9,6 +9,8 @@ import importlib.util
 import math
 import sys
 
+from ..extras import install_hint
+
 SOLVERS = ("mujoco", "steel", "kamino", "featherstone", "semi_implicit", "xpbd")
 """Newton's articulation solvers the demo knows; :func:`unsupported` says which of them cannot hold the Panda."""
 MAXIMAL_SOLVERS = ("xpbd", "semi_implicit")  # body-coordinate solvers: joint_q is recovered with eval_ik each step
@@ -165,6 +167,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--progress", action=argparse.BooleanOptionalAction, default=True, help="tqdm progress bar (default on)"
     )
+    from ..console import add_output_options
+
+    add_output_options(p)
     return p
 
 
@@ -292,10 +297,15 @@ def _check_args(parser, args) -> None:
     if args.device != "cpu":
         if not (args.device == "cuda" or args.device.startswith("cuda:")):
             _fail(parser, f"--device: expected cpu, cuda or cuda:N, got {args.device!r}")
+        from ..console import cuda_absent, quiet_warp
+
+        if cuda_absent():  # known without importing Warp
+            _fail(parser, f"--device {args.device}: no CUDA device is available on this machine")
         import warp as wp
 
-        wp.config.log_level = wp.LOG_WARNING
-        if not wp.is_cuda_available():
+        with quiet_warp(args.verbose):
+            cuda = wp.is_cuda_available()
+        if not cuda:
             _fail(parser, f"--device {args.device}: no CUDA device is available on this machine")
         if args.device != "cuda":  # 'cuda' means cuda:LOCAL_RANK under torchrun, checked when the rank starts
             from ..config import ConfigError
@@ -329,7 +339,7 @@ def _check_extras(args) -> None:
         for_what = f"--robot {args.robot} needs" if missing == ["ManiSkill"] else "the demo needs"
         print(
             f"wpctrl demo: error: {', '.join(missing)} not installed; {for_what} the [{extra}] extra: "
-            f'pip install -e ".[{extra}]" (in a clone) or pip install "wpctrl[{extra}]"',
+            + install_hint(extra),
             file=sys.stderr,
         )
         raise SystemExit(2)

@@ -51,9 +51,9 @@ def main(argv=None) -> int:
             f"{SOLVER_LABELS[args.solver]} at {args.sim_freq} Hz on {args.device}",
             flush=True,
         )
-    import warp as wp
+    from ..console import cli_output
 
-    wp.config.log_level = wp.LOG_WARNING  # no banner, no "Module ... load" lines: the demo says what it does
+    cli_output(args.verbose)  # no banner, no "Module ... load" lines unless --verbose: the demo says what it does
 
     try:
         ctx = distributed.init(device=args.device, seed=args.seed)

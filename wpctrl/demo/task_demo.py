@@ -14,7 +14,8 @@ import sys
 import time
 from pathlib import Path
 
-TASK_IDS = ("PushCube-v1", "PickCube-v1")
+from ..console import add_output_options
+from ..tasks.names import TASK_IDS
 
 
 def parser() -> argparse.ArgumentParser:
@@ -29,6 +30,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="episode seed (default 0)")
     p.add_argument("--substeps", type=int, default=None, help="MuJoCo steps per 10 ms physics step (default 16)")
     p.add_argument("--out", default="wpctrl-demo", help="folder for summary.json and task.png (default wpctrl-demo)")
+    add_output_options(p)
     return p
 
 
@@ -41,9 +43,12 @@ def run(args) -> dict:
 
     device = "cuda:0" if args.device == "cuda" else args.device
     physics = T.TaskPhysics() if args.substeps is None else T.TaskPhysics(substeps=args.substeps)
+    from ..console import compile_notice
+
     t0 = time.perf_counter()
-    env = T.make(args.task, num_envs=args.envs, device=device, control_mode="pd_ee_delta_pos", auto_reset=False,
-                 ignore_terminations=True, physics=physics, seed=args.seed)  # fmt: skip
+    with compile_notice(f"Warp kernels for {args.task} on {device}", say=lambda msg: print(msg, flush=True)):
+        env = T.make(args.task, num_envs=args.envs, device=device, control_mode="pd_ee_delta_pos", auto_reset=False,
+                     ignore_terminations=True, physics=physics, seed=args.seed, verbose=args.verbose)  # fmt: skip
     build_s = time.perf_counter() - t0
     policy = policy_for(args.task)
     obs, info = env.reset(seed=args.seed)
@@ -112,10 +117,21 @@ def main(argv) -> int:
     if args.envs < 1:
         print("wpctrl demo: error: --envs must be at least 1", file=sys.stderr)
         return 2
-    print(f"wpctrl demo: {args.task}, {args.envs} envs on {args.device} (scripted pd_ee_delta_pos solve)", flush=True)
-    import warp as wp
+    from ..console import cli_output, device_refusal
 
-    wp.config.log_level = wp.LOG_WARNING
+    if why := device_refusal(args.device, "--device"):  # known without Warp
+        print(f"wpctrl demo: error: {why}", file=sys.stderr)
+        return 2
+    print(f"wpctrl demo: {args.task}, {args.envs} envs on {args.device} (scripted pd_ee_delta_pos solve)", flush=True)
+    cli_output(args.verbose)
+    from ..config import ConfigError
+    from ..devices import check_device
+
+    try:
+        check_device("cuda:0" if args.device == "cuda" else args.device, "--device")
+    except ConfigError as e:
+        print(f"wpctrl demo: error: {e}", file=sys.stderr)
+        return 2
     summary = run(args)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -1,11 +1,11 @@
 """ManiSkill's robots on Newton: ``load_robot(uid)`` gives a Newton builder of the agent's own asset and its control
 modes as wpctrl configs, translated field by field from the agent class.
 
-Needs the ``maniskill`` extra (``pip install "wpctrl[maniskill]"``: mani-skill 3.0.1); ManiSkill is imported only
-here. No SAPIEN scene is created: the agent class's ``_controller_configs`` are read from an instance whose scene
-set-up is skipped (its ``__init__`` runs with ManiSkill's ``BaseAgent.__init__`` stubbed out, so per-robot attributes
-such as Fetch's joint lists are set), with a stand-in ``robot`` whose ``active_joints`` are the asset's active joints
-in ManiSkill's order. A user's own ManiSkill agent class works the same way.
+Needs the ``maniskill`` extra (``pip install -e ".[maniskill]"`` in a source checkout: mani-skill 3.0.1); ManiSkill
+is imported only here. No SAPIEN scene is created: the agent class's ``_controller_configs`` are read from an
+instance whose scene set-up is skipped (its ``__init__`` runs with ManiSkill's ``BaseAgent.__init__`` stubbed out,
+so per-robot attributes such as Fetch's joint lists are set), with a stand-in ``robot`` whose ``active_joints`` are
+the asset's active joints in ManiSkill's order. A user's own ManiSkill agent class works the same way.
 
 What ManiSkill's loader does, and what the Newton builder gets of it:
 
@@ -57,7 +57,9 @@ def _mani_skill():
         from mani_skill.agents.base_agent import BaseAgent
         from mani_skill.agents.registration import REGISTERED_AGENTS
     except ImportError as e:  # pragma: no cover - the extra is installed in the test environment
-        raise ImportError('wpctrl.maniskill needs ManiSkill: pip install "wpctrl[maniskill]" (mani-skill 3.0.1)') from e
+        from ..extras import missing
+
+        raise ImportError(missing("wpctrl.maniskill", "maniskill", e, torch=True)) from e
     return BaseAgent, REGISTERED_AGENTS
 
 

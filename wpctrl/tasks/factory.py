@@ -4,21 +4,12 @@ from __future__ import annotations
 
 from ..config import ConfigError
 from .definitions import TASKS
+from .names import CONTROL_MODES, OBS_MODES
 from .physics import TaskPhysics
 
-OBS_MODES = ("state", "state_dict")
 SIM_BACKENDS = ("mujoco",)
 CONTROLLER_SEMANTICS = ("physx_cpu", "physx_cuda")
-
-
-def _control_modes() -> tuple[str, ...]:
-    from ..robots import panda_control_modes
-
-    return tuple(m for m in panda_control_modes() if m.startswith("pd_"))  # ManiSkill's own, not wpctrl's torque modes
-
-
-CONTROL_MODES = _control_modes()
-"""The Panda's ManiSkill control modes (``pd_joint_delta_pos``, ManiSkill's default, first)."""
+__all__ = ["CONTROLLER_SEMANTICS", "CONTROL_MODES", "OBS_MODES", "SIM_BACKENDS", "make"]
 
 
 def make(
@@ -37,6 +28,7 @@ def make(
     controller_semantics: str = "physx_cpu",
     asset_dir: str | None = None,
     graph: bool | None = None,
+    verbose: bool = False,
 ):
     """A ManiSkill task on Newton (:class:`~wpctrl.tasks.env.TaskEnv`), ``num_envs`` copies on ``device``.
 
@@ -58,6 +50,14 @@ def make(
             least-squares step, as ManiSkill's GPU sim). Joint modes are the same on both.
         asset_dir: A copy of ``mani_skill/assets`` to read the Panda from (default: the installed mani-skill).
         graph: Capture the step in a graph and replay it (default: True, on CUDA and the CPU).
+        verbose: Let Warp print what it does while the env is built: its start-up banner and a
+            ``Module ... load on device ...`` line per kernel module. By default (``False``) ``make`` prints nothing:
+            for the duration of the call it raises ``warp.config.log_level`` to ``warp.LOG_WARNING`` (and puts your
+            value back before it returns), and if Warp is not initialised yet it initialises it without the native
+            "Warp CUDA warning: Could not find or load the NVIDIA CUDA driver" line, which on a machine without a GPU
+            says nothing you need (asking for a CUDA device there is refused with a :class:`~wpctrl.config.ConfigError`
+            anyway). Warp's warnings and errors still show. No other Warp setting is touched. Also on under
+            ``wpctrl``'s command line with ``--verbose``.
     """
     if env_id not in TASKS:
         raise ConfigError(f"make: unknown env_id {env_id!r}; expected one of {sorted(TASKS)}")
@@ -81,9 +81,18 @@ def make(
         physics = TaskPhysics()
     elif not isinstance(physics, TaskPhysics):
         raise ConfigError(f"make: physics expected a TaskPhysics, got {type(physics).__name__}")
+    try:  # the env's tensors are torch's
+        import torch  # noqa: F401
+    except ImportError as e:
+        from ..extras import missing
+
+        raise ImportError(missing("wpctrl.tasks.make", "tasks", e, torch=True)) from e
+    from ..console import quiet_warp
     from ..devices import check_device
     from ._validate import seed_value
 
-    device = check_device(device, "make: device")
-    options = (bool(auto_reset), bool(ignore_terminations), physics, controller_semantics, asset_dir, graph)
-    return TaskEnv(TASKS[env_id], num_envs, device, control_mode, obs_mode, reward_mode, seed_value(seed), *options)
+    with quiet_warp(verbose):  # the banner, the CUDA-driver line and the module-load lines: only when asked for
+        device = check_device(device, "make: device")
+        options = (bool(auto_reset), bool(ignore_terminations), physics, controller_semantics, asset_dir, graph)
+        return TaskEnv(TASKS[env_id], num_envs, device, control_mode, obs_mode, reward_mode, seed_value(seed),
+                       *options)  # fmt: skip

@@ -98,7 +98,9 @@ def make_maniskill(env_id: str, control_mode: str, **kwargs):
         import gymnasium as gym
         import mani_skill.envs  # noqa: F401  (registers the tasks)
     except ImportError as e:
-        raise ImportError(f'the real ManiSkill side needs mani-skill (pip install "wpctrl[maniskill]"): {e}') from e
+        from ..extras import missing
+
+        raise ImportError(missing("the real ManiSkill side", "maniskill", e, torch=True)) from e
 
     with warnings.catch_warnings(), no_visuals():
         warnings.simplefilter("ignore")

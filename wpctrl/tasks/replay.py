@@ -2,22 +2,26 @@
 its own env, its actions are replayed step by step (all episodes of a file at once, one env each), and success and
 the cube's position are compared with ManiSkill's at every step.
 
-The episode format is ManiSkill's recording of the tasks (a JSON file with ``header`` (``task``, ``control_mode``)
-and ``episodes``: ``init_state_dict``, ``actions``, ``info["success"]`` and ``cube_pose`` per step, ...).
-``python -m wpctrl replay FILE.json`` runs it from the command line.
+The episode format is ManiSkill's recording of the tasks (a JSON file, plain or gzip-compressed ``.json.gz``, with
+``header`` (``task``, ``control_mode``) and ``episodes``: ``init_state_dict``, ``actions``, ``info["success"]`` and
+``cube_pose`` per step, ...). ``python -m wpctrl replay FILE.json`` runs it from the command line: every file is
+read and checked before Warp, Newton or torch is imported, so a wrong file is refused at once.
 """
 
 from __future__ import annotations
 
 import argparse
+import gzip
 import json
 import sys
+import zlib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ..config import ConfigError
+from .names import CONTROL_MODES, TASK_IDS
 
 __all__ = ["EpisodeResult", "ReplayReport", "load_episodes", "main", "replay"]
 
@@ -105,37 +109,68 @@ class ReplayReport:
         return "\n".join(lines)
 
 
+EXPECTED = "ManiSkill's episode JSON (an object with 'header' and 'episodes'), plain or gzip-compressed (.json.gz)"
+"""What a replay file must be, as the refusals say it."""
+
+
+def _read(path: Path) -> dict:
+    """A recording's JSON, from a plain or a gzip-compressed file (told by its first bytes)."""
+    with path.open("rb") as f:
+        raw = f.read()
+    why = "not a readable gzip file"
+    try:
+        if raw[:2] == b"\x1f\x8b":
+            raw = gzip.decompress(raw)
+        why = "not JSON text"
+        return json.loads(raw)
+    except (ValueError, OSError, EOFError, zlib.error) as e:  # JSONDecodeError and UnicodeDecodeError are ValueErrors
+        raise ConfigError(f"replay: {str(path)!r} is not a recording ({why}); expected {EXPECTED}") from e
+
+
 def load_episodes(source) -> dict:
-    """A recorded episode file (path) or its loaded dict, checked for what the replay reads."""
+    """A recorded episode file (path: JSON or ``.json.gz``) or its loaded dict, checked for what the replay reads:
+    ManiSkill's format, a task and control mode :func:`wpctrl.tasks.make` builds, equal episode lengths. Host only
+    (no Warp, Newton or torch)."""
     data = source
+    where = ""
     if not isinstance(source, dict):
         path = Path(source)
         if not path.is_file():
             raise FileNotFoundError(f"replay: no episode file {str(path)!r}")
-        data = json.loads(path.read_text())
+        data = _read(path)
+        where = f"{str(path)!r}: "
     if not isinstance(data, dict) or "header" not in data or "episodes" not in data:
-        raise ConfigError("replay: expected ManiSkill's episode format: a dict with 'header' and 'episodes'")
+        raise ConfigError(f"replay: {where}expected ManiSkill's episode format: a dict with 'header' and 'episodes' "
+                          f"({EXPECTED})")  # fmt: skip
     for key in ("task", "control_mode"):
         if key not in data["header"]:
-            raise ConfigError(f"replay: the header has no {key!r}")
+            raise ConfigError(f"replay: {where}the header has no {key!r}")
+    if data["header"]["task"] not in TASK_IDS:
+        raise ConfigError(f"replay: {where}task {data['header']['task']!r} is not one wpctrl builds; expected one of "
+                          f"{list(TASK_IDS)}")  # fmt: skip
+    if data["header"]["control_mode"] not in CONTROL_MODES:
+        raise ConfigError(f"replay: {where}control mode {data['header']['control_mode']!r} is not one of the Panda's "
+                          f"{list(CONTROL_MODES)}")  # fmt: skip
     if not data["episodes"]:
-        raise ConfigError("replay: the file holds no episodes")
+        raise ConfigError(f"replay: {where}the file holds no episodes")
     for i, ep in enumerate(data["episodes"]):
         for key in ("init_state_dict", "actions", "info", "cube_pose"):
             if key not in ep:
-                raise ConfigError(f"replay: episode {i} has no {key!r}")
+                raise ConfigError(f"replay: {where}episode {i} has no {key!r}")
     lengths = {len(ep["actions"]) for ep in data["episodes"]}
     if len(lengths) != 1:
-        raise ConfigError(f"replay: the episodes must have the same number of actions, got {sorted(lengths)}")
+        raise ConfigError(f"replay: {where}the episodes must have the same number of actions, got {sorted(lengths)}")
     return data
 
 
-def replay(source, device="cpu", physics=None, asset_dir: str | None = None, env=None) -> ReplayReport:
+def replay(source, device="cpu", physics=None, asset_dir: str | None = None, env=None, verbose: bool = False,
+           progress=None) -> ReplayReport:  # fmt: skip
     """Replay every episode of ``source`` (a path or a loaded dict) open-loop on Newton, one env per episode.
 
     ``env``: an env of :func:`wpctrl.tasks.make` to reuse (its task, control mode and number of envs must match);
     otherwise one is built with ``auto_reset=False`` and ``ignore_terminations=True`` (the recorded episodes keep
-    stepping after success).
+    stepping after success), ``verbose`` passed to ``make``. ``progress``: an object with ``update(n)`` (a tqdm bar,
+    say), advanced by one after every step of the episodes (they all step together).
     """
     import torch
 
@@ -146,7 +181,8 @@ def replay(source, device="cpu", physics=None, asset_dir: str | None = None, env
     n = len(episodes)
     if env is None:
         env = make(header["task"], num_envs=n, device=device, control_mode=header["control_mode"],
-                   auto_reset=False, ignore_terminations=True, physics=physics, asset_dir=asset_dir)  # fmt: skip
+                   auto_reset=False, ignore_terminations=True, physics=physics, asset_dir=asset_dir,
+                   verbose=verbose)  # fmt: skip
     elif (env.task_spec.env_id, env.control_mode, env.num_envs) != (header["task"], header["control_mode"], n):
         raise ConfigError(f"replay: env is {env.task_spec.env_id} / {env.control_mode} / {env.num_envs} envs, the file "
                           f"{header['task']} / {header['control_mode']} / {n} episodes")  # fmt: skip
@@ -168,6 +204,8 @@ def replay(source, device="cpu", physics=None, asset_dir: str | None = None, env
             grasped[:, t] = info["is_grasped"].cpu().numpy()
         q = env.get_state_dict()["actors"]["cube"][:, :3].cpu().numpy()
         error[:, t] = np.linalg.norm(q - recorded_cube[:, t + 1], axis=1)
+        if progress is not None:
+            progress.update(1)
     report = ReplayReport(task=header["task"], control_mode=header["control_mode"])
     for i, ep in enumerate(episodes):
         rec = [bool(s) for s in ep["info"]["success"][1:]]
@@ -189,30 +227,61 @@ def replay(source, device="cpu", physics=None, asset_dir: str | None = None, env
 
 
 def _parser() -> argparse.ArgumentParser:
+    from ..console import add_output_options
+
     p = argparse.ArgumentParser(
-        prog="python -m wpctrl replay",
+        prog="wpctrl replay",
         description="Replay ManiSkill's recorded PushCube-v1 / PickCube-v1 episodes open-loop on Newton and compare "
         "success and the cube's trajectory with ManiSkill's.",
     )
-    p.add_argument("episodes", nargs="+", help="episode files (JSON, ManiSkill's recording format)")
+    p.add_argument("episodes", nargs="+", help="episode files (ManiSkill's recording format: JSON, or .json.gz)")
     p.add_argument("--device", default="cpu", help="Warp device (default: cpu)")
     p.add_argument("--out", default=None, help="write the full report (every step of every episode) as JSON here")
     p.add_argument("--asset-dir", default=None, help="a copy of mani_skill/assets (default: the installed package)")
+    add_output_options(p, progress=True)
     return p
+
+
+def _refuse(message: str) -> int:
+    print(f"wpctrl replay: error: {message.removeprefix('replay: ')}", file=sys.stderr)
+    return 2
 
 
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
-    import warp as wp
+    from ..console import cli_output, compile_notice, device_refusal, progress
 
-    wp.config.log_level = wp.LOG_WARNING
+    if why := device_refusal(args.device, "--device"):  # no Warp needed to know
+        return _refuse(why)
+    try:  # every file read and checked before anything heavy is imported
+        recordings = [(path, load_episodes(path)) for path in args.episodes]
+    except (ConfigError, FileNotFoundError) as e:
+        return _refuse(str(e))
+    cli_output(args.verbose)
+    from ..devices import check_device
+
+    try:
+        check_device(args.device, "--device")
+    except ConfigError as e:
+        return _refuse(str(e))
     reports = []
-    for path in args.episodes:
+    for path, data in recordings:
+        header, n = data["header"], len(data["episodes"])
+        with compile_notice(f"Warp kernels for {header['task']} on {args.device}"):
+            from .factory import make
+
+            env = make(header["task"], num_envs=n, device=args.device, control_mode=header["control_mode"],
+                       auto_reset=False, ignore_terminations=True, asset_dir=args.asset_dir,
+                       verbose=args.verbose)  # fmt: skip
+        bar = progress(len(data["episodes"][0]["actions"]), f"{Path(path).name} ({n} episodes)", "step",
+                       args.progress)  # fmt: skip
         try:
-            report = replay(path, device=args.device, asset_dir=args.asset_dir)
-        except (ConfigError, FileNotFoundError) as e:
-            print(f"wpctrl replay: error: {e}", file=sys.stderr)
-            return 2
+            report = replay(data, env=env, progress=bar)
+        except ConfigError as e:
+            return _refuse(str(e))
+        finally:
+            bar.close()
+            env.close()
         print(report.format(), flush=True)
         reports.append(report)
     if args.out:

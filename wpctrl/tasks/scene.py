@@ -41,10 +41,11 @@ def panda_urdf_path(asset_dir: str | None = None) -> str:
     if root is None:
         spec = importlib.util.find_spec("mani_skill")
         if spec is None or not spec.submodule_search_locations:
+            from ..extras import install_hint
+
             raise ImportError(
-                "wpctrl.tasks needs ManiSkill's Panda asset: install the maniskill extra "
-                '(pip install "wpctrl[maniskill]") or point asset_dir / WPCTRL_MANISKILL_ASSETS at a copy of '
-                "mani_skill/assets"
+                f"wpctrl.tasks needs ManiSkill's Panda asset: install the tasks extra ({install_hint('tasks', True)})"
+                " or point asset_dir / WPCTRL_MANISKILL_ASSETS at a copy of mani_skill/assets"
             )
         root = os.path.join(list(spec.submodule_search_locations)[0], "assets")
     path = os.path.join(root, _URDF)

@@ -3,7 +3,8 @@ task (:mod:`wpctrl.train.reach`) or ManiSkill's ``PushCube-v1`` / ``PickCube-v1`
 
 Writes into ``--out``: ``train.json`` (per iteration: mean episode reward and success rate of the episodes finished in
 it, collection env-steps/s, wall time; the evaluations of the deterministic policy on fresh episodes, periodic with
-``--eval-every`` and final), ``learning_curve.png``, and ``policy.pt`` (the runner's checkpoint).
+``--eval-every`` and final), ``learning_curve.png`` (:mod:`.outputs`), TensorBoard event files (:mod:`.logger`) and
+``policy.pt`` (the runner's checkpoint, which ``--resume`` continues: :mod:`.resume`).
 """
 
 from __future__ import annotations
@@ -15,8 +16,12 @@ import sys
 import time
 from pathlib import Path
 
+from ..console import add_output_options, cuda_absent, device_refusal
+from ..tasks.names import CONTROL_MODES as TASK_CONTROL_MODES
 from .commands import missing_train_extra
+from .logger import LOGGERS, logger_error
 from .ppo_config import MANISKILL_MINIBATCHES, MANISKILL_STEPS_PER_ENV, batch_error, runner_cfg
+from .resume import ResumeError, apply_resume, explicit_flags
 
 MANISKILL_TASKS = ("PushCube-v1", "PickCube-v1")
 TASKS = ("reach",) + MANISKILL_TASKS
@@ -159,7 +164,29 @@ def parse(argv):
     )
     p.add_argument("--out", default="wpctrl-train", help="output folder")
     p.add_argument("--no-graph", action="store_true", help="run the env step eagerly (no CUDA / CPU graph)")
+    p.add_argument(
+        "--logger",
+        choices=LOGGERS,
+        default="tensorboard",
+        help="where the run's scalars go besides train.json: TensorBoard event files in --out (rsl-rl's tags), "
+        "'wandb' (Weights & Biases, and the event files; needs the wandb package), 'none'",
+    )
+    p.add_argument(
+        "--resume",
+        default=None,
+        metavar="RUN_DIR",
+        help="continue the run in RUN_DIR from its policy.pt (weights, normaliser, optimizer, iteration) with its "
+        "recorded configuration; --iterations adds iterations; writes into RUN_DIR unless --out is given",
+    )
+    add_output_options(p)
     args = p.parse_args(argv)
+    if why := logger_error(args.logger):
+        p.error(why)
+    if args.resume is not None:
+        try:
+            args.resumed = apply_resume(args, explicit_flags(p, argv))
+        except ResumeError as e:
+            p.error(str(e))
     for name in ("envs", "iterations", "steps_per_env", "eval_episodes", "eval_envs", "epochs", "minibatches",
                  "substeps"):  # fmt: skip
         v = getattr(args, name)
@@ -182,25 +209,35 @@ def parse(argv):
             p.error(f"--no-partial-reset: only for the ManiSkill tasks {list(MANISKILL_TASKS)}")
         if args.control_mode is not None and args.control_mode not in CONTROL_MODES:
             p.error(f"--control-mode: expected one of {list(CONTROL_MODES)} for reach, got {args.control_mode!r}")
+    elif args.control_mode is not None and args.control_mode not in TASK_CONTROL_MODES:
+        p.error(f"--control-mode: expected one of the Panda's modes {list(TASK_CONTROL_MODES)} for {args.task}, got "
+                f"{args.control_mode!r}")  # fmt: skip
     _check_device_and_batch(p, args)
     return args
 
 
 def _check_device_and_batch(p: argparse.ArgumentParser, args) -> None:
     """The device exists, and the rollout (``--envs`` x ``--steps-per-env``) fills PPO's mini-batches: checked here,
-    before any env is built, with the defaults that depend on the device resolved as training resolves them."""
-    import warp as wp
+    before any env is built, with the defaults that depend on the device resolved as training resolves them. Without
+    Warp where this machine shows no NVIDIA driver (the CPU is then the only device); Warp decides otherwise."""
+    if why := device_refusal(args.device, "--device"):
+        p.error(why)
+    if cuda_absent():
+        cuda = False
+    else:
+        import warp as wp
 
-    from ..config import ConfigError
-    from ..devices import check_device
+        from ..config import ConfigError
+        from ..console import quiet_warp
+        from ..devices import check_device
 
-    wp.config.log_level = wp.LOG_WARNING
-    if args.device is not None:
-        try:
-            check_device(args.device, "--device")
-        except ConfigError as e:
-            p.error(str(e))
-    cuda = (args.device or ("cuda:0" if wp.is_cuda_available() else "cpu")).startswith("cuda")
+        with quiet_warp(args.verbose):
+            if args.device is not None:
+                try:
+                    check_device(args.device, "--device")
+                except ConfigError as e:
+                    p.error(str(e))
+            cuda = (args.device or ("cuda:0" if wp.is_cuda_available() else "cpu")).startswith("cuda")
     envs = args.envs or (4096 if cuda else 64)
     if args.task in MANISKILL_TASKS:
         # ManiSkill's PPO normalises the advantages per mini-batch: 2 samples at least for a defined std
@@ -222,7 +259,9 @@ def main(argv=None) -> int:
     import warp as wp
     from rsl_rl.runners import OnPolicyRunner
 
-    wp.config.log_level = wp.LOG_WARNING
+    from ..console import cli_output
+
+    cli_output(args.verbose)  # Warp quiet unless --verbose
     if args.task in MANISKILL_TASKS:
         from .task_ppo import train
 
@@ -247,13 +286,23 @@ def main(argv=None) -> int:
     cfg = train_cfg(args.steps_per_env, args.seed)
     with contextlib.redirect_stdout(io.StringIO()):  # rsl-rl prints its observation sets and both networks
         runner = OnPolicyRunner(env, cfg, log_dir=None, device=device)
+    resumed, start = getattr(args, "resumed", None), 0
+    if resumed is not None:  # weights, normaliser, Adam's state and the iteration count of the run's checkpoint
+        from .resume import load_checkpoint
+
+        start = load_checkpoint(runner, args.resume, device, resumed, captured=False)
+    from .logger import RunLogger
+
+    log = RunLogger(args.logger, out, cfg=cfg, env_cfg=env.cfg, start_iteration=start)
     setup_s = time.perf_counter() - t0
     print(f"wpctrl train: {envs} envs on {device}, {args.control_mode}, set up in {setup_s:.1f} s", flush=True)
-    history, evaluations = [], []
+    # a resumed run continues its history, evaluations and wall time
+    history, evaluations = list(resumed["history"]) if resumed else [], list(resumed["evaluations"]) if resumed else []
+    wall0, n_prev = max([r["wall_s"] for r in history[-1:] + evaluations[-1:]], default=0.0), len(evaluations)
     t_start = time.perf_counter()
-    obs = _start_episodes(env, args.seed)
+    obs = _start_episodes(env, args.seed + start)
     runner.alg.train_mode()
-    for it in range(iterations):
+    for it in range(start, start + iterations):
         t_it = time.perf_counter()
         with torch.inference_mode():  # the loop of OnPolicyRunner.learn, with the env's own episode statistics
             for _ in range(cfg["num_steps_per_env"]):
@@ -276,37 +325,43 @@ def main(argv=None) -> int:
             "collection_env_steps_per_s": envs * cfg["num_steps_per_env"] / collect_s,
             "collect_s": collect_s,
             "learn_s": learn_s,
+            "env_steps": (it + 1) * envs * cfg["num_steps_per_env"],
             "iteration_s": time.perf_counter() - t_it,
-            "wall_s": time.perf_counter() - t_start,
+            "wall_s": wall0 + time.perf_counter() - t_start,
             "action_std": float(runner.alg.get_policy().output_std.detach().mean()),
             "losses": {k: float(v) for k, v in losses.items()},
         }
         history.append(row)
+        log.iteration(row, runner.alg.learning_rate)
         print(
             f"[{it:4d}] step reward {fmt(row['mean_step_reward'])} episode reward {fmt(row['mean_episode_reward'])} "
             f"success {fmt(row['success_rate'])} "
             f"collect {row['collection_env_steps_per_s']:,.0f} env-steps/s  wall {row['wall_s']:.1f} s",
             flush=True,
         )
-        if args.eval_every and (it + 1) % args.eval_every == 0 and it + 1 < iterations:
+        if args.eval_every and (it + 1) % args.eval_every == 0 and it + 1 < start + iterations:
             ev = evaluate(env, runner, eval_episodes)
-            ev.update(iteration=it, wall_s=time.perf_counter() - t_start)
+            ev.update(iteration=it, wall_s=wall0 + time.perf_counter() - t_start, env_steps=row["env_steps"])
             evaluations.append(ev)
+            log.evaluation(ev)
             print(f"       evaluation: success {ev['success_rate']:.3f} over {ev['episodes']} episodes", flush=True)
             if args.target_success is not None and ev["success_rate"] >= args.target_success:
                 break
             obs = _start_episodes(env, args.seed + it + 1)
             runner.alg.train_mode()
     train_s = time.perf_counter() - t_start
+    runner.current_learning_iteration = len(history)
     runner.save(str(out / "policy.pt"))
     last = evaluations[-1] if evaluations and evaluations[-1]["iteration"] == history[-1]["iteration"] else None
     if last is None:
         last = evaluate(env, runner, eval_episodes)
-        last.update(iteration=history[-1]["iteration"], wall_s=time.perf_counter() - t_start)
+        last.update(iteration=history[-1]["iteration"], wall_s=wall0 + time.perf_counter() - t_start,
+                    env_steps=history[-1]["env_steps"])  # fmt: skip
         evaluations.append(last)
+        log.evaluation(last)
     print(f"evaluation: success {last['success_rate']:.3f} over {last['episodes']} episodes", flush=True)
     target = args.target_success
-    reached = [e for e in evaluations if target is not None and e["success_rate"] >= target]
+    reached = [e for e in evaluations[n_prev:] if target is not None and e["success_rate"] >= target]
     summary = {
         "task": args.task,
         "control_mode": args.control_mode,
@@ -324,7 +379,9 @@ def main(argv=None) -> int:
         "total_s": time.perf_counter() - t_main,
         "collection_env_steps_per_s_median": median([h["collection_env_steps_per_s"] for h in history[1:] or history]),
         "target_success": target,
-        "time_to_target_s": (t_start - t_main + reached[0]["wall_s"]) if reached else None,
+        "time_to_target_s": (t_start - t_main + reached[0]["wall_s"] - wall0) if reached else None,
+        "resumed_from": {"run": str(args.resume), "iteration": start} if resumed else None,
+        "logger": args.logger,
         "ppo": cfg,
         "history": history,
         "evaluations": evaluations,
@@ -334,7 +391,8 @@ def main(argv=None) -> int:
     wall = history[-1]["wall_s"]
     plot(history, evaluations, out / "learning_curve.png",
          f"reach, {envs} envs on {device}: {len(history)} iterations in {wall:.0f} s",
-         "success rate (TCP within 2.5 cm)")  # fmt: skip
+         "success rate (TCP within 2.5 cm)", window=envs)  # fmt: skip
+    log.close()
     print(f"wrote {out / 'train.json'}, {out / 'learning_curve.png'}, {out / 'policy.pt'}", flush=True)
     if reached:
         first = reached[0]

@@ -15,13 +15,19 @@ from __future__ import annotations
 import json
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import torch
 
-from .commands import evaluate_parser
+from .command_args import check_evaluate_args, evaluate_parser
 
 __all__ = ["evaluate_maniskill", "load_policy", "main"]
+
+SAPIEN_VULKAN_NOTE = "Failed to find system libvulkan"
+"""SAPIEN's warning, on import, that it falls back to its own Vulkan library: not shown (unless ``--verbose``), as the
+evaluation's ManiSkill env renders nothing."""
+
 
 class PolicyError(ValueError):
     """A policy file that cannot drive the requested task (the message says what differs)."""
@@ -67,9 +73,13 @@ def load_policy(path, task: str | None = None, device="cpu"):
 def evaluate_maniskill(policy, task: str, control_mode: str, episodes: int, seed: int = 0, progress=None) -> dict:
     """``policy`` on ``episodes`` episodes of the real ManiSkill (PhysX CPU, one env); metrics as
     :func:`wpctrl.train.task_ppo.evaluate_policy`, plus per-episode records."""
+    from wpctrl import console
     from wpctrl.tasks.maniskill_side import make_maniskill
 
-    env = make_maniskill(task, control_mode, reward_mode="normalized_dense")
+    with warnings.catch_warnings():
+        if not console.VERBOSE:  # SAPIEN's note on import; the env renders nothing (render_backend="none")
+            warnings.filterwarnings("ignore", message=SAPIEN_VULKAN_NOTE, category=UserWarning)
+        env = make_maniskill(task, control_mode, reward_mode="normalized_dense")
     steps = int(env.spec.max_episode_steps or 50)
     t = time.perf_counter()
     records = []
@@ -105,24 +115,44 @@ def _summary(records: list, seconds: float) -> dict:
     }
 
 
+class _CountEpisodes:
+    """``env`` as :func:`~wpctrl.train.task_ppo.evaluate_policy` uses it, advancing ``bar`` by the episodes that end
+    with each round of ``max_episode_steps`` steps (``env.num_envs`` at a time, the last round's share only)."""
+
+    def __init__(self, env, bar, episodes: int):
+        self._env, self._bar, self._left, self._k = env, bar, episodes, 0
+
+    def __getattr__(self, name):
+        return getattr(self._env, name)
+
+    def step(self, action):
+        out = self._env.step(action)
+        self._k += 1
+        if self._k == self._env.max_episode_steps:
+            self._k = 0
+            n = min(self._env.num_envs, self._left)
+            self._left -= n
+            self._bar.update(n)
+        return out
+
+
 def main(argv=None) -> int:
     p = evaluate_parser()
     args = p.parse_args(argv)
-    for name in ("episodes", "envs", "substeps"):
-        v = getattr(args, name)
-        if v is not None and v < 1:
-            p.error(f"--{name}: expected a positive number, got {v}")
-    import warp as wp
-
+    check_evaluate_args(p, args)  # without torch's, Warp's or ManiSkill's imports (wpctrl evaluate ran them already)
+    from .. import console
     from ..config import ConfigError
+    from ..console import compile_notice, progress
     from ..devices import check_device
 
-    wp.config.log_level = wp.LOG_WARNING
+    console.VERBOSE = args.verbose
     if args.sim == "newton":
+        console.cli_output(args.verbose)  # Warp quiet unless --verbose (ManiSkill's PhysX needs no Warp)
         try:
             check_device(args.device, "--device")
         except ConfigError as e:
-            p.error(str(e))
+            print(f"wpctrl evaluate: error: {e}", file=sys.stderr)
+            return 2
     device = args.device if args.sim == "newton" else "cpu"
     try:
         policy, meta = load_policy(args.policy, args.task, device)
@@ -132,14 +162,21 @@ def main(argv=None) -> int:
     task, control_mode = meta["task"], meta.get("control_mode", "pd_joint_delta_pos")
     if not str(device).startswith("cuda"):
         torch.set_num_threads(1)  # a small network: see wpctrl.train.task_ppo
+    bar = None
     if args.sim == "maniskill":
+        bar = progress(args.episodes, f"{task} on ManiSkill", "episode", args.progress)
 
-        def progress(i, records):
-            if i % 10 == 0 or i == args.episodes:
+        def report(i, records):
+            bar.update(1)
+            if not args.progress and (i % 10 == 0 or i == args.episodes):
                 ok = sum(r["success_once"] for r in records)
                 print(f"  {i:4d} episodes: {ok} successful", flush=True)
 
-        result = evaluate_maniskill(policy, task, control_mode, args.episodes, args.seed, progress)
+        if args.video:
+            from .video import open_recorder
+
+            open_recorder(None, args.video, sim=args.sim)  # says why it is skipped
+        result = evaluate_maniskill(policy, task, control_mode, args.episodes, args.seed, report)
     else:
         import wpctrl.tasks as T
 
@@ -147,11 +184,22 @@ def main(argv=None) -> int:
 
         substeps = args.substeps or meta.get("substeps")
         physics = T.TaskPhysics(substeps=substeps) if substeps else T.TaskPhysics()
-        env = T.make(task, num_envs=args.envs or min(args.episodes, 256), device=device, control_mode=control_mode,
-                     seed=args.seed, auto_reset=False, ignore_terminations=True, physics=physics)  # fmt: skip
-        result = evaluate_policy(policy, env, args.episodes, seed=args.seed)
+        with compile_notice(f"Warp kernels for {task} on {device}"):
+            env = T.make(task, num_envs=args.envs or min(args.episodes, 256), device=device, control_mode=control_mode,
+                         seed=args.seed, auto_reset=False, ignore_terminations=True, physics=physics,
+                         verbose=args.verbose)  # fmt: skip
+        bar = progress(args.episodes, f"{task} on Newton", "episode", args.progress)
+        rec = None
+        if args.video:
+            from .video import open_recorder
+
+            rec = open_recorder(env, args.video)  # None, saying why, where no renderer works
+        result = evaluate_policy(policy, _CountEpisodes(rec or env, bar, args.episodes), args.episodes, seed=args.seed)
+        if rec is not None:
+            rec.close()
         result["substeps"] = physics.substeps
         env.close()
+    bar.close()
     result = {"task": task, "sim": args.sim, "control_mode": control_mode, "policy": str(args.policy),
               "seed": args.seed, **result}  # fmt: skip
     print(f"{task} on {args.sim}: success {100 * result['success_rate']:.1f} % (at the end "

@@ -13,13 +13,14 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import logging
 import sys
 import warnings
 from pathlib import Path
 
 import torch
 
-from .commands import export_parser
+from .command_args import export_parser
 
 __all__ = ["EXTRA_FILE", "TaskPolicy", "export", "load_actor", "main"]
 
@@ -164,10 +165,45 @@ def _export_onnx(actor, meta: dict, path: Path, obs, reference) -> dict:
     return {"policy.onnx": str(path), "onnx_max_abs_diff": float(abs(got - reference.numpy()).max())}
 
 
+TORCH_JIT_DEPRECATION = r"`torch\.jit\.\w+` is deprecated"
+"""torch (2.10 and later) marks TorchScript deprecated on every ``torch.jit.script`` / ``save`` / ``load``; the
+export writes TorchScript on purpose (it loads with torch alone, and ManiSkill's and Isaac Lab's deployment read
+it)."""
+TORCHVISION_SKIPPED = "torchvision is not installed. Skipping torchvision::"
+"""torch's ONNX exporter logs this once per torchvision operator when torchvision is absent; the policy uses none."""
+
+
+class _DropTorchvisionNotes(logging.Filter):
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not record.getMessage().startswith(TORCHVISION_SKIPPED)
+
+
+@contextlib.contextmanager
+def known_third_party_notes_hidden():
+    """Within the block, two notes of torch that do not concern an exported policy are not shown: TorchScript's
+    deprecation warnings (:data:`TORCH_JIT_DEPRECATION`) and the ONNX exporter's "torchvision is not installed"
+    lines (:data:`TORCHVISION_SKIPPED`). Every other warning and log line still shows; ``--verbose`` shows these
+    too."""
+    drop = _DropTorchvisionNotes()
+    loggers = [logging.getLogger("torch.onnx._internal.exporter._registration")]  # where torch logs them
+    with warnings.catch_warnings():
+        for category in (DeprecationWarning, FutureWarning):
+            warnings.filterwarnings("ignore", message=TORCH_JIT_DEPRECATION, category=category)
+        for logger in loggers:
+            logger.addFilter(drop)
+        try:
+            yield
+        finally:
+            for logger in loggers:
+                logger.removeFilter(drop)
+
+
 def main(argv=None) -> int:
     args = export_parser().parse_args(argv)
+    hide = contextlib.nullcontext() if args.verbose else known_third_party_notes_hidden()
     try:
-        result = export(args.run_dir, args.out, onnx=not args.no_onnx)
+        with hide:
+            result = export(args.run_dir, args.out, onnx=not args.no_onnx)
     except (ExportError, ImportError) as e:
         print(f"wpctrl export: error: {e}", file=sys.stderr)
         return 2

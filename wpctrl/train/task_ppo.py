@@ -183,7 +183,9 @@ def train(args, t_main: float) -> int:
 
     import wpctrl.tasks as T
 
+    from .logger import RunLogger
     from .outputs import fmt, median, plot, write_json
+    from .resume import load_checkpoint
 
     device = args.device or ("cuda:0" if wp.is_cuda_available() else "cpu")
     cuda = device.startswith("cuda")
@@ -226,9 +228,14 @@ def train(args, t_main: float) -> int:
     maniskill_init(alg.critic, math.sqrt(2.0))
     for group in alg.optimizer.param_groups:
         group["eps"] = 1e-5  # ManiSkill's Adam
+    resumed = getattr(args, "resumed", None)
+    start = 0
+    if resumed is not None:  # weights, normaliser, Adam's state and the iteration count of the run's checkpoint
+        start = load_checkpoint(runner, args.resume, device, resumed, captured=ppo_update == "captured")
     if ppo_update == "captured":
         alg.update = CapturedUpdate(alg, graph=True)
     collector = Collector(env, alg, sampling)
+    log = RunLogger(args.logger, out, cfg=cfg, env_cfg=env.cfg, start_iteration=start)
     setup_s = time.perf_counter() - t0
     print(f"wpctrl train: {args.task}, {envs} envs on {device} ({env.substeps} MuJoCo steps per physics step), "
           f"{control_mode}, evaluation on {eval_envs} envs, PPO update {ppo_update}, {sampling} action sampling; "
@@ -242,20 +249,23 @@ def train(args, t_main: float) -> int:
 
     def evaluation(it: int) -> dict:
         ev = evaluate_policy(deterministic, eval_env, eval_episodes, seed=eval_seed)
-        ev.update(iteration=it, wall_s=time.perf_counter() - t_start, env_steps=(it + 1) * envs * steps)
+        ev.update(iteration=it, wall_s=wall0 + time.perf_counter() - t_start, env_steps=(it + 1) * envs * steps)
         evaluations.append(ev)
+        log.evaluation(ev)
         print(f"       evaluation: success {ev['success_rate']:.3f} (at the end {ev['success_at_end_rate']:.3f}) "
               f"over {ev['episodes']} episodes, return {ev['mean_episode_reward']:.2f}", flush=True)  # fmt: skip
         return ev
 
-    history, evaluations = [], []
+    # a resumed run continues its history, evaluations and wall time
+    history, evaluations = list(resumed["history"]) if resumed else [], list(resumed["evaluations"]) if resumed else []
+    wall0, n_prev = max([r["wall_s"] for r in history[-1:] + evaluations[-1:]], default=0.0), len(evaluations)
     t_start = time.perf_counter()
     obs = env.get_observations()
-    if args.eval_every:
+    if args.eval_every and not resumed:
         evaluation(-1)  # the untrained policy: the curve's start
     alg.train_mode()
     stop = None
-    for it in range(iterations):
+    for it in range(start, start + iterations):
         t_it = time.perf_counter()
         with torch.inference_mode():
             obs = collector.rollout(obs, steps)
@@ -269,14 +279,16 @@ def train(args, t_main: float) -> int:
         row = {"iteration": it, **{k: stats[k] for k in ("mean_episode_reward", "success_rate", "success_at_end_rate",
                                                           "mean_episode_length", "episodes", "mean_step_reward")},
                "collection_env_steps_per_s": envs * steps / collect_s, "collect_s": collect_s, "learn_s": learn_s,
-               "iteration_s": time.perf_counter() - t_it, "wall_s": time.perf_counter() - t_start,
+               "env_steps": (it + 1) * envs * steps, "iteration_s": time.perf_counter() - t_it,
+               "wall_s": wall0 + time.perf_counter() - t_start,
                "action_std": float(alg.get_policy().output_std.detach().mean()),
                "losses": {k: float(v) for k, v in losses.items()}}  # fmt: skip
         history.append(row)
+        log.iteration(row, alg.learning_rate)
         print(f"[{it:4d}] step reward {fmt(row['mean_step_reward'])} episode reward {fmt(row['mean_episode_reward'])} "
               f"success {fmt(row['success_rate'])} collect {row['collection_env_steps_per_s']:,.0f} env-steps/s  "
               f"wall {row['wall_s']:.1f} s", flush=True)  # fmt: skip
-        last_it = it + 1 == iterations
+        last_it = it + 1 == start + iterations
         over = args.time_limit is not None and time.perf_counter() - t_main >= args.time_limit
         if args.eval_every and (it + 1) % args.eval_every == 0 and not last_it and not over:
             ev = evaluation(it)
@@ -294,7 +306,7 @@ def train(args, t_main: float) -> int:
     if last is None:
         last = evaluation(history[-1]["iteration"])
     target = args.target_success
-    reached = [e for e in evaluations if target is not None and e["success_rate"] >= target]
+    reached = [e for e in evaluations[n_prev:] if target is not None and e["success_rate"] >= target]
     summary = {
         "task": args.task,
         "control_mode": control_mode,
@@ -318,8 +330,10 @@ def train(args, t_main: float) -> int:
         "total_s": time.perf_counter() - t_main,
         "collection_env_steps_per_s_median": median([h["collection_env_steps_per_s"] for h in history[1:] or history]),
         "target_success": target,
-        "time_to_target_s": (t_start - t_main + reached[0]["wall_s"]) if reached else None,
+        "time_to_target_s": (t_start - t_main + reached[0]["wall_s"] - wall0) if reached else None,
         "env_steps_to_target": reached[0]["env_steps"] if reached else None,
+        "resumed_from": {"run": str(args.resume), "iteration": start} if resumed else None,
+        "logger": args.logger,
         "ppo": cfg,
         "checkpoint": infos,
         "history": history,
@@ -329,7 +343,8 @@ def train(args, t_main: float) -> int:
     write_json(out / "train.json", summary)
     plot(history, evaluations, out / "learning_curve.png",
          f"{args.task}, {envs} envs on {device}: {len(history)} iterations in {history[-1]['wall_s']:.0f} s",
-         "success rate (success at any step)")  # fmt: skip
+         "success rate (success at any step)", window=envs)  # fmt: skip
+    log.close()
     print(f"wrote {out / 'train.json'}, {out / 'learning_curve.png'}, {out / 'policy.pt'}", flush=True)
     if reached:
         first = reached[0]

@@ -1,0 +1,118 @@
+"""``wpctrl export``'s and ``wpctrl evaluate``'s argument parsers and every check of their arguments that needs no
+torch (a missing file, an unknown task, a device this machine cannot have, the train extra not installed): imported
+by the light entry points (:mod:`.commands`) and by the commands themselves (:mod:`.export`, :mod:`.evaluate`), and
+importing none of them."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import importlib.util
+import sys
+from pathlib import Path
+
+from ..console import add_output_options, device_refusal
+from ..extras import install_hint, missing
+from ..tasks.names import TASK_IDS
+
+__all__ = [
+    "SIMS",
+    "check_evaluate_args",
+    "check_export_args",
+    "evaluate_parser",
+    "export_parser",
+    "missing_train_extra",
+    "refuse",
+]
+
+SIMS = ("maniskill", "newton")
+"""``wpctrl evaluate --sim``'s simulators."""
+
+TRAIN_EXTRA = ("torch", "rsl_rl")
+"""What ``wpctrl train`` and ``wpctrl export`` import (``evaluate`` needs torch alone)."""
+
+
+def missing_train_extra(command: str, modules: tuple[str, ...] = TRAIN_EXTRA, load: bool = True) -> str | None:
+    """The one-line install hint of ``wpctrl <command>`` when one of ``modules`` does not import, else None.
+    ``load=False``: only whether they are installed (found without importing them: milliseconds, not seconds)."""
+    for name in modules:
+        try:
+            if load:
+                importlib.import_module(name)
+            elif importlib.util.find_spec(name) is None:
+                raise ImportError(f"No module named {name!r}")
+        except (ImportError, ValueError) as e:
+            return missing(f"wpctrl {command}", "train", e, torch=True)
+    return None
+
+
+def export_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="wpctrl export",
+        description="Export the policy of a `wpctrl train --task PushCube-v1 | PickCube-v1` run as TorchScript "
+        "(policy.ts, loadable with torch alone) and ONNX (policy.onnx, if the onnx package is importable): "
+        "ManiSkill's flattened state observation -> deterministic action, observation normaliser included.",
+    )
+    p.add_argument("run_dir", help="the training run's --out folder (holds policy.pt)")
+    p.add_argument("--out", default=None, help="folder for policy.ts / policy.onnx / policy.json (default: run_dir)")
+    p.add_argument("--no-onnx", action="store_true", help="write the TorchScript module only")
+    add_output_options(p)
+    return p
+
+
+def evaluate_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="wpctrl evaluate",
+        description="Evaluate an exported policy (policy.ts from `wpctrl export`) on fresh episodes of ManiSkill's "
+        "PushCube-v1 / PickCube-v1, in the real ManiSkill (PhysX CPU) or on Newton through wpctrl.",
+    )
+    p.add_argument("--policy", required=True, help="the exported TorchScript policy (policy.ts)")
+    p.add_argument("--task", default=None, choices=TASK_IDS, help="the task (default: the policy's own)")
+    p.add_argument("--sim", choices=SIMS, required=True, help="the simulator")
+    p.add_argument("--episodes", type=int, default=100, help="episodes to run (default: 100)")
+    p.add_argument("--seed", type=int, default=0, help="episode seeds (ManiSkill: seed + i for episode i)")
+    p.add_argument("--device", default="cpu", help="newton: Warp / torch device (default: cpu)")
+    p.add_argument("--envs", type=int, default=None, help="newton: envs at a time (default: min(episodes, 256))")
+    p.add_argument("--substeps", type=int, default=None, help="newton: MuJoCo-Warp steps per physics step "
+                   "(default: the policy's training value, else wpctrl.tasks.TaskPhysics's)")  # fmt: skip
+    p.add_argument("--out", default=None, help="write the result (with every episode on ManiSkill) as JSON here")
+    p.add_argument("--video", default=None, metavar="FILE", help="newton: also write env 0's first episodes as a video "
+                   "(FILE.mp4, .gif; MuJoCo's offscreen renderer; skipped, saying why, where none works)")  # fmt: skip
+    add_output_options(p, progress=True)
+    return p
+
+
+def check_export_args(args) -> str | None:
+    """Why ``wpctrl export``'s arguments cannot work, known without torch (the run folder and its checkpoint), or
+    None."""
+    run = Path(args.run_dir)
+    if not run.is_dir():
+        return f"run dir {str(run)!r} does not exist"
+    if not (run / "policy.pt").is_file():
+        return f"run dir {str(run)!r} has no policy.pt (the checkpoint `wpctrl train` writes)"
+    return None
+
+
+def refuse(command: str, message: str):
+    """Exit 2 with the one line ``wpctrl <command>: error: <message>`` on stderr."""
+    print(f"wpctrl {command}: error: {message}", file=sys.stderr)
+    raise SystemExit(2)
+
+
+def check_evaluate_args(p: argparse.ArgumentParser, args) -> None:
+    """``wpctrl evaluate``'s arguments, checked without torch, Warp or ManiSkill: exits 2 with one line for the first
+    that cannot work (the policy file, the numbers, a device this machine cannot have; Warp confirms the device
+    later)."""
+    for name in ("episodes", "envs", "substeps"):
+        v = getattr(args, name)
+        if v is not None and v < 1:
+            p.error(f"--{name}: expected a positive number, got {v}")
+    policy = Path(args.policy)
+    if not policy.is_file():
+        what = "a folder" if policy.is_dir() else "no file"
+        refuse("evaluate", f"--policy: {what} {str(policy)!r} (export a run with `python -m wpctrl export RUN_DIR`, "
+                           "which writes RUN_DIR/policy.ts)")  # fmt: skip
+    if args.sim == "newton" and (why := device_refusal(args.device, "--device")):
+        refuse("evaluate", why)
+    if args.sim == "maniskill" and importlib.util.find_spec("mani_skill") is None:
+        refuse("evaluate", f"--sim maniskill: needs ManiSkill, the maniskill extra ({install_hint('maniskill', True)})")

@@ -276,13 +276,16 @@ def main(argv=None) -> int:
     torch.manual_seed(args.seed)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    from ..console import compile_notice
     from .outputs import fmt, median, plot, write_json
     from .reach import ReachEnv
 
     t0 = time.perf_counter()
-    env = ReachEnv(
-        envs, device=device, control_mode=args.control_mode, seed=args.seed, graph=cuda and not args.no_graph
-    )
+    print(f"wpctrl train: building {envs} reach envs on {device} ...", flush=True)
+    with compile_notice(f"Warp kernels for the reach on {device}", say=lambda msg: print(msg, flush=True)):
+        env = ReachEnv(
+            envs, device=device, control_mode=args.control_mode, seed=args.seed, graph=cuda and not args.no_graph
+        )
     cfg = train_cfg(args.steps_per_env, args.seed)
     with contextlib.redirect_stdout(io.StringIO()):  # rsl-rl prints its observation sets and both networks
         runner = OnPolicyRunner(env, cfg, log_dir=None, device=device)

@@ -17,6 +17,7 @@ import time
 
 import torch
 
+from ..console import compile_notice
 from .ppo_config import MANISKILL_EPOCHS as EPOCHS
 from .ppo_config import MANISKILL_MINIBATCHES as MINIBATCHES
 from .ppo_config import MANISKILL_STEPS_PER_ENV as STEPS_PER_ENV
@@ -214,11 +215,13 @@ def train(args, t_main: float) -> int:
 
     t0 = time.perf_counter()
     graph = not args.no_graph
-    env = TaskVecEnv(args.task, envs, device=device, control_mode=control_mode, seed=args.seed,
-                     partial_reset=not args.no_partial_reset, substeps=args.substeps, graph=graph)  # fmt: skip
-    eval_env = T.make(args.task, num_envs=eval_envs, device=device, control_mode=control_mode,
-                      seed=args.seed + 10_000, auto_reset=False, ignore_terminations=True,
-                      physics=T.TaskPhysics(substeps=env.substeps), graph=graph)  # fmt: skip
+    print(f"wpctrl train: building {envs} {args.task} envs and {eval_envs} evaluation envs on {device} ...", flush=True)
+    with compile_notice(f"Warp kernels for {args.task} on {device}", say=lambda msg: print(msg, flush=True)):
+        env = TaskVecEnv(args.task, envs, device=device, control_mode=control_mode, seed=args.seed,
+                         partial_reset=not args.no_partial_reset, substeps=args.substeps, graph=graph)  # fmt: skip
+        eval_env = T.make(args.task, num_envs=eval_envs, device=device, control_mode=control_mode,
+                          seed=args.seed + 10_000, auto_reset=False, ignore_terminations=True,
+                          physics=T.TaskPhysics(substeps=env.substeps), graph=graph)  # fmt: skip
     cfg = maniskill_ppo_cfg(steps, args.epochs or EPOCHS, args.minibatches or MINIBATCHES, args.seed,
                             obs_normalization=args.obs_normalization == "on")  # fmt: skip
     with contextlib.redirect_stdout(io.StringIO()):  # rsl-rl prints its observation sets and both networks

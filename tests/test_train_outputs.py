@@ -108,7 +108,9 @@ def test_logger_none_writes_no_event_file_and_wandb_is_refused_with_its_install_
     out = tmp_path / "quiet"
     assert main(["train", "--envs", "8", "--iterations", "1", "--logger", "none", "--out", str(out)]) == 0
     assert (out / "train.json").exists() and not list(out.glob("events.out.tfevents.*"))
-    capsys.readouterr()
+    printed = capsys.readouterr().out.splitlines()  # the set-up says what it builds before it builds it
+    assert printed[0] == "wpctrl train: building 8 reach envs on cpu ...", printed[:3]
+    assert any(line.startswith("wpctrl train: 8 envs on cpu") and "set up in" in line for line in printed), printed
     try:
         import wandb  # noqa: F401
     except ImportError:

@@ -10,28 +10,14 @@ import math
 import sys
 
 from ..extras import install_hint
+from ..tasks.names import CONTROL_MODES as MANISKILL_PANDA_MODES
 
 SOLVERS = ("mujoco", "steel", "kamino", "featherstone", "semi_implicit", "xpbd")
 """Newton's articulation solvers the demo knows; :func:`unsupported` says which of them cannot hold the Panda."""
 MAXIMAL_SOLVERS = ("xpbd", "semi_implicit")  # body-coordinate solvers: joint_q is recovered with eval_ik each step
-PANDA_MODES = (
-    "pd_joint_delta_pos",
-    "pd_joint_pos",
-    "pd_joint_target_delta_pos",
-    "pd_joint_vel",
-    "pd_joint_pos_vel",
-    "pd_joint_delta_pos_vel",
-    "pd_ee_delta_pos",
-    "pd_ee_delta_pose",
-    "pd_ee_pose",
-    "pd_ee_target_delta_pos",
-    "pd_ee_target_delta_pose",
-    "osc_ee_delta_pose",
-    "osc_ee_pose",
-    "joint_impedance_delta_pos",
-)
-"""wpctrl.robots.PANDA_CONTROL_MODES' names, spelled out so that --help and argument errors need no heavy import
-(a test keeps the two equal)."""
+PANDA_MODES = MANISKILL_PANDA_MODES + ("osc_ee_delta_pose", "osc_ee_pose", "joint_impedance_delta_pos")
+"""wpctrl.robots.PANDA_CONTROL_MODES' names: ManiSkill's (the light list of :mod:`wpctrl.tasks.names`) and wpctrl's
+torque-level ones, so that --help and argument errors need no heavy import (a test keeps the two equal)."""
 ROBOT_MODES = {
     "panda": PANDA_MODES,
     "fetch": (

@@ -156,8 +156,9 @@ def device_refusal(device: str | None, what: str = "--device") -> str | None:
     device where :func:`cuda_absent`), worded as :func:`wpctrl.devices.check_device`'s; None when Warp must decide."""
     if device is None or device == "cpu" or not cuda_absent():
         return None
-    why = " (it has no CUDA device)" if device.startswith("cuda") else ""
-    return f"{what}: {device!r} is not a device of this machine{why}; available devices: ['cpu']"
+    from .devices import not_a_device
+
+    return not_a_device(what, device, True, ["cpu"])
 
 
 # -- progress ----------------------------------------------------------------------------------------------------

@@ -5,7 +5,14 @@ from __future__ import annotations
 
 from .config.errors import ConfigError
 
-__all__ = ["available_devices", "check_device"]
+__all__ = ["available_devices", "check_device", "not_a_device"]
+
+
+def not_a_device(what: str, device: str, cuda_missing: bool, available: list[str]) -> str:
+    """The refusal of ``device``: ``what`` (the argument), the name asked for, that the machine has no CUDA device
+    where that is why, and the devices it has."""
+    why = " (it has no CUDA device)" if cuda_missing and device.startswith("cuda") else ""
+    return f"{what}: {device!r} is not a device of this machine{why}; available devices: {available}"
 
 
 def available_devices() -> list[str]:
@@ -30,7 +37,4 @@ def check_device(device, what: str = "device"):
     try:
         return wp.get_device(device)
     except (ValueError, RuntimeError) as e:  # Warp's "Invalid device identifier" and the like
-        why = "" if wp.is_cuda_available() or not device.startswith("cuda") else " (it has no CUDA device)"
-        raise ConfigError(
-            f"{what}: {device!r} is not a device of this machine{why}; available devices: {available_devices()}"
-        ) from e
+        raise ConfigError(not_a_device(what, device, not wp.is_cuda_available(), available_devices())) from e

@@ -88,8 +88,13 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--run", nargs=2, action="append", metavar=("LABEL", "JUNIT_XML"), required=True,
                     help="what the run was and its pytest --junitxml report")  # fmt: skip
-    ap.add_argument("--wall", type=float, action="append", default=[],
-                    help="the wall time [s] of each run, in the order of --run (default: the report's time)")
+    ap.add_argument(
+        "--wall",
+        type=float,
+        action="append",
+        default=[],
+        help="the wall time [s] of each run, in the order of --run (default: the report's time)",
+    )
     ap.add_argument("--doc", type=Path, default=DOC)
     args = ap.parse_args(argv)
     if args.wall and len(args.wall) != len(args.run):

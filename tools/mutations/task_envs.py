@@ -1,0 +1,96 @@
+"""Mutations: tasks, evaluation rounds, the gymnasium API and the tasks' range edges."""
+
+from .model import M
+
+MUTATIONS = [
+    M(
+        "tasks_reset_same_draw_every_env",
+        "wpctrl/tasks/kernels.py",
+        "    rng = wp.rand_init(seed[0], e + n * reset_count[e])\n",
+        "    rng = wp.rand_init(seed[0], n * reset_count[e])\n",
+        "every env of a reset draws the same episode (the RNG's offset forgets the env)",
+        ("tests/test_tasks_envs.py::test_every_env_of_a_reset_draws_its_own_episode_from_maniskills_distribution",),
+    ),
+    M(
+        "tasks_set_state_dict_resets_every_env",
+        "wpctrl/tasks/state_dict.py",
+        "        self._after_state_write(mask)\n",
+        "        self._after_state_write(self._all)\n",
+        "set_state_dict(env_idx=...) resets the drive targets, contact forces and observations of every env",
+        ("tests/test_tasks_envs.py::test_partial_set_state_dict_leaves_the_other_envs_exactly_as_they_were",),
+    ),
+    M(
+        "tasks_final_info_misses_success",
+        "wpctrl/tasks/env.py",
+        '            done = t["terminated"] | t["truncated"]\n',
+        '            done = t["truncated"].clone()\n',
+        "the final-info mask misses the envs whose episode ended by success",
+        (
+            "tests/test_tasks_envs.py::test_an_episode_ended_by_success_is_in_the_final_info_and_restarts_inside_the_step",
+        ),
+    ),
+    M(
+        "tasks_pick_static_six_joints",
+        "wpctrl/tasks/kernels.py",
+        "    for j in range(7):\n        if wp.abs(joint_qd[qd0 + j]) > P.static_threshold:\n",
+        "    for j in range(6):\n        if wp.abs(joint_qd[qd0 + j]) > P.static_threshold:\n",
+        "PickCube's robot-static test ignores the 7th arm joint",
+        ("tests/test_tasks_envs.py::test_pick_robot_static_checks_every_arm_joint_at_the_threshold",),
+    ),
+    M(
+        "tasks_static_threshold_exclusive",
+        "wpctrl/tasks/kernels.py",
+        "        if wp.abs(joint_qd[qd0 + j]) > P.static_threshold:\n",
+        "        if wp.abs(joint_qd[qd0 + j]) >= P.static_threshold:\n",
+        "a joint at exactly 0.2 rad/s counts as moving (ManiSkill: max |qvel| <= 0.2 is static)",
+        ("tests/test_tasks_envs.py::test_pick_robot_static_checks_every_arm_joint_at_the_threshold",),
+    ),
+    M(
+        "tasks_grasp_angle_in_radians",
+        "wpctrl/tasks/env.py",
+        "math.cos(math.radians(spec.grasp_max_angle))",
+        "math.cos(spec.grasp_max_angle)",
+        "the grasp cone's 85 degrees taken as radians",
+        ("tests/test_tasks_envs.py::test_pick_grasp_cone_and_force_limit_at_their_edges",),
+    ),
+    M(
+        "tasks_pick_goal_radius_shrunk",
+        "wpctrl/tasks/kernels.py",
+        "        placed = wp.length(goal - cube_p) <= P.goal_radius\n",
+        "        placed = wp.length(goal - cube_p) < P.goal_radius - 1.0e-3\n",
+        "PickCube's goal radius (0.025 m, inclusive) shrunk by a millimetre",
+        ("tests/test_tasks_envs.py::test_goal_radius_and_height_edges",),
+    ),
+    M(
+        "train_eval_rounds_one_seed",
+        "wpctrl/train/task_ppo.py",
+        "seed=None if seed is None else seed + rounds",
+        "seed=seed",
+        "every evaluation round replays the first round's episodes (one seed)",
+        ("tests/test_train_tasks.py::test_evaluation_over_several_rounds_draws_new_episodes_and_counts_each_once",),
+    ),
+    M(
+        "train_eval_success_once_kept",
+        "wpctrl/train/task_ppo.py",
+        "            hit = torch.zeros(n, dtype=torch.bool, device=env.device)\n",
+        "            hit = hit if rounds > 1 else torch.zeros(n, dtype=torch.bool, device=env.device)\n",
+        "an evaluation round keeps the last round's success_once",
+        ("tests/test_train_tasks.py::test_evaluation_over_several_rounds_draws_new_episodes_and_counts_each_once",),
+    ),
+    M(
+        "train_stats_success_once_kept",
+        "wpctrl/train/task_env.py",
+        "        self._success_once.masked_fill_(dones, False)\n",
+        "",
+        "the training statistics' success_once is not cleared when an episode ends",
+        ("tests/test_train_tasks.py::test_adapter_statistics_count_success_once_per_episode",),
+    ),
+    M(
+        "train_stats_return_kept",
+        "wpctrl/train/task_env.py",
+        "        self._return.masked_fill_(dones, 0.0)\n",
+        "",
+        "an episode's return in the training statistics carries the last episode's rewards",
+        ("tests/test_train_tasks.py::test_adapter_statistics_count_success_once_per_episode",),
+    ),
+]

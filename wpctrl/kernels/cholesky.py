@@ -1,10 +1,12 @@
-"""Unrolled float64 Cholesky factorisation of an articulation's n x n joint-space inertia, and the controlled rows'
-block of its inverse, for the fused kernels (:mod:`.inertia_unrolled`, :mod:`.coupled_drive`).
+"""The Cholesky solves of the kernels: symmetric positive definite systems of a size fixed at compile time.
 
-Private module. :func:`cholesky_funcs` compiles them for a size and the rows' DOFs (compile-time constants, every loop
-unrolled, so the matrices stay in registers on CUDA). Pivots are floored as in Newton's ``JointSpaceResponse`` and
-come from a refined float32 reciprocal square root: no IEEE float64 division or square root, whose slow-path
-branches serialise a one-thread-per-env kernel.
+Private module. :func:`spd_solve` compiles the solve of the EE kernels' small systems (``J J^T + λ I``, ``J^T J + λ I``:
+:mod:`.ee_math`) for a size and scalar type. :func:`cholesky_funcs` compiles the float64 factorisation of an
+articulation's n x n joint-space inertia, and the controlled rows' block of its inverse, for the fused kernels
+(:mod:`.inertia_unrolled`, :mod:`.coupled_drive`, :mod:`.impedance`): sizes and the rows' DOFs are compile-time
+constants, every loop unrolled, so the matrices stay in registers on CUDA. Its pivots are floored as in Newton's
+``JointSpaceResponse`` and come from a refined float32 reciprocal square root: no IEEE float64 division or square
+root, whose slow-path branches serialise a one-thread-per-env kernel.
 """
 
 import warp as wp
@@ -25,6 +27,52 @@ def _rsqrt(x: wp.float64):
 
 
 _cache: dict[tuple, tuple] = {}
+_solve_cache: dict[tuple, wp.Function] = {}
+
+
+def spd_solve(n: int, dtype=wp.float32) -> wp.Function:
+    """``solve(a, b)``: x with ``a x = b`` for a symmetric positive definite n x n ``a`` of ``dtype`` (``L L^T``
+    in IEEE square roots and divisions, pivots floored at 1e-30)."""
+    key = (n, dtype)
+    if key in _solve_cache:
+        return _solve_cache[key]
+    N = n
+    Mat = wp.types.matrix(shape=(n, n), dtype=dtype)
+    Vec = wp.types.vector(length=n, dtype=dtype)
+
+    @wp.func
+    def solve(a: Mat, b: Vec):
+        lo = Mat()
+        for i in range(N):
+            for j in range(N):
+                if j <= i:
+                    s = a[i, j]
+                    for k in range(N):
+                        if k < j:
+                            s -= lo[i, k] * lo[j, k]
+                    if i == j:
+                        lo[i, i] = wp.sqrt(wp.max(s, dtype(1.0e-30)))
+                    else:
+                        lo[i, j] = s / lo[j, j]
+        y = Vec()
+        for i in range(N):
+            s = b[i]
+            for k in range(N):
+                if k < i:
+                    s -= lo[i, k] * y[k]
+            y[i] = s / lo[i, i]
+        x = Vec()
+        for ii in range(N):
+            i = N - 1 - ii
+            s = y[i]
+            for k in range(N):
+                if k > i:
+                    s -= lo[k, i] * x[k]
+            x[i] = s / lo[i, i]
+        return x
+
+    _solve_cache[key] = solve
+    return solve
 
 
 def cholesky_funcs(n: int, row_dof: tuple) -> tuple:
@@ -97,30 +145,23 @@ def cholesky_funcs(n: int, row_dof: tuple) -> tuple:
                 Y[r, i] = t * inv[i]
         return Y
 
-    @wp.func
-    def inverse_block(H: MatN):
-        Y = rows_y(H)
-        A = MatR()
-        for r in range(wp.static(NR)):
-            for c in range(wp.static(r + 1)):
-                v = wp.float64(0.0)
-                for k in range(wp.static(max(ROWD[r], ROWD[c])), wp.static(N)):
-                    v += Y[r, k] * Y[c, k]
-                A[r, c] = v
-                A[c, r] = v
-        return A
+    def inverse(diagonal_only: bool):
+        @wp.func
+        def rows_inverse(H: MatN):
+            Y = rows_y(H)
+            A = MatR()
+            for r in range(wp.static(NR)):
+                for c in range(wp.static(r if diagonal_only else 0), wp.static(r + 1)):
+                    v = wp.float64(0.0)
+                    for k in range(wp.static(max(ROWD[r], ROWD[c])), wp.static(N)):
+                        v += Y[r, k] * Y[c, k]
+                    A[r, c] = v
+                    A[c, r] = v
+            return A
 
-    @wp.func
-    def inverse_diag(H: MatN):
-        Y = rows_y(H)
-        A = MatR()
-        for r in range(wp.static(NR)):
-            v = wp.float64(0.0)
-            for k in range(wp.static(ROWD[r]), wp.static(N)):
-                v += Y[r, k] * Y[r, k]
-            A[r, r] = v
-        return A
+        return rows_inverse
 
+    inverse_block, inverse_diag = inverse(False), inverse(True)
     out = (factor, solve, inverse_block, inverse_diag)
     _cache[key] = out
     return out

@@ -10,6 +10,7 @@ import newton
 import warp as wp
 
 from ..config import ee as ee_config
+from .cholesky import spd_solve
 from .pd import _scale
 
 wp.set_module_options({"enable_backward": False})
@@ -242,70 +243,10 @@ def _jacobian(p: wp.vec3, axes: mat3D, origins: mat3D, kinds: vecD, n: int):
     return jac
 
 
-@wp.func
-def _chol_solve6(a: mat66, b: vec6):
-    """Solve a x = b for a symmetric positive definite 6×6 a (Cholesky; constant loop bounds, unrolled)."""
-    lo = mat66()
-    for i in range(6):
-        for j in range(6):
-            if j <= i:
-                s = a[i, j]
-                for k in range(6):
-                    if k < j:
-                        s -= lo[i, k] * lo[j, k]
-                if i == j:
-                    lo[i, i] = wp.sqrt(wp.max(s, 1.0e-30))
-                else:
-                    lo[i, j] = s / lo[j, j]
-    y = vec6()
-    for i in range(6):
-        s = b[i]
-        for k in range(6):
-            if k < i:
-                s -= lo[i, k] * y[k]
-        y[i] = s / lo[i, i]
-    x = vec6()
-    for ii in range(6):
-        i = 5 - ii
-        s = y[i]
-        for k in range(6):
-            if k > i:
-                s -= lo[k, i] * x[k]
-        x[i] = s / lo[i, i]
-    return x
-
-
-@wp.func
-def _chol_solveD(a: matDD, b: vecD):
-    """Solve a x = b for a symmetric positive definite MAX_DOF × MAX_DOF a (Cholesky; constant loop bounds)."""
-    lo = matDD()
-    for i in range(MAX_DOF):
-        for j in range(MAX_DOF):
-            if j <= i:
-                s = a[i, j]
-                for k in range(MAX_DOF):
-                    if k < j:
-                        s -= lo[i, k] * lo[j, k]
-                if i == j:
-                    lo[i, i] = wp.sqrt(wp.max(s, 1.0e-30))
-                else:
-                    lo[i, j] = s / lo[j, j]
-    y = vecD()
-    for i in range(MAX_DOF):
-        s = b[i]
-        for k in range(MAX_DOF):
-            if k < i:
-                s -= lo[i, k] * y[k]
-        y[i] = s / lo[i, i]
-    x = vecD()
-    for ii in range(MAX_DOF):
-        i = MAX_DOF - 1 - ii
-        s = y[i]
-        for k in range(MAX_DOF):
-            if k > i:
-                s -= lo[k, i] * x[k]
-        x[i] = s / lo[i, i]
-    return x
+_chol_solve6 = spd_solve(6)
+"""x with a x = b for a symmetric positive definite 6 x 6 a."""
+_chol_solveD = spd_solve(ee_config.MAX_EE_DOF)
+"""x with a x = b for a symmetric positive definite MAX_DOF x MAX_DOF a."""
 
 
 @wp.func

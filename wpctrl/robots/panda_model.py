@@ -28,7 +28,7 @@ import newton
 import numpy as np
 import warp as wp
 
-from ..engine.hostmath import qaxis, qmul, rpy_quat
+from ..engine.hostmath import LinkFrames, qaxis, qrotate, register_link_frames, rpy_quat, tmul
 
 __all__ = [
     "PANDA_ARM_JOINTS",
@@ -169,18 +169,7 @@ _VISUAL_BOXES = [
 
 
 def _qmat(q: np.ndarray) -> np.ndarray:
-    x, y, z, w = q
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
-def _tmul(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    return a[0] + _qmat(a[1]) @ b[0], qmul(a[1], b[1])
+    return np.column_stack([qrotate(q, e) for e in np.eye(3)])
 
 
 def _tident() -> tuple[np.ndarray, np.ndarray]:
@@ -220,7 +209,7 @@ def _collapse(inertia_merge: str):
     for row in _JOINTS:
         name, jtype, parent, child, xyz, rpy = row[:6]
         s, x_sp = survivor[parent]
-        x_pc = _tmul(x_sp, (np.asarray(xyz, dtype=np.float64), rpy_quat(rpy)))
+        x_pc = tmul(x_sp, (np.asarray(xyz, dtype=np.float64), rpy_quat(rpy)))
         if jtype == "fixed":
             survivor[child] = (s, x_pc)
         else:
@@ -339,7 +328,7 @@ def panda(
             motion = (np.zeros(3), qaxis(axis, q0[k]))
         else:
             motion = (np.asarray(axis, dtype=np.float64) * q0[k], np.array([0.0, 0.0, 0.0, 1.0]))
-        world[child] = _tmul(_tmul(world[parent], x_p), motion)
+        world[child] = tmul(tmul(world[parent], x_p), motion)
 
     builder = newton.ModelBuilder()
     body_of: dict[str, int] = {}
@@ -405,7 +394,7 @@ def _add_visual_shapes(builder: newton.ModelBuilder, body_of: dict[str, int], su
     def place(link: str, local: tuple[np.ndarray, np.ndarray]) -> tuple[int, wp.transform]:
         s, x_sl = survivor[link]
         body = -1 if s is None else body_of[s]
-        return body, _wp_transform(_tmul(x_sl, local))
+        return body, _wp_transform(tmul(x_sl, local))
 
     for n, (link, a, b, radius) in enumerate(_VISUAL_CAPSULES):
         a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
@@ -447,5 +436,10 @@ def _panda_frames() -> dict[str, tuple[str | None, tuple[tuple[float, ...], tupl
 
 PANDA_FRAMES = _panda_frames()
 """Every link of the Panda URDF as ``(kept body or None for the world, (position [m], quaternion xyzw))`` relative to
-the body it is merged into by ``collapse_fixed_joints`` (``panda_hand_tcp`` -> ``panda_link7``). The EE controllers
-fall back on it when a Panda model lacks ``ee_link`` and ``urdf_path`` cannot be read."""
+the body it is merged into by ``collapse_fixed_joints`` (``panda_hand_tcp`` -> ``panda_link7``)."""
+
+PANDA_LINK_FRAMES = LinkFrames.from_urdf_rows([r[:6] for r in _JOINTS], "the built-in Panda (wpctrl.robots)")
+"""The Panda URDF's link tree. Registered with the EE controllers on import: they locate a Panda link that a model
+lacks (``panda_hand_tcp`` of ``add_urdf(collapse_fixed_joints=True)``) and the base frame there when a controller's
+``urdf_path`` is None or unreadable."""
+register_link_frames(PANDA_LINK_FRAMES)

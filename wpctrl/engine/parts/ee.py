@@ -5,11 +5,15 @@ interpolation, actuation, NaN hold, resets and graph capture work as for joint c
 one kernel launch before the joint launch of ``set_action`` (it writes those rows' ``target_qpos``) and one after
 the joint reset (measured EE pose, and the target pose with ``use_target``).
 
+Frames come from the Newton model: the chain is its joints (``joint_parent``, ``joint_X_p``, ``joint_X_c``,
+``joint_axis``), read on the host once; ``ee_link`` is a body or a site on a body. A link the importer merged away
+(``collapse_fixed_joints``) is found in a robot description: ``urdf_path`` when it exists, else the descriptions robot
+modules registered (:func:`wpctrl.engine.hostmath.register_link_frames`).
+
 Root frame: the body ``root_link_name`` when given; otherwise the articulation root: the child of the chain's top
-joint when that joint is free or fixed, or, for a fixed base merged into the world (``collapse_fixed_joints``, the
-built-in Panda), the root link's frame as the robot's description (``urdf_path``, or the built-in Panda's) places
-the top joint in it, moved with each env's own base placement (so every env reports poses relative to its base,
-wherever ``replicate`` put it); without a description, env 0's world frame.
+joint when that joint is free or fixed, or, for a fixed base merged into the world, the root link's frame as the
+robot's description places the top joint in it, moved with each env's own base placement (so every env reports poses
+relative to its base, wherever ``replicate`` put it); without a description, env 0's world frame.
 """
 
 from __future__ import annotations
@@ -28,7 +32,7 @@ from ...config.ee import MAX_EE_DOF, EESpec
 from ...kernels import ee as ee_kernels
 from ...kernels.dims import PER_ENV_BLOCK_DIM
 from ...kernels.ee_math import EEChain
-from ..hostmath import qmul, rpy_quat
+from ..hostmath import LinkFrames, known_link_frames, tmul, urdf_frames
 from ..launch import _Launch
 from .part import Part
 
@@ -58,118 +62,85 @@ def _find(labels, ids, name: str) -> list[int]:
     return [i for i in ids if labels[i] == name or _short(labels[i]) == name]
 
 
-def _urdf_offset(path: str, ee_link: str, kept: set[str]) -> tuple[str, wp.transform]:
-    """Walk the URDF's fixed joints up from ``ee_link`` to a link in ``kept``; return it and the composed offset."""
+def _up_fixed(frames: LinkFrames, link: str, x, until):
+    """Carry ``x`` (a frame in ``link``'s) up the fixed joints above ``link`` until ``until(link)``: ``(the link
+    reached, x in its frame)``; a missing or moving joint on the way stops it: ``(None, that joint's row or None)``."""
+    while not until(link):
+        row = frames.joint_of(link)
+        if row is None or not row[1]:
+            return None, row
+        x = tmul((row[4], row[5]), x)
+        link = row[2]
+    return link, x
+
+
+def _wp(x) -> wp.transform:
+    return wp.transform(wp.vec3(*(float(v) for v in x[0])), wp.quat(*(float(v) for v in x[1])))
+
+
+def _merged_offset(frames: LinkFrames, ee_link: str, kept: set[str]) -> tuple[str, wp.transform]:
+    """The link of ``kept`` that ``ee_link`` is merged into (through fixed joints) and ``ee_link``'s frame in it."""
+    if ee_link not in frames.links:
+        raise ConfigError(f"ee_link: link {ee_link!r} is neither in the model nor in urdf_path {frames.source}")
+    link, x = _up_fixed(frames, ee_link, (np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0])), kept.__contains__)
+    if link is None and x is None:
+        raise ConfigError(f"ee_link: {ee_link!r} has no ancestor body in the model (searched {frames.source})")
+    if link is None:
+        raise ConfigError(
+            f"ee_link: {ee_link!r} hangs off the moving joint {x[0]!r}, which the model lacks; "
+            f"the model and urdf_path {frames.source} describe different robots"
+        )
+    return link, _wp(x)
+
+
+def _read_urdf(path: str, ee_link: str) -> LinkFrames:
     try:
-        root = ET.parse(path).getroot()
+        return urdf_frames(path)
     except (OSError, ET.ParseError) as e:
         raise ConfigError(f"urdf_path: cannot read {path!r} to locate ee_link {ee_link!r}: {e}") from e
-    parent_of = {}
-    for j in root.findall("joint"):
-        child = j.find("child").get("link")
-        parent_of[child] = j
-    links = {lk.get("name") for lk in root.findall("link")}
-    if ee_link not in links:
-        raise ConfigError(f"ee_link: link {ee_link!r} is neither in the model nor in urdf_path {path!r}")
-    wp_p = np.zeros(3)
-    wp_q = np.array([0.0, 0.0, 0.0, 1.0])
-    link = ee_link
-    while link not in kept:
-        j = parent_of.get(link)
-        if j is None:
-            raise ConfigError(f"ee_link: {ee_link!r} has no ancestor body in the model (searched {path!r})")
-        if j.get("type") != "fixed":
-            raise ConfigError(
-                f"ee_link: {ee_link!r} hangs off the moving joint {j.get('name')!r}, which the model lacks; "
-                f"the model and urdf_path {path!r} describe different robots"
-            )
-        o = j.find("origin")
-        xyz = np.array([float(v) for v in (o.get("xyz", "0 0 0") if o is not None else "0 0 0").split()])
-        rpy = [float(v) for v in (o.get("rpy", "0 0 0") if o is not None else "0 0 0").split()]
-        q = rpy_quat(rpy)
-        # offset <- X_joint * offset
-        wp_p = xyz + _rotate(q, wp_p)
-        wp_q = qmul(q, wp_q)
-        link = j.find("parent").get("link")
-    return link, wp.transform(wp.vec3(*wp_p), wp.quat(*wp_q))
 
 
-def _rotate(q, v):
-    x, y, z, w = q
-    u = np.array([x, y, z])
-    return v + 2.0 * np.cross(u, np.cross(u, v) + w * v)
-
-
-def _known_frame(link: str, labels, bodies0):
-    """A Panda link merged away (e.g. ``panda_hand_tcp``) from wpctrl.robots' URDF facts: ([body], offset) or None."""
-    from ...robots import PANDA_FRAMES
-
-    entry = PANDA_FRAMES.get(link)
-    if entry is None or entry[0] is None:
-        return None
-    cand = _find(labels, bodies0, entry[0])
-    if len(cand) != 1:
-        return None
-    p, q = entry[1]
-    return cand, wp.transform(wp.vec3(*p), wp.quat(*q))
-
-
-def _joint_rows(spec: EESpec) -> list[tuple]:
-    """``(name, type, parent link, child link, origin xyz, origin rpy)`` of the robot's joints: ``urdf_path``'s, else
-    the built-in Panda's (wpctrl.robots)."""
+def _descriptions(spec) -> list[LinkFrames]:
+    """Where links and base frames missing from the model are looked up: ``urdf_path`` when it exists (nothing when
+    it cannot be parsed), else the descriptions registered by :func:`wpctrl.engine.hostmath.register_link_frames`."""
     if spec.urdf_path is not None and os.path.exists(spec.urdf_path):
         try:
-            root = ET.parse(spec.urdf_path).getroot()
+            return [urdf_frames(spec.urdf_path)]
         except (OSError, ET.ParseError):
             return []
-        rows = []
-        for j in root.findall("joint"):
-            o = j.find("origin")
-            xyz = [float(v) for v in (o.get("xyz", "0 0 0") if o is not None else "0 0 0").split()]
-            rpy = [float(v) for v in (o.get("rpy", "0 0 0") if o is not None else "0 0 0").split()]
-            rows.append((j.get("name"), j.get("type"), j.find("parent").get("link"), j.find("child").get("link"), xyz,
-                         rpy))  # fmt: skip
-        return rows
-    from ...robots.panda_model import _JOINTS
-
-    return [r[:6] for r in _JOINTS]
+    return list(known_link_frames())
 
 
-def _design_frame(spec: EESpec, joint: str):
-    """Where ``joint`` (the top of a chain whose root link is merged into the world) sits in the robot's root-link
-    frame before the model placed it: its origin composed through the fixed joints up to the root link, from
-    ``urdf_path`` or the built-in Panda. None when neither describes ``joint``."""
-    rows = _joint_rows(spec)
-    row = next((r for r in rows if r[0] == joint), None)
-    if row is None:
-        return None
-    by_child = {r[3]: r for r in rows}
-    p, q = np.asarray(row[4], np.float64), rpy_quat(row[5])
-    link = row[2]
-    while link in by_child:
-        up = by_child[link]
-        if up[1] != "fixed":
-            return None
-        uq = rpy_quat(up[5])
-        p, q = np.asarray(up[4], np.float64) + _rotate(uq, p), qmul(uq, q)
-        link = up[2]
-    return wp.transform(wp.vec3(*p), wp.quat(*q))
-
-
-def _is_merged_root(spec: EESpec) -> bool:
-    """Whether ``root_link_name`` is the robot's root link (absent from the model: merged into the world)."""
-    name = spec.root_link_name
-    if spec.urdf_path is not None and os.path.exists(spec.urdf_path):
+def _known_offset(spec, labels, bodies0, kept: set[str]):
+    """``([body], offset)`` of a link merged away, from a registered description, or None."""
+    for frames in known_link_frames():
         try:
-            root = ET.parse(spec.urdf_path).getroot()
-        except (OSError, ET.ParseError):
-            return False
-        children = {j.find("child").get("link") for j in root.findall("joint")}
-        roots = [lk.get("name") for lk in root.findall("link") if lk.get("name") not in children]
-        return roots == [name]
-    from ...robots import PANDA_FRAMES
+            link, offset = _merged_offset(frames, spec.ee_link, kept)
+        except ConfigError:
+            continue
+        cand = _find(labels, bodies0, link)
+        if len(cand) == 1:
+            logger.info("ee_link %r: located through %s (not in the model)", spec.ee_link, frames.source)
+            return cand, offset
+    return None
 
-    return name in PANDA_FRAMES and PANDA_FRAMES[name][0] is None
+
+def _design_frame(spec, joint: str):
+    """Where ``joint`` (the top of a chain whose root link is merged into the world) sits in the root link's frame
+    as the robot's description places it: its origin carried up the fixed joints to the root link. None when no
+    description holds ``joint``."""
+    for frames in _descriptions(spec):
+        row = frames.joint(joint)
+        if row is None:
+            continue
+        link, x = _up_fixed(frames, row[2], (row[4], row[5]), lambda lk, f=frames: f.joint_of(lk) is None)
+        return None if link is None else _wp(x)
+    return None
+
+
+def _is_merged_root(spec) -> bool:
+    """Whether ``root_link_name`` is the robot's root link (absent from the model: merged into the world)."""
+    return any(f.root == spec.root_link_name for f in _descriptions(spec))
 
 
 class EEPart:
@@ -223,13 +194,12 @@ class EEPart:
                 offset = wp.transform(wp.vec3(*st[:3]), wp.quat(*st[3:]))
             elif spec.urdf_path is not None and os.path.exists(spec.urdf_path):
                 kept = {_short(labels[b]) for b in bodies0}
-                link, offset = _urdf_offset(spec.urdf_path, spec.ee_link, kept)
+                link, offset = _merged_offset(_read_urdf(spec.urdf_path, spec.ee_link), spec.ee_link, kept)
                 cand = _find(labels, bodies0, link)
-            elif (known := _known_frame(spec.ee_link, labels, bodies0)) is not None:
+            elif (known := _known_offset(spec, labels, bodies0, {_short(labels[b]) for b in bodies0})) is not None:
                 cand, offset = known
-                logger.info("ee_link %r: using wpctrl.robots.PANDA_FRAMES (not in the model)", spec.ee_link)
             elif spec.urdf_path is not None:
-                _urdf_offset(spec.urdf_path, spec.ee_link, set())  # raises: cannot read urdf_path
+                _read_urdf(spec.urdf_path, spec.ee_link)  # raises: cannot read urdf_path
             else:
                 known = sorted({_short(labels[b]) for b in bodies0})
                 close = difflib.get_close_matches(spec.ee_link, known, n=5, cutoff=0.5)

@@ -19,6 +19,18 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+# BENCH_WPCTRL_TREE: the source tree whose ``wpctrl`` the benchmark imports (the A/B stages of ``python -m bench``
+# set it to the baseline tree). That tree goes first on the path; the ``bench`` package stays this one (it is
+# already imported), so the same benchmark code times both trees.
+WPCTRL_TREE = os.environ.get("BENCH_WPCTRL_TREE") or None
+if WPCTRL_TREE:
+    WPCTRL_TREE = str(Path(WPCTRL_TREE).resolve())
+    if not (Path(WPCTRL_TREE) / "wpctrl" / "__init__.py").is_file():
+        raise SystemExit(f"BENCH_WPCTRL_TREE={WPCTRL_TREE}: no wpctrl package there")
+    if "wpctrl" in sys.modules:
+        raise SystemExit("BENCH_WPCTRL_TREE is set but wpctrl was imported before bench.common")
+    sys.path.insert(0, WPCTRL_TREE)
+
 import numpy as np  # noqa: E402
 import warp as wp  # noqa: E402
 
@@ -100,7 +112,7 @@ class ControllerSetup:
     ctrl: object
     state: object
     control: object
-    layout: object  # bench.reference_torch.JointLayout of the mode's joints
+    layout: object  # bench.step.reference_torch.JointLayout of the mode's joints
     build_s: float
 
     def new_control(self):
@@ -120,7 +132,7 @@ def _control(joint_target_q, joint_target_qd, joint_f):
 def real_setup(mode: dict, model, *, actuation: str, control_freq: int, sim_freq: int, **options) -> ControllerSetup:
     """``options``: further ``build_controller`` keywords (delay, track_effort, clip_targets, ...)."""
     import wpctrl
-    from bench.reference_torch import layout_from_model
+    from bench.step.reference_torch import layout_from_model
 
     t0 = time.perf_counter()
     ctrl = wpctrl.build_controller(
@@ -143,7 +155,7 @@ def synthetic_setup(
     Uses wpctrl internals (``engine._Engine``, ``engine.make_plan``, ``binding.JointBinding``): bench-only.
     """
     import wpctrl
-    from bench.reference_torch import layout_from_model, tile_layout
+    from bench.step.reference_torch import layout_from_model, tile_layout
     from wpctrl.binding import JointBinding
     from wpctrl.engine import _Engine, make_plan
 
@@ -458,6 +470,17 @@ def machine_info(device) -> dict:
         "wpctrl_commit": _sh(f"cd '{ROOT}' && git rev-parse --short HEAD 2>/dev/null") or "unknown",
         "wpctrl_dirty": bool(_sh(f"cd '{ROOT}' && git status --porcelain wpctrl 2>/dev/null")),
     }
+    import wpctrl
+
+    info["wpctrl_path"] = str(Path(wpctrl.__file__).resolve().parent)
+    if WPCTRL_TREE:  # another tree's wpctrl: its recorded commit (a tree without git metadata has a COMMIT file)
+        commit_file = Path(WPCTRL_TREE) / "COMMIT"
+        info["wpctrl_commit"] = (
+            commit_file.read_text().strip()
+            if commit_file.is_file()
+            else _sh(f"cd '{WPCTRL_TREE}' && git rev-parse --short HEAD 2>/dev/null") or "unknown"
+        )
+        info["wpctrl_dirty"] = None
     try:
         import torch
 

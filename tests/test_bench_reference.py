@@ -1,10 +1,10 @@
-"""The torch baseline of the benchmarks (bench/reference_torch.py) computes what wpctrl computes.
+"""The torch baseline of the benchmarks (bench/step/reference_torch.py) computes what wpctrl computes.
 
 Both run the same Panda control modes on the same random measured states and actions (explicit actuation, a handful
 of envs, a few control steps, CPU), each writing into its own Control; we compare the targets after set_action and
 the drive targets and torques written at every substep. This is what makes the benchmark a comparison of equal work.
-The synthetic large-N layout that bench/controller_step.py uses above its real-model limit is checked against a real
-replicated model too.
+The synthetic large-N layout that bench/step/controller_step.py uses above its real-model limit is checked against a
+real replicated model too.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ torch = pytest.importorskip("torch", reason="the benchmarks' baseline is written
 
 import wpctrl  # noqa: E402
 from bench.common import panda_mode, synthetic_setup  # noqa: E402
-from bench.reference_torch import TorchCombinedController, layout_from_model, tile_layout  # noqa: E402
+from bench.step.reference_torch import TorchCombinedController, layout_from_model, tile_layout  # noqa: E402
 
 NUM_ENVS = 5
 STEPS = 3

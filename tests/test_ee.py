@@ -504,7 +504,7 @@ def test_demo_runs_an_ee_mode(tmp_path):
 
 
 def test_bench_torch_baseline_is_the_same_step():
-    """bench/ee_step.py's torch port of ManiSkill's GPU EE path computes the same step as wpctrl (so the benchmark
+    """bench/step/ee_step.py's torch port of ManiSkill's GPU EE path computes the same step as wpctrl (so the benchmark
     compares equal work): drive targets of the gripper equal, the arm's task-space step within float32 noise."""
     import sys
 
@@ -513,7 +513,7 @@ def test_bench_torch_baseline_is_the_same_step():
     torch = pytest.importorskip("torch")
     if str(ROOT) not in sys.path:
         sys.path.insert(0, str(ROOT))
-    from bench.ee_step import TorchEEPose
+    from bench.step.ee_step import TorchEEPose
 
     n = 8
     model = build_panda(n)

@@ -8,7 +8,7 @@ puts 4,096 envs on 16 of an H200's 132 SMs). Ignored on the CPU."""
 
 def step_block_dim(device, num_envs: int) -> int:
     """CUDA block size of the per-step kernels (one thread per env, :mod:`wpctrl.kernels.pd_step`): 64 threads.
-    Measured on an H200 (bench/run_gpu_launch.sh, block_dim stage; captured implicit step): 4k envs 3.62 / 3.36 /
+    Measured on an H200 (`python -m bench step-block-dim`; captured implicit step): 4k envs 3.62 / 3.36 /
     5.64 / 8.92 µs and 1M envs 190 / 188 / 187 / 235 µs for 32 / 64 / 128 / 256 threads: small blocks spread a few
     thousand envs over every SM, and 256-thread blocks of these register-heavy threads lose occupancy at 1M."""
     return 64

@@ -1,0 +1,1 @@
+"""Two wpctrl trees compared in one run on one machine."""

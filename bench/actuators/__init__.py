@@ -1,0 +1,1 @@
+"""The actuator models and networks: their cost on a control step, their envelope, their fidelity."""

@@ -1,0 +1,1 @@
+"""Where the time goes: host overhead, launch cost, Nsight Compute workloads."""

@@ -1,0 +1,1 @@
+"""The control step: wpctrl against its torch baseline, per mode and option."""

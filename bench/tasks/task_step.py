@@ -1,0 +1,126 @@
+"""ManiSkill's tasks on Newton: env-steps/s of a whole ``TaskEnv.step`` (graph replay, no policy: a fixed action
+tensor), next to the bare MuJoCo-Warp step of the same scene, and the controller's and the task kernels' shares.
+
+For every (task, N, substeps):
+
+- ``env step``: ``env.step(action)`` as a user calls it (the action copy, the captured graph, the output clones);
+- ``physics``: a captured graph of the K x substeps ``solver.step`` calls alone on the same model and state (the
+  contacts and Newton's contact sensor of the last solver step included, as in the env);
+- ``controller``: a captured graph of ``set_action`` + K ``before_simulation_step`` (implicit actuation: only
+  ``set_action`` launches);
+- ``task kernels``: a captured graph of the observation / evaluation / reward / episode / reset launches.
+
+``env-steps/s`` = N / seconds per control step (a control step = 5 physics steps of ManiSkill's 10 ms).
+Run ``python bench/tasks/task_step.py --help``; results go to ``<out>/task_step_<device>.{json,md}``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+
+import torch  # noqa: E402
+import warp as wp  # noqa: E402
+
+from bench.common import (  # noqa: E402
+    DEFAULT_OUT,
+    Sync,
+    fmt_envs,
+    fmt_us,
+    machine_info,
+    md_table,
+    measure,
+    meta_markdown,
+    parse_envs,
+    task_step_parts,
+    write_results,
+)
+
+
+def _capture(fn, device):
+    fn()
+    with wp.ScopedCapture(device=device) as cap:
+        fn()
+    return cap.graph
+
+
+def bench_one(task: str, n: int, device, substeps: int, control_mode: str) -> dict:
+    import wpctrl.tasks as T
+
+    env = T.make(task, num_envs=n, device=device, control_mode=control_mode, physics=T.TaskPhysics(substeps=substeps))
+    env.reset(seed=0)
+    sync = Sync(device)
+    dev = wp.get_device(device)
+    action = torch.zeros((n, env.ctrl.action_dim), device=env.device)
+    action[:, -1] = 1.0  # gripper open: the arm holds its pose, the cube rests on the table
+    physics, controller = task_step_parts(env)
+
+    def task_kernels():
+        env._bookkeep()
+
+    graphs = {name: _capture(fn, dev) for name, fn in (("physics", physics), ("controller", controller),
+                                                         ("task kernels", task_kernels))}  # fmt: skip
+    env.reset(seed=0)
+    row = {"task": task, "envs": n, "substeps": substeps, "control_mode": control_mode}
+    row["env step"] = measure(lambda: env.step(action), sync)["median_s"]
+    for name, g in graphs.items():
+        row[name] = measure(lambda g=g: wp.capture_launch(g), sync)["median_s"]
+    row["env_steps_per_s"] = n / row["env step"]
+    row["physics_steps_per_s"] = n / row["physics"]
+    row["controller_share"] = row["controller"] / row["env step"]
+    row["task_share"] = row["task kernels"] / row["env step"]
+    row["vs_physics"] = row["physics"] / row["env step"]
+    return row
+
+
+def render(meta: dict, rows: list[dict]) -> str:
+    header = ["task", "envs", "substeps", "env step [µs]", "env-steps/s", "physics [µs]", "env / physics",
+              "controller [µs] (share)", "task kernels [µs] (share)"]  # fmt: skip
+    body = [[r["task"], fmt_envs(r["envs"]), r["substeps"], fmt_us(r["env step"]), f"{r['env_steps_per_s']:,.0f}",
+             fmt_us(r["physics"]), f"{r['vs_physics'] * 100:.1f} %",
+             f"{fmt_us(r['controller'])} ({100 * r['controller_share']:.2f} %)",
+             f"{fmt_us(r['task kernels'])} ({100 * r['task_share']:.2f} %)"] for r in rows]  # fmt: skip
+    return (
+        "# Task env step vs the bare MuJoCo-Warp step\n\n" + meta_markdown(meta) + "\n\n" + md_table(header, body)
+        + "\n`env / physics`: the bare physics' share of the whole env step (the rest is the controller, the task "
+        "kernels, the action copy and the output tensors).\n"
+    )  # fmt: skip
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--device", default="cuda:0" if wp.get_cuda_device_count() else "cpu")
+    p.add_argument("--envs", default=None, help="e.g. 1k,4k (default: 4k on CUDA, 16 on the CPU)")
+    p.add_argument("--tasks", default="PushCube-v1,PickCube-v1")
+    p.add_argument("--substeps", default="8", help="MuJoCo steps per physics step, e.g. 4,8")
+    p.add_argument("--control-mode", default="pd_joint_delta_pos")
+    p.add_argument("--out", default=str(DEFAULT_OUT))
+    p.add_argument("--tag", default=None)
+    args = p.parse_args(argv)
+    device = wp.get_device(args.device)
+    envs = parse_envs(args.envs or ("4k" if device.is_cuda else "16"))
+    t0 = time.perf_counter()
+    meta = machine_info(device)
+    rows = []
+    for task in args.tasks.split(","):
+        for sub in (int(s) for s in args.substeps.split(",")):
+            for n in envs:
+                row = bench_one(task, n, device, sub, args.control_mode)
+                rows.append(row)
+                print(f"{task} {fmt_envs(n)} envs, {sub} substeps: env step {fmt_us(row['env step'])} µs "
+                      f"({row['env_steps_per_s']:,.0f} env-steps/s), physics {fmt_us(row['physics'])} µs, "
+                      f"controller {100 * row['controller_share']:.2f} %, task kernels "
+                      f"{100 * row['task_share']:.2f} %", flush=True)  # fmt: skip
+    meta["wall_s"] = time.perf_counter() - t0
+    tag = args.tag or ("cuda" if device.is_cuda else "cpu")
+    j, m = write_results(args.out, f"task_step_{tag}", meta, rows, render(meta, rows))
+    print(f"wrote {j} and {m}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

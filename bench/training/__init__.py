@@ -1,0 +1,1 @@
+"""PPO training: the collection rate and its parts."""

@@ -19,25 +19,10 @@ from conftest import HAS_CUDA, build_panda
 
 import wpctrl
 from wpctrl.kernels import actuator_net as KN
-from wpctrl.kernels import actuator_net_split as KS
 from wpctrl.robots import PANDA_ARM_JOINTS
 
-KERNELS = ("unrolled", "tiled", "split2", "split4")
+KERNELS = ("unrolled", "tiled")
 MLP_KERNELS = (*KERNELS, "3xtf32")
-
-
-def _kind(kernel: str) -> str:
-    """The kernel variant that runs for a ``kernel`` setting (split2 / split4: the split kernel)."""
-    return "split" if kernel.startswith("split") else kernel
-
-
-@pytest.fixture(autouse=True)
-def _cpu_blocks_for_split(request, monkeypatch):
-    """The split kernel's blocks (2 or 4 warps per 32 rows, synchronised) run on the CPU as Warp's cooperative CPU
-    blocks; without them the engine would run the unrolled kernel."""
-    kernel = getattr(request.node, "callspec", None) and request.node.callspec.params.get("kernel")
-    if isinstance(kernel, str) and kernel.startswith("split"):
-        monkeypatch.setattr(wp.config, "enable_cpu_blocks", True)
 
 
 pytestmark = pytest.mark.filterwarnings("ignore:`torch.jit:DeprecationWarning")
@@ -91,7 +76,7 @@ def test_mlp_actuator_equals_torch_with_history_and_partial_reset(tmp_path, orde
                                             actuator=act)  # fmt: skip
     model = build_panda(E)
     ctrl = wpctrl.build_controller(cfg, model, 100, 100, actuation="explicit", track_effort=True)
-    assert ctrl._engine.part("actuator_models").nets[0].kernel_kind == _kind(kernel)  # private: the variant that runs
+    assert ctrl._engine.part("actuator_models").nets[0].kernel_kind == kernel  # private: the variant that runs
     hist_e = np.zeros((E, 5, J), f32)
     hist_v = np.zeros((E, 5, J), f32)
     rng = np.random.default_rng(0)
@@ -123,7 +108,7 @@ def test_lstm_actuator_equals_torch_with_hidden_state_and_partial_reset(tmp_path
                                             actuator=act)  # fmt: skip
     model = build_panda(E)
     ctrl = wpctrl.build_controller(cfg, model, 100, 100, actuation="explicit", track_effort=True)
-    assert ctrl._engine.part("actuator_models").nets[0].kernel_kind == _kind(kernel)  # private: the variant that runs
+    assert ctrl._engine.part("actuator_models").nets[0].kernel_kind == kernel  # private: the variant that runs
     h = torch.zeros(2, E * J, 8)
     c = torch.zeros(2, E * J, 8)
     rng = np.random.default_rng(1)
@@ -194,7 +179,7 @@ def _check_against_torch(act, net, lstm, envs: int = E, device: str = "cpu", ste
     model = build_panda(envs, device)
     ctrl = wpctrl.build_controller(cfg, model, 100, 100, actuation="explicit", track_effort=True)
     if kernel is not None:
-        assert ctrl._engine.part("actuator_models").nets[0].kernel_kind == _kind(kernel)  # private: the variant
+        assert ctrl._engine.part("actuator_models").nets[0].kernel_kind == kernel  # private: the variant
     ref = _Reference(net, act, lstm, envs)
     rng = np.random.default_rng(7)
     s, c = model.state(), model.control()
@@ -268,7 +253,7 @@ NETWORKS = {
     # one LSTM layer of 4 units, velocity first, a head with an activation
     "lstm_1x4": (lambda: _LSTMHead(), {"input_order": "vel_pos", "pos_scale": 2.0, "vel_scale": 0.4,
                                        "torque_scale": 5.0}, (1, 4)),
-    # widths that 2 and 4 threads per row do not divide (the split kernel's last slices short or empty)
+    # widths that are no multiple of 8 (the tensor-core kernel pads them) and narrowing layers
     "odd_widths": (lambda: _mlp(torch.nn.Linear(6, 5), torch.nn.Tanh(), torch.nn.Linear(5, 7), torch.nn.Softsign(),
                                 torch.nn.Linear(7, 3), torch.nn.ELU(0.9), torch.nn.Linear(3, 1)),
                    {"input_idx": (0, 1, 4), "pos_scale": 1.2, "vel_scale": 0.3, "torque_scale": 12.0}, None),
@@ -315,13 +300,11 @@ def test_network_shapes_equal_torch(tmp_path, name, kernel):
     _check_against_torch(act, net, lstm, kernel=kernel)
 
 
-@pytest.mark.parametrize("kernel", ["tiled", "split2", "split4"])
+@pytest.mark.parametrize("kernel", ["tiled"])
 @pytest.mark.parametrize("kind", ["mlp", "lstm"])
 def test_partial_tile_or_block_on_cpu_blocks(tmp_path, monkeypatch, kind, kernel):
-    """Warp's cooperative CPU blocks run the tiled and split kernels as on a GPU, 13 envs x 7 joints = 91 rows: the
-    tiled kernel's second 64-row tile 27 rows full and 37 threads past the end that still take part in the tile
-    products; the split kernel's third 32-row block 27 rows full, its 5 threads past the end (per warp) still taking
-    part in the block's synchronisations."""
+    """Warp's cooperative CPU blocks run the tiled kernel as on a GPU, 13 envs x 7 joints = 91 rows: its second
+    64-row tile 27 rows full and 37 threads past the end that still take part in the tile products."""
     monkeypatch.setattr(wp.config, "enable_cpu_blocks", True)
     if kind == "mlp":
         make, kw, lstm = NETWORKS["trained"]
@@ -332,7 +315,7 @@ def test_partial_tile_or_block_on_cpu_blocks(tmp_path, monkeypatch, kind, kernel
         for p in net.parameters():
             torch.nn.init.uniform_(p, -0.6, 0.6)
     act = wpctrl.ActuatorNet(net, kernel=kernel, **kw)
-    _check_against_torch(act, net, lstm, envs=13, kernel=_kind(kernel))
+    _check_against_torch(act, net, lstm, envs=13, kernel=kernel)
 
 
 @pytest.mark.skipif(not HAS_CUDA, reason="needs a CUDA device: the kernels' GPU build (fast math, 64-row tiles)")
@@ -340,7 +323,7 @@ def test_partial_tile_or_block_on_cpu_blocks(tmp_path, monkeypatch, kind, kernel
 @pytest.mark.parametrize("name", ["trained", "activations", "lstm_2x8", "odd_widths", "lstm_2x3", "wide"])
 def test_networks_equal_torch_on_cuda(name, kernel):
     """On the GPU, with 13 envs (91 rows: one full and one partial 64-row tile, two full and one partial 32-row
-    block of the split kernel and of the tensor-core kernel's warps; ``"auto"`` runs the unrolled kernel for so few
+    block of the tensor-core kernel's warps; ``"auto"`` runs the unrolled kernel for so few
     rows)."""
     if kernel == "3xtf32" and name.startswith("lstm"):
         pytest.skip("the tensor-core kernel runs MLPs (its refusal of an LSTM is tested on the CPU)")
@@ -353,7 +336,7 @@ def test_networks_equal_torch_on_cuda(name, kernel):
         make, kw, lstm = NETWORKS[name]
         net = make()
     act = wpctrl.ActuatorNet(net, kernel=kernel, **kw)
-    kind = "unrolled" if kernel == "auto" else _kind(kernel)
+    kind = "unrolled" if kernel == "auto" else kernel
     _check_against_torch(act, net, lstm, envs=13, device="cuda:0", kernel=kind)
 
 
@@ -382,21 +365,10 @@ def test_kernel_choice_and_size_limit():
     assert KN.mma_unsupported(wide) == "a layer 136 wide (padded to 8; at most 128)"
     assert KN.mma_unsupported(big._replace(dense=((6, 128, 5, 0.0, 0, 0), (128, 1, 0, 0.0, 0, 0)))) is None
     assert KN.choose_kernel(big, "unrolled") == "unrolled"
-    # "auto" never splits (measured slower at every size); the split kernel only when named. "split" without a
-    # count: 4 threads per row while that fits 1,024 threads per SM, else 2 (split_lanes 1: not even 2 fit)
-    assert KN.choose_kernel(small, "split") == KN.choose_kernel(small, "split4") == "split"
-    assert KN.choose_kernel(small, "split2") == "split" and KN.choose_kernel(big, "split2") == "split"
-    assert [KS.split_lanes(rows, 132) for rows in (7, 4096 * 7, 33_792, 33_793, 67_584, 67_585)] == [4, 4, 4, 2, 2, 1]
     lstm = small._replace(dense=((32, 1, 0, 0.0, 0, 0),), lstm=((2, 32, 0, 0, 0, 0), (32, 32, 0, 0, 0, 0)), taps=())
     assert lstm.macs == 4 * 32 * 34 + 4 * 32 * 64 + 32 and KN.choose_kernel(lstm, "auto") == "tiled"
     assert KN.choose_kernel(lstm, "auto", 90) == "tiled"  # the tensor-core kernel runs MLPs only
     model = build_panda(1)
-    # on the CPU without Warp's cooperative CPU blocks, "split" runs the unrolled kernel (the same results)
-    act = wpctrl.ActuatorNet(_mlp(torch.nn.Linear(6, 1)), kernel="split")
-    cfg = wpctrl.PDJointPosControllerConfig(PANDA_ARM_JOINTS, None, None, 0, 0, normalize_action=False, actuator=act)
-    assert not wp.config.enable_cpu_blocks
-    ctrl = wpctrl.build_controller(cfg, model, actuation="explicit")
-    assert ctrl._engine.part("actuator_models").nets[0].kernel_kind == "unrolled"  # private: the variant that runs
     huge = torch.nn.Sequential(torch.nn.Linear(6, 200), torch.nn.Tanh(), torch.nn.Linear(200, 100),
                                torch.nn.Linear(100, 1))  # fmt: skip
     cfg = wpctrl.PDJointPosControllerConfig(PANDA_ARM_JOINTS, None, None, 0, 0, normalize_action=False,
@@ -424,9 +396,10 @@ def test_network_errors_name_the_problem(tmp_path):
         build(torch.nn.Sequential(torch.nn.Conv1d(1, 1, 1), torch.nn.Linear(6, 1)))
     with pytest.raises(wpctrl.ConfigError, match=r"input_idx: expected substep indices"):
         build(torch.nn.Sequential(torch.nn.Linear(6, 1)), input_idx=(0, -1, 2))
-    with pytest.raises(wpctrl.ConfigError, match=r"kernel: expected 'auto', 'unrolled', '3xtf32', 'split', 'split2', "
-                       r"'split4' or 'tiled', got 'fast'"):  # fmt: skip
-        build(torch.nn.Sequential(torch.nn.Linear(6, 1)), kernel="fast")
+    for kernel in ("fast", "split", "split2", "split4"):  # the split kernel (measured slower everywhere) is gone
+        with pytest.raises(wpctrl.ConfigError, match=rf"kernel: expected 'auto', 'unrolled', '3xtf32' or 'tiled', "
+                           rf"got '{kernel}'"):  # fmt: skip
+            build(torch.nn.Sequential(torch.nn.Linear(6, 1)), kernel=kernel)
     with pytest.raises(wpctrl.ConfigError, match=r"kernel: expected another kernel than '3xtf32' for a layer 136 wide "
                        r"\(padded to 8; at most 128\), got '3xtf32'"):  # fmt: skip
         build(torch.nn.Sequential(torch.nn.Linear(6, 130), torch.nn.Linear(130, 1)), kernel="3xtf32")

@@ -190,11 +190,11 @@ def substeps(ctrl, model, names, rng, steps, targets_in=None):
         yield q, qd, c.joint_target_q.numpy()[coord], c.joint_f.numpy()[dof]
 
 
-@pytest.mark.parametrize(("order", "kernel"), [("pos_vel", "auto"), ("vel_pos", "auto"), ("pos_vel", "split2")])
+@pytest.mark.parametrize(("order", "kernel"), [("pos_vel", "auto"), ("vel_pos", "auto"), ("pos_vel", "tiled")])
 def test_lstm_with_input_scales_on_a_later_controller_equals_torch(order, kernel, monkeypatch):
     """An LSTM actuator on the second controller with pos/vel/torque scales that are not 1 and a per-env DC
     envelope: torch's LSTM on the scaled inputs (in ``input_order``), the output times torque_scale, then Newton's
-    ClampingDCMotor at each env's values. Also with the split kernel (on Warp's cooperative CPU blocks)."""
+    ClampingDCMotor at each env's values. Also with the tiled kernel (on Warp's cooperative CPU blocks)."""
     from newton.actuators import ClampingDCMotor
 
     monkeypatch.setattr(wp.config, "enable_cpu_blocks", kernel != "auto")
@@ -330,10 +330,10 @@ def test_mlp_on_a_later_controller_reads_the_delayed_target():
         np.testing.assert_allclose(tau, u, rtol=1e-4, atol=1e-4)
 
 
-@pytest.mark.parametrize("kernel", ["auto", "split4"])
+@pytest.mark.parametrize("kernel", ["auto", "tiled"])
 def test_two_networks_in_one_mode_keep_their_own_weights_scales_and_state(kernel, monkeypatch):
     """An MLP on the first controller and an LSTM on the second, different scales: each row gets its own network
-    (also with the split kernel, on Warp's cooperative CPU blocks)."""
+    (also with the tiled kernel, on Warp's cooperative CPU blocks)."""
     monkeypatch.setattr(wp.config, "enable_cpu_blocks", kernel != "auto")
     mlp = init(torch.nn.Sequential(torch.nn.Linear(2, 5), torch.nn.ELU(0.5), torch.nn.Linear(5, 1)), seed=2)
     lstm = init(LSTMNet(hidden=4, layers=1), seed=3)
@@ -345,7 +345,7 @@ def test_two_networks_in_one_mode_keep_their_own_weights_scales_and_state(kernel
     }  # fmt: skip
     model = build_panda(E)
     ctrl = wpctrl.build_controller(mode, model, 100, 100, actuation="explicit")
-    want = "split" if kernel != "auto" else "unrolled"
+    want = "tiled" if kernel != "auto" else "unrolled"
     assert [g.kernel_kind for g in ctrl._engine.part("actuator_models").nets] == [want, want]  # private: the kernels
     h = torch.zeros(1, E * 4, 4)
     cs = torch.zeros(1, E * 4, 4)

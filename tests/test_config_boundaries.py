@@ -696,8 +696,8 @@ BOUNDS: dict[str, dict[str, Bound]] = {
             wrong_type=(3, None),
         ),
         "kernel": Bound(
-            inside=("auto", "unrolled", "3xtf32", "split", "split2", "split4", "tiled"),
-            outside=("fast", "Tiled", "split3"),
+            inside=("auto", "unrolled", "3xtf32", "tiled"),
+            outside=("fast", "Tiled", "split", "split2", "split4"),
             wrong_type=(3, None),
         ),
         "launch": Bound(

@@ -213,7 +213,6 @@ print("ok", len(configs))
 SHARED_STEMS = {
     # a module name used in several packages, and the one concept it names in all of them
     "ee": "end-effector control (config, kernels, engine part, controller classes)",
-    "impedance": "operational-space and joint-impedance control (config, kernels, part, controllers, ManiSkill arms)",
     "actuator_models": "actuator models: DC motor, position table, networks (config, kernels, engine part)",
     "coupled_drive": "the coupled (PhysX) drive (its solve kernel, its engine part)",
     "drive_properties": "per-env drive properties (the engine part, the controllers' API)",

@@ -3,8 +3,8 @@
 by more in every later env) with more than one controller in the mode:
 
 - actuator networks (MLP and LSTM) on the mode's second (and third) controller, on every network kernel that runs on
-  the CPU (unrolled in a launch of its own and in the substep's launch, tiled, split on Warp's cooperative CPU
-  blocks, the tensor-core kernel's CPU emulation): the whole ``Control.joint_f`` of every env against torch
+  the CPU (unrolled in a launch of its own and in the substep's launch, tiled, the tensor-core kernel's CPU
+  emulation): the whole ``Control.joint_f`` of every env against torch
   evaluating the same network on the position errors and velocities gathered at the model's own indices, the other
   controller's explicit PD re-derived in numpy and the base's DOFs untouched;
 - the elided substep launch (implicit actuation, nothing to do per substep): ``set_action`` writes each controller's
@@ -54,8 +54,6 @@ KERNELS = {
     "unrolled": ("unrolled", "separate"),
     "fused": ("unrolled", "fused"),  # the substep kernel and the network in one launch
     "tiled": ("tiled", "auto"),
-    "split2": ("split2", "auto"),
-    "split4": ("split4", "auto"),
     "3xtf32": ("3xtf32", "auto"),
 }
 
@@ -156,19 +154,17 @@ CASES = [
 
 
 @pytest.mark.parametrize(("layout", "kind", "k"), CASES)
-def test_networks_on_a_floating_base_equal_torch_per_env_and_dof(layout, kind, k, monkeypatch):
+def test_networks_on_a_floating_base_equal_torch_per_env_and_dof(layout, kind, k):
     """Per env and per DOF, the whole ``Control.joint_f`` after every substep: each network's rows are torch's
     network on the position errors ``q* - q`` (at the joints' coordinates) and velocities (at their DOFs) of that
     env, times torque_scale, clamped to the controller's force limit; the fingers are the explicit PD of their
     targets; the floating base's 6 DOFs stay 0. Random, per-env different states and targets, a partial reset."""
     kernel, launch = KERNELS[k]
-    if kernel.startswith("split"):  # the split kernel's blocks run on Warp's cooperative CPU blocks
-        monkeypatch.setattr(wp.config, "enable_cpu_blocks", True)
     model = _floating()
     mode, nets = _network_mode(layout, kind, kernel, launch)
     ctrl = wpctrl.build_controller(mode, model, 100, 100, actuation="explicit", track_effort=True)
     groups = ctrl._engine.part("actuator_models")  # private: the variant that runs, and the launch
-    assert [g.kernel_kind for g in groups.nets] == ["split" if kernel.startswith("split") else kernel] * len(nets)
+    assert [g.kernel_kind for g in groups.nets] == [kernel] * len(nets)
     assert (groups.fused is not None) == (launch == "fused")
     refs = {name: _TorchActuator(net, act, kind, len(j)) for name, (j, net, act, _) in nets.items()}
     finger_q, finger_d = indices(model, FINGERS)

@@ -32,23 +32,12 @@ from .config import (
 
 # The controllers (which import newton, ~4 s) load on first use, so that ``python -m wpctrl demo`` can say what it is
 # doing before the heavy imports and kernel compilation start.
-_LAZY = {
-    "BaseController",
-    "JointEffortController",
-    "JointImpedanceController",
-    "OperationalSpaceController",
-    "CombinedController",
-    "PassiveController",
-    "PDBaseForwardVelController",
-    "PDBaseVelController",
-    "PDEEPosController",
-    "PDEEPoseController",
-    "PDJointPosController",
-    "PDJointPosMimicController",
-    "PDJointPosVelController",
-    "PDJointVelController",
-    "build_controller",
-}
+_LAZY = set(
+    "BaseController CombinedController JointEffortController JointImpedanceController OperationalSpaceController "
+    "PassiveController PDBaseForwardVelController PDBaseVelController PDEEPosController PDEEPoseController "
+    "PDJointPosController PDJointPosMimicController PDJointPosVelController PDJointVelController "
+    "build_controller".split()
+)
 
 if TYPE_CHECKING:
     from .controllers import (

@@ -5,7 +5,7 @@ from .model import M
 MUTATIONS = [
     M(
         "osc_without_operational_space_inertia",
-        "wpctrl/kernels/impedance.py",
+        "wpctrl/impedance/warp_kernels.py",
         "f = _task_solve(lam_inv, a, eps)",
         "f = a",
         "OSC with decoupling applies the task acceleration without Λ",
@@ -13,7 +13,7 @@ MUTATIONS = [
     ),
     M(
         "osc_partial_decoupling_keeps_the_coupling",
-        "wpctrl/kernels/impedance.py",
+        "wpctrl/impedance/warp_kernels.py",
         "if decoupling == 1 or wp.static((k < 3) == (m < 3)):",
         "if decoupling != 0:",
         "partial decoupling keeps the translation-rotation blocks of Λ⁻¹",
@@ -21,7 +21,7 @@ MUTATIONS = [
     ),
     M(
         "osc_nullspace_not_projected",
-        "wpctrl/kernels/impedance.py",
+        "wpctrl/impedance/warp_kernels.py",
         "tau = tau + t0 - wp.transpose(J) * y",
         "tau = tau + t0",
         "the posture torque is added without the null-space projection",
@@ -29,7 +29,7 @@ MUTATIONS = [
     ),
     M(
         "osc_nullspace_always_kinematic",
-        "wpctrl/kernels/impedance.py",
+        "wpctrl/impedance/warp_kernels.py",
         "if decoupling == 1:  # dynamically consistent",
         "if decoupling == 3:  # dynamically consistent",
         "full decoupling uses the kinematic (J Jᵀ) projector, not the dynamically consistent one",
@@ -37,7 +37,7 @@ MUTATIONS = [
     ),
     M(
         "impedance_gravity_sign",
-        "wpctrl/kernels/impedance.py",
+        "wpctrl/impedance/warp_kernels.py",
         "tau = tau + g",
         "tau = tau - g",
         "the gravity torque is subtracted",
@@ -45,7 +45,7 @@ MUTATIONS = [
     ),
     M(
         "osc_damping_sign",
-        "wpctrl/kernels/impedance.py",
+        "wpctrl/impedance/warp_kernels.py",
         "- wp.float64(task_kd[env, k]) * xd[k]",
         "+ wp.float64(task_kd[env, k]) * xd[k]",
         "the task damping pushes along the TCP's velocity",
@@ -53,7 +53,7 @@ MUTATIONS = [
     ),
     M(
         "osc_rotation_error_in_the_body_frame",
-        "wpctrl/kernels/impedance.py",
+        "wpctrl/impedance/warp_kernels.py",
         "dr = _log3(wp.transform_get_rotation(tgt) * wp.quat_inverse(wp.transform_get_rotation(t_ee)))",
         "dr = _log3(wp.quat_inverse(wp.transform_get_rotation(t_ee)) * wp.transform_get_rotation(tgt))",
         "the orientation error is taken in the EE frame instead of the root frame",
@@ -61,7 +61,7 @@ MUTATIONS = [
     ),
     M(
         "osc_singularity_damping_off",
-        "wpctrl/kernels/impedance.py",
+        "wpctrl/impedance/warp_kernels.py",
         "    if pmin < eps:",
         "    if pmin < wp.float64(0.0):",
         "the singularity damping never acts",
@@ -69,7 +69,7 @@ MUTATIONS = [
     ),
     M(
         "joint_impedance_inertia_ignored",
-        "wpctrl/kernels/impedance.py",
+        "wpctrl/impedance/warp_kernels.py",
         "                tau = M * a",
         "                tau = a",
         "joint impedance's inertial compensation is dropped",
@@ -77,7 +77,7 @@ MUTATIONS = [
     ),
     M(
         "variable_impedance_damping_not_doubled",
-        "wpctrl/kernels/impedance.py",
+        "wpctrl/impedance/warp_kernels.py",
         "kd_out[env, gain_off + k] = 2.0 * ratio[k] * wp.sqrt(kp[k])",
         "kd_out[env, gain_off + k] = ratio[k] * wp.sqrt(kp[k])",
         "variable impedance's damping is ζ √Kp instead of 2 ζ √Kp",
@@ -85,7 +85,7 @@ MUTATIONS = [
     ),
     M(
         "joint_impedance_use_target_ignored",
-        "wpctrl/kernels/impedance.py",
+        "wpctrl/impedance/warp_kernels.py",
         "t = target_qpos_out[env, row0 + c] + x",
         "t = joint_q_in[qb + row_q_off[c]] + x",
         "joint impedance's use_target adds the increment to the measured position",
@@ -93,7 +93,7 @@ MUTATIONS = [
     ),
     M(
         "osc_fixed_posture_ignored",
-        "wpctrl/kernels/impedance.py",
+        "wpctrl/impedance/warp_kernels.py",
         "qn = posture[c]",
         "qn = target_qpos_in[env, row0 + c]",
         "nullspace_target is ignored (the reset pose stays the posture)",
@@ -101,7 +101,7 @@ MUTATIONS = [
     ),
     M(
         "impedance_gravity_twice_with_balance",
-        "wpctrl/engine/parts/impedance.py",
+        "wpctrl/impedance/engine_part.py",
         "self.gravity_on = bool(spec.gravity and not plan.options.balance_passive_force)",
         "self.gravity_on = bool(spec.gravity)",
         "the controller adds gravity although the solver already takes it off the robot",
@@ -109,7 +109,7 @@ MUTATIONS = [
     ),
     M(
         "osc_reset_keeps_the_old_target",
-        "wpctrl/engine/parts/impedance.py",
+        "wpctrl/impedance/engine_part.py",
         "EEPart.reset(self, state, env_ids, env_mask, use_target=True)",
         "EEPart.reset(self, state, env_ids, env_mask, use_target=False)",
         "an OSC reset leaves the target pose where it was",
@@ -117,7 +117,7 @@ MUTATIONS = [
     ),
     M(
         "impedance_default_damping_not_critical",
-        "wpctrl/config/impedance.py",
+        "wpctrl/impedance/spec.py",
         "kd = 2.0 * ratio * np.sqrt(kp) if kd_value is None",
         "kd = ratio * np.sqrt(kp) if kd_value is None",
         "damping=None gives ζ √Kp instead of critical damping",
@@ -125,7 +125,7 @@ MUTATIONS = [
     ),
     M(
         "osc_task_gain_scale_ignores_the_config",
-        "wpctrl/engine/parts/impedance.py",
+        "wpctrl/impedance/engine_part.py",
         "                x = nominal_in[p, k] * x\n",
         "                x = x\n",
         "randomize_task_impedance's 'scale' mode draws the factor itself, not the config's gain times it",

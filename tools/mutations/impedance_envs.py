@@ -5,7 +5,7 @@ from .model import M
 MUTATIONS = [
     M(
         "envs_joint_impedance_variable_gains_into_the_first_rows",
-        "wpctrl/engine/parts/impedance.py",
+        "wpctrl/impedance/engine_part.py",
         "        return drive.kp, drive.kd, self.row0",
         "        return drive.kp, drive.kd, 0",
         "a later joint-impedance controller's variable gains are written to the mode's first rows",
@@ -13,7 +13,7 @@ MUTATIONS = [
     ),
     M(
         "envs_joint_impedance_variable_gains_from_the_first_columns",
-        "wpctrl/engine/parts/impedance.py",
+        "wpctrl/impedance/engine_part.py",
         "gain_col0=self.col0 + s.task_dim,",
         "gain_col0=s.task_dim,",
         "a later impedance controller reads its gain columns from the action's start",
@@ -21,7 +21,7 @@ MUTATIONS = [
     ),
     M(
         "envs_osc_nullspace_gains_from_env0",
-        "wpctrl/kernels/impedance.py",
+        "wpctrl/impedance/warp_kernels.py",
         "a0 = VecN()\n                kb = _bidx(kp.shape[0], env)",
         "a0 = VecN()\n                kb = _bidx(kp.shape[0], 0)",
         "OSC's null-space (posture) gains are read from env 0 for every env",
@@ -29,7 +29,7 @@ MUTATIONS = [
     ),
     M(
         "envs_osc_task_gains_from_env0",
-        "wpctrl/kernels/impedance.py",
+        "wpctrl/impedance/warp_kernels.py",
         "wp.float64(task_kp[env, k]) * e[k]",
         "wp.float64(task_kp[0, k]) * e[k]",
         "OSC's task stiffness is read from env 0 for every env",
@@ -37,7 +37,7 @@ MUTATIONS = [
     ),
     M(
         "envs_joint_impedance_gains_from_env0",
-        "wpctrl/kernels/impedance.py",
+        "wpctrl/impedance/warp_kernels.py",
         "kb = _bidx(kp.shape[0], env)\n            a = VecN()",
         "kb = _bidx(kp.shape[0], 0)\n            a = VecN()",
         "joint impedance's per-env stiffness and damping are read from env 0",
@@ -48,7 +48,7 @@ MUTATIONS = [
     ),
     M(
         "envs_impedance_gravity_from_env0",
-        "wpctrl/kernels/impedance.py",
+        "wpctrl/impedance/warp_kernels.py",
         "gv = gravity_in[env_world[env]]",
         "gv = gravity_in[env_world[0]]",
         "the gravity compensation of every env uses env 0's world gravity",
@@ -59,7 +59,7 @@ MUTATIONS = [
     ),
     M(
         "envs_impedance_world_gravity_ignored",
-        "wpctrl/engine/parts/impedance.py",
+        "wpctrl/impedance/engine_part.py",
         "self.env_world = up(np.where(w < 0, gworld - 1, np.minimum(w, gworld - 1)))",
         "self.env_world = up(np.full(E, gworld - 1))",
         "the gravity compensation uses the model's global gravity, not each env's world gravity",
@@ -70,7 +70,7 @@ MUTATIONS = [
     ),
     M(
         "envs_joint_impedance_clip_first_controllers_limits",
-        "wpctrl/kernels/impedance.py",
+        "wpctrl/impedance/warp_kernels.py",
         "t = wp.clamp(t, p.row_qlo[row0 + c], p.row_qhi[row0 + c])",
         "t = wp.clamp(t, p.row_qlo[c], p.row_qhi[c])",
         "joint-impedance clip_targets clamps to the mode's first joints' limits, not its own joints'",
@@ -78,7 +78,7 @@ MUTATIONS = [
     ),
     M(
         "envs_joint_impedance_torque_first_controllers_targets",
-        "wpctrl/kernels/impedance.py",
+        "wpctrl/impedance/warp_kernels.py",
         "wp.float64(kp[kb, row0 + c]) * (wp.float64(target_qpos_in[env, row0 + c]) - q[c])",
         "wp.float64(kp[kb, row0 + c]) * (wp.float64(target_qpos_in[env, c]) - q[c])",
         "joint impedance's torque reads the mode's first rows' targets",
@@ -86,7 +86,7 @@ MUTATIONS = [
     ),
     M(
         "envs_joint_impedance_action_first_columns",
-        "wpctrl/kernels/impedance.py",
+        "wpctrl/impedance/warp_kernels.py",
         "x = _scale(action_in[env, col0 + c], target_lo[c], target_hi[c], normalize)",
         "x = _scale(action_in[env, c], target_lo[c], target_hi[c], normalize)",
         "a later joint-impedance controller reads the action's first columns",
@@ -94,7 +94,7 @@ MUTATIONS = [
     ),
     M(
         "envs_impedance_q_offsets_of_the_first_rows",
-        "wpctrl/engine/parts/impedance.py",
+        "wpctrl/impedance/engine_part.py",
         "self.row_q_off = up(b.q_off[row0 : row0 + n])",
         "self.row_q_off = up(b.q_off[0:n])",
         "an impedance controller measures the positions of the mode's first joints, not its own",
@@ -102,7 +102,7 @@ MUTATIONS = [
     ),
     M(
         "envs_osc_rotation_action_scaled_twice",
-        "wpctrl/kernels/impedance.py",
+        "wpctrl/impedance/warp_kernels.py",
         "act = _pose_action(action_in, env, col0, 1, normalize, lo, hi, p.rot_scale)",
         "act = _pose_action(action_in, env, col0, 1, normalize, lo, hi, wp.cw_mul(p.rot_scale, p.rot_scale))",
         "the rotation part of a normalised OSC action is scaled twice",
@@ -110,15 +110,15 @@ MUTATIONS = [
     ),
     M(
         "envs_osc_body_translation_ignored",
-        "wpctrl/config/impedance.py",
-        'bits = (FRAME_BODY_TRANS if c.frame.startswith("body_translation") else 0) | (',
-        'bits = (FRAME_BODY_TRANS if c.frame.endswith("body_translation") else 0) | (',
+        "wpctrl/config/ee.py",
+        'return (FRAME_BODY_TRANS if c.frame.startswith("body_translation") else 0) | (',
+        'return (FRAME_BODY_TRANS if c.frame.endswith("body_translation") else 0) | (',
         "OSC's body_translation frame is ignored (delta positions along the root axes)",
         ("tests/test_impedance_envs.py::test_osc_target_pose_from_the_action_in_every_frame_and_option",),
     ),
     M(
         "envs_osc_use_target_ignored",
-        "wpctrl/kernels/impedance.py",
+        "wpctrl/impedance/warp_kernels.py",
         "            if use_target != 0:\n                prev = _read_pose(target_pose_out, env)",
         "            if use_target != 0:\n                prev = t_ee",
         "OSC's use_target composes the increment on the measured pose, not the last target",
@@ -126,7 +126,7 @@ MUTATIONS = [
     ),
     M(
         "envs_osc_rotation_scale_full_range",
-        "wpctrl/config/impedance.py",
+        "wpctrl/impedance/spec.py",
         "rot_scale=(0.5 * (rhi - rlo)).astype(np.float32) if normalize",
         "rot_scale=(rhi - rlo).astype(np.float32) if normalize",
         "a normalised OSC rotation is scaled by the full range instead of the half range",

@@ -1,24 +1,21 @@
 """Configs: host dataclasses that mirror ManiSkill 3's controller configs, and the per-joint rows they become.
 
-Never touches a device. :mod:`.errors` (:class:`ConfigError`, :class:`MimicJointError`), :mod:`.joint` (joint
-controllers), :mod:`.mobile_base` (mobile-base controllers), :mod:`.ee` (end-effector controllers),
-:mod:`.impedance` (operational-space and joint-impedance controllers), :mod:`.actuator_models` (actuator models)
-and :mod:`.networks` (actuator network files), :mod:`.options` (the option groups of a control mode),
-:mod:`.validate` (the per-field checks), :mod:`.rows` (the flat per-joint tables one kernel launch handles).
+Never touches a device. :mod:`.errors` (:class:`ConfigError`, :class:`MimicJointError`), :mod:`.family` (what every
+config class declares: its controller class and its family, how it becomes rows and which engine part runs it),
+:mod:`.joint` (joint controllers) and :mod:`.joint_rows` (their rows), :mod:`.mobile_base` (mobile-base
+controllers), :mod:`.ee` (end-effector controllers), :mod:`.actuator_models` (actuator models) and :mod:`.networks`
+(actuator network files), :mod:`.options` (the option groups of a control mode), :mod:`.validate` (the per-field
+checks), :mod:`.rows` (the flat per-joint tables one kernel launch handles). The operational-space and
+joint-impedance configs live with the rest of their controllers in :mod:`wpctrl.impedance` and are exported here too.
 """
 
+from ..impedance.config import IMPEDANCE_CONFIGS, JointImpedanceControllerConfig, OperationalSpaceControllerConfig
+from ..impedance.spec import ImpedanceSpec, impedance_rows
 from .actuator_models import ActuatorNet, DCMotor, PositionBasedEffortLimit
 from .ee import EE_CONFIGS, MAX_EE_DOF, EESpec, PDEEPosControllerConfig, PDEEPoseControllerConfig, ee_rows
 from .errors import ConfigError, MimicJointError
-from .impedance import (
-    IMPEDANCE_CONFIGS,
-    ImpedanceSpec,
-    JointImpedanceControllerConfig,
-    OperationalSpaceControllerConfig,
-    impedance_rows,
-)
+from .family import ControllerConfig, Family
 from .joint import (
-    ControllerConfig,
     JointEffortControllerConfig,
     PassiveControllerConfig,
     PDJointPosControllerConfig,
@@ -43,6 +40,7 @@ from .rows import (
     Rows,
     check_mode_dict,
     config_rows,
+    controller_rows,
 )
 from .validate import DriveMode
 
@@ -90,5 +88,7 @@ __all__ = [
     "Rows",
     "check_mode_dict",
     "config_rows",
+    "controller_rows",
     "ee_rows",
+    "Family",
 ]

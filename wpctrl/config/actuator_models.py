@@ -84,18 +84,15 @@ class ActuatorNet:
     """DC-motor no-load speed [rad/s or m/s] (inf: none)."""
     kind: Literal["auto", "mlp", "lstm"] = "auto"
     """``"auto"``: an LSTM if the module holds one, else an MLP."""
-    kernel: Literal["auto", "unrolled", "3xtf32", "split", "split2", "split4", "tiled"] = "auto"
+    kernel: Literal["auto", "unrolled", "3xtf32", "tiled"] = "auto"
     """How the network runs on the device. ``"unrolled"``: its weights compiled into the kernel as instruction
     operands, one thread per (env, joint), no loads of weights (the fastest for actuator-sized networks; one compile
     per network). ``"3xtf32"``: an MLP's layers as warp-wide matrix products on the tensor cores at float32
     accuracy (each product three TF32 ones, CUTLASS's 3xTF32), 32 rows per warp, the weights as data (one compile per
     network shape); CUDA sm_80 or later, and the CPU (where it emulates the same rounding, for tests). ``"tiled"``:
     the weights staged in shared memory once per block, rows batched into tiles and each layer a tiled matrix product
-    (one compile per network shape; for networks of up to 16,384 weights).
-    ``"split"``: the unrolled code with each row split over 2 or 4 threads (warps of a block), each computing a slice
-    of every layer; measured slower than ``"unrolled"`` at every size on an H200, kept for comparison on other GPUs;
-    ``"split2"`` / ``"split4"`` force the number, ``"split"`` takes 4 while 4 threads per row fit 1,024 per SM, else
-    2 (on the CPU it needs Warp's cooperative CPU blocks, else the unrolled kernel runs).
+    (one compile per network shape; for networks of up to 16,384 weights: the one kernel for an LSTM or a wide MLP
+    too large to compile in, and on GPUs without TF32 tensor cores).
     ``"auto"``: unrolled up to 4,096 multiply-adds per row; past that ``"3xtf32"`` for an MLP of layers up to 128
     wide on CUDA sm_80 or later, else tiled."""
     launch: Literal["auto", "fused", "separate"] = "auto"
@@ -110,6 +107,9 @@ class ActuatorNet:
 
 
 ACTUATOR_TYPES = (DCMotor, PositionBasedEffortLimit, ActuatorNet)
+
+NET_KERNELS = ("auto", "unrolled", "3xtf32", "tiled")
+"""The accepted values of ``ActuatorNet.kernel``."""
 
 
 def _f32(x) -> float:
@@ -203,8 +203,8 @@ def actuator_rows(config, n: int) -> dict:
             v = getattr(act, f)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(_f32(v)):
                 raise ConfigError(f"{where}.{f}: expected a finite number (within float32 range), got {v!r}")
-        if act.kernel not in ("auto", "unrolled", "3xtf32", "split", "split2", "split4", "tiled"):
-            kernels = "'auto', 'unrolled', '3xtf32', 'split', 'split2', 'split4' or 'tiled'"
+        if act.kernel not in NET_KERNELS:
+            kernels = ", ".join(repr(k) for k in NET_KERNELS[:-1]) + f" or {NET_KERNELS[-1]!r}"
             raise ConfigError(f"{where}.kernel: expected {kernels}, got {act.kernel!r}")
         if act.launch not in ("auto", "fused", "separate"):
             raise ConfigError(f"{where}.launch: expected 'auto', 'fused' or 'separate', got {act.launch!r}")

@@ -14,22 +14,27 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Literal, Union
+from typing import Literal, Union, get_args
 
 import numpy as np
 
 from .errors import ConfigError
-from .joint import ControllerClass, ControllerConfig, PDJointPosControllerConfig
-from .rows import Rows, _pos_rows
+from .family import ControllerClass, ControllerConfig, Family
+from .joint import PDJointPosControllerConfig
+from .joint_rows import _pos_rows
+from .robot_description import Descriptions, descriptions_for
+from .rows import Rows
 from .validate import DriveMode, _f32, _joint_names
 
 POS_FRAMES = ("root_translation", "body_translation")
-POSE_FRAMES = (
+PoseFrame = Literal[
     "body_translation:root_aligned_body_rotation",
     "root_translation:root_aligned_body_rotation",
     "body_translation:body_aligned_body_rotation",
     "root_translation:body_aligned_body_rotation",
-)
+]
+"""Frames of a pose action's position (root or EE axes) and rotation (pre- or post-multiplied)."""
+POSE_FRAMES = get_args(PoseFrame)
 SOLVER_TYPES = ("levenberg_marquardt", "pseudo_inverse")
 MAX_EE_DOF = 8
 """Most controlled joints on one EE chain (the fixed-size Jacobian of the kernels is 6 x MAX_EE_DOF)."""
@@ -42,6 +47,7 @@ def _default_solver() -> dict:
 @dataclass
 class PDEEPosControllerConfig(ControllerConfig):
     controller_cls = ControllerClass("wpctrl.controllers.ee", "PDEEPosController")
+    family = Family(lambda config, qlimits: ee_rows(config, qlimits), part="wpctrl.engine.parts.ee")  # (below)
 
     pos_lower: Union[float, Sequence[float]]
     """Lower bound of the position action [m] (per axis or one value for x, y, z); None: unbounded (-inf)."""
@@ -96,12 +102,7 @@ class PDEEPoseControllerConfig(PDEEPosControllerConfig):
     damping: Union[float, Sequence[float]] = None
     force_limit: Union[float, Sequence[float]] = 1e10
     friction: Union[float, Sequence[float]] = 0.0
-    frame: Literal[
-        "body_translation:root_aligned_body_rotation",
-        "root_translation:root_aligned_body_rotation",
-        "body_translation:body_aligned_body_rotation",
-        "root_translation:body_aligned_body_rotation",
-    ] = "root_translation:root_aligned_body_rotation"
+    frame: PoseFrame = "root_translation:root_aligned_body_rotation"
     """Frames of the position delta (root or EE axes) and of the rotation delta (pre- or post-multiplied)."""
 
 
@@ -134,6 +135,9 @@ class EESpec:
     ee_link: str
     urdf_path: str | None
     root_link_name: str | None
+    descriptions: Descriptions  # urdf_path's joints, else the registered robots': for links the model lacks
+
+    joint_targets = True  # its solve writes the rows' joint position targets (target clipping applies)
 
 
 def _name(c) -> str:
@@ -204,6 +208,35 @@ def _solver(c) -> dict:
     return out
 
 
+def link_and_frame(c, frames: tuple[str, ...]) -> int:
+    """Check an end-effector config's ``ee_link``, ``urdf_path``, ``root_link_name`` and ``frame`` (one of
+    ``frames``); return the frame's bits (``FRAME_BODY_TRANS``, ``FRAME_BODY_ROT``)."""
+    if not isinstance(c.ee_link, str) or not c.ee_link:
+        raise ConfigError(f"{_name(c)}.ee_link: expected the name of the controlled link, got {c.ee_link!r}")
+    if c.urdf_path is not None and not isinstance(c.urdf_path, (str, bytes)) and not hasattr(c.urdf_path, "__fspath__"):
+        raise ConfigError(f"{_name(c)}.urdf_path: expected a path or None, got {c.urdf_path!r}")
+    if c.root_link_name is not None and not isinstance(c.root_link_name, str):
+        raise ConfigError(f"{_name(c)}.root_link_name: expected a link name or None, got {c.root_link_name!r}")
+    if c.frame not in frames:
+        raise ConfigError(f"{_name(c)}.frame: expected one of {frames}, got {c.frame!r}")
+    return (FRAME_BODY_TRANS if c.frame.startswith("body_translation") else 0) | (
+        FRAME_BODY_ROT if c.frame.endswith("body_aligned_body_rotation") else 0
+    )
+
+
+def check_pose_box(c, low: np.ndarray, high: np.ndarray) -> None:
+    """Each axis of a pose action's bounds (x, y, z, then rx, ry, rz) ordered: lower <= upper."""
+    axes = ["x", "y", "z", "rx", "ry", "rz"]
+    bad = np.nonzero(low > high)[0]
+    if bad.size:
+        i = int(bad[0])
+        what = "pos_lower/pos_upper" if i < 3 else "rot_lower/rot_upper"
+        raise ConfigError(
+            f"{_name(c)}.{what}: lower must be <= upper, got lower={_f32(low[i])} > "
+            f"upper={_f32(high[i])} for axis {axes[i]!r}"
+        )
+
+
 def ee_rows(c: PDEEPosControllerConfig, qlimits: np.ndarray) -> tuple[Rows, EESpec]:
     """Validate an EE config; return its joint rows (position rows, no action column of their own) and its spec.
 
@@ -219,18 +252,7 @@ def ee_rows(c: PDEEPosControllerConfig, qlimits: np.ndarray) -> tuple[Rows, EESp
     for f in ("use_delta", "use_target", "interpolate", "normalize_action"):
         if not isinstance(getattr(c, f), (bool, np.bool_)):
             raise ConfigError(f"{_name(c)}.{f}: expected a bool, got {getattr(c, f)!r}")
-    if not isinstance(c.ee_link, str) or not c.ee_link:
-        raise ConfigError(f"{_name(c)}.ee_link: expected the name of the controlled link, got {c.ee_link!r}")
-    if c.urdf_path is not None and not isinstance(c.urdf_path, (str, bytes)) and not hasattr(c.urdf_path, "__fspath__"):
-        raise ConfigError(f"{_name(c)}.urdf_path: expected a path or None, got {c.urdf_path!r}")
-    if c.root_link_name is not None and not isinstance(c.root_link_name, str):
-        raise ConfigError(f"{_name(c)}.root_link_name: expected a link name or None, got {c.root_link_name!r}")
-    frames = POSE_FRAMES if pose else POS_FRAMES
-    if c.frame not in frames:
-        raise ConfigError(f"{_name(c)}.frame: expected one of {frames}, got {c.frame!r}")
-    bits = (FRAME_BODY_TRANS if c.frame.startswith("body_translation") else 0) | (
-        FRAME_BODY_ROT if c.frame.endswith("body_aligned_body_rotation") else 0
-    )
+    bits = link_and_frame(c, POSE_FRAMES if pose else POS_FRAMES)
     s = _solver(c)
 
     normalize = bool(c.normalize_action)
@@ -248,15 +270,7 @@ def ee_rows(c: PDEEPosControllerConfig, qlimits: np.ndarray) -> tuple[Rows, EESp
             rot_scale = (rlo if s["rotation_sign"] == "maniskill" else 0.5 * (rhi - rlo)).astype(np.float32)
     a_low = np.concatenate(low).astype(np.float32)
     a_high = np.concatenate(high).astype(np.float32)
-    axes = ["x", "y", "z", "rx", "ry", "rz"]
-    bad = np.nonzero(a_low > a_high)[0]
-    if bad.size:
-        i = int(bad[0])
-        what = "pos_lower/pos_upper" if i < 3 else "rot_lower/rot_upper"
-        raise ConfigError(
-            f"{_name(c)}.{what}: lower must be <= upper, got lower={_f32(a_low[i])} > "
-            f"upper={_f32(a_high[i])} for axis {axes[i]!r}"
-        )
+    check_pose_box(c, a_low, a_high)
 
     # Joint rows: position rows (drive, interpolation, NaN hold, reset as any joint controller) whose targets the
     # EE kernel writes; act_col -1 tells the joint kernel to keep them.
@@ -298,5 +312,6 @@ def ee_rows(c: PDEEPosControllerConfig, qlimits: np.ndarray) -> tuple[Rows, EESp
         ee_link=c.ee_link,
         urdf_path=None if c.urdf_path is None else str(c.urdf_path),
         root_link_name=c.root_link_name,
+        descriptions=descriptions_for(None if c.urdf_path is None else str(c.urdf_path)),
     )
     return rows, spec

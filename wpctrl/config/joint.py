@@ -3,51 +3,31 @@
 Class names, field names, field order and defaults are ManiSkill's, so a ManiSkill control-mode dict ports by
 changing an import. This module never touches a device.
 
+Each config class declares its controller class and its family (:mod:`.family`: the rows of
+:mod:`.joint_rows`).
+
 Units: positions in rad (revolute) or m (prismatic), velocities in rad/s or m/s, stiffness in N·m/rad (N/m),
 damping in N·m·s/rad (N·s/m), force limits in N·m (N).
 """
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Union
 
+from . import joint_rows
 from .actuator_models import ActuatorNet, DCMotor, PositionBasedEffortLimit
+from .family import ControllerClass, ControllerConfig, Family
 from .validate import DriveMode
 
 Actuator = Union[DCMotor, PositionBasedEffortLimit, ActuatorNet]
 
 
-class ControllerClass:
-    """``Config.controller_cls`` of wpctrl's configs: the controller class, named by its module and class and imported
-    on first read. So it is the class itself right after ``import wpctrl`` (the controllers import Newton and load
-    lazily), and the config layer imports nothing of the controller layer. A subclass that assigns its own
-    ``controller_cls`` (as ManiSkill's configs do) replaces it."""
-
-    def __init__(self, module: str, name: str):
-        self.module, self.name = module, name
-
-    def __get__(self, obj, owner=None):
-        return getattr(importlib.import_module(self.module), self.name)
-
-    def __repr__(self) -> str:
-        return f"ControllerClass({self.module}.{self.name})"
-
-
-@dataclass
-class ControllerConfig:
-    joint_names: list[str]
-    """Names of the joints this controller drives, matched against the Newton model's joint labels."""
-
-    # A class variable (not a dataclass field), as in ManiSkill: the controller class this config builds.
-    controller_cls = None
-
-
 @dataclass
 class PDJointPosControllerConfig(ControllerConfig):
     controller_cls = ControllerClass("wpctrl.controllers.joint", "PDJointPosController")
+    family = Family(joint_rows.position_rows)
 
     lower: Union[None, float, Sequence[float]]
     """Lower action bound [rad or m] (a delta bound with ``use_delta``); None takes the joint's lower limit."""
@@ -88,6 +68,7 @@ class PDJointPosControllerConfig(ControllerConfig):
 @dataclass
 class PDJointPosMimicControllerConfig(PDJointPosControllerConfig):
     controller_cls = ControllerClass("wpctrl.controllers.joint", "PDJointPosMimicController")
+    family = Family(joint_rows.mimic_rows)
 
     mimic: dict[str, dict[str, float]] = field(default_factory=dict)
     """``{mimic_joint: {"joint": control_joint, "multiplier": 1.0, "offset": 0.0}}``: the mimic joint's target is
@@ -97,6 +78,7 @@ class PDJointPosMimicControllerConfig(PDJointPosControllerConfig):
 @dataclass
 class PDJointVelControllerConfig(ControllerConfig):
     controller_cls = ControllerClass("wpctrl.controllers.joint", "PDJointVelController")
+    family = Family(joint_rows.velocity_rows)
 
     lower: Union[float, Sequence[float]]
     """Lower velocity bound [rad/s or m/s]."""
@@ -120,6 +102,7 @@ class PDJointVelControllerConfig(ControllerConfig):
 @dataclass
 class PDJointPosVelControllerConfig(PDJointPosControllerConfig):
     controller_cls = ControllerClass("wpctrl.controllers.joint", "PDJointPosVelController")
+    family = Family(joint_rows.pos_vel_rows)
 
     vel_lower: Union[float, Sequence[float]] = -1.0
     """Lower velocity-target bound [rad/s or m/s]."""
@@ -134,6 +117,7 @@ class JointEffortControllerConfig(ControllerConfig):
     built-in drive is off (gains 0, target mode EFFORT) in both actuations."""
 
     controller_cls = ControllerClass("wpctrl.controllers.joint", "JointEffortController")
+    family = Family(joint_rows.effort_rows)
 
     lower: Union[float, Sequence[float]]
     """Lower effort bound [N·m or N]."""
@@ -150,6 +134,7 @@ class JointEffortControllerConfig(ControllerConfig):
 @dataclass
 class PassiveControllerConfig(ControllerConfig):
     controller_cls = ControllerClass("wpctrl.controllers.joint", "PassiveController")
+    family = Family(joint_rows.passive_rows)
 
     damping: Union[float, Sequence[float]]
     """Damping toward a zero velocity target [N·m·s/rad or N·s/m]; stiffness is 0."""

@@ -10,7 +10,40 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .joint import ControllerClass, PDJointVelControllerConfig
+import numpy as np
+
+from .errors import ConfigError
+from .family import ControllerClass, Family
+from .joint import PDJointVelControllerConfig
+from .joint_rows import _action_box, _vel_rows
+from .rows import Rows
+from .validate import _joint_names, _name
+
+
+def _base_rows(config, forward: bool) -> Rows:
+    """Rows of a mobile base: velocity rows whose x / y targets are the planar action rotated by the measured yaw."""
+    names = _joint_names(config)
+    n = len(names)
+    if n < 3 or (forward and n != 3):
+        want = "exactly 3 joints" if forward else "at least 3 joints"
+        raise ConfigError(
+            f"{_name(config)}.joint_names: expected {want} (the base's x, y and yaw joints, in that order), got {n}: "
+            f"{names}"
+        )
+    if forward:
+        # ManiSkill's forward base: action [v, w], bounds broadcast to 2 (not one per joint).
+        a_lo, a_hi = _action_box(config, 2, ["forward velocity", "yaw rate"])
+        rows = _vel_rows(config, bounds=(np.array([a_lo[0], 0, a_lo[1]]), np.array([a_hi[0], 0, a_hi[1]])))
+        rows.act_col[:] = [0, -1, 1]
+        rows.action_low, rows.action_high, rows.action_dim = a_lo, a_hi, 2
+        rows.bx_col[:2] = 0
+    else:
+        rows = _vel_rows(config)
+        rows.bx_col[:2] = 0
+        rows.by_col[:2] = 1
+    rows.yaw_row[:2] = 2
+    rows.base_axis[:2] = [0, 1]
+    return rows
 
 
 @dataclass
@@ -20,6 +53,7 @@ class PDBaseVelControllerConfig(PDJointVelControllerConfig):
     [rad/s or m/s]."""
 
     controller_cls = ControllerClass("wpctrl.controllers.mobile_base", "PDBaseVelController")
+    family = Family(lambda config, qlimits: _base_rows(config, forward=False))
 
 
 @dataclass
@@ -28,3 +62,4 @@ class PDBaseForwardVelControllerConfig(PDJointVelControllerConfig):
     velocity targets ``[c v, s v, w]`` of the base's x, y and yaw joints (exactly 3 joints)."""
 
     controller_cls = ControllerClass("wpctrl.controllers.mobile_base", "PDBaseForwardVelController")
+    family = Family(lambda config, qlimits: _base_rows(config, forward=True))

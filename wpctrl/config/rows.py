@@ -1,38 +1,21 @@
 """Rows: the flat, per-joint description of a control mode that one kernel launch handles.
 
-Validates configs (:mod:`wpctrl.config.joint`) and turns them into per-joint rows (plain numpy tables) that the
-binding and the engine upload. Host only.
+A config becomes rows through its family (:mod:`wpctrl.config.family`: each config class declares how); this module
+holds the table itself (:class:`Rows`, one row per controlled joint: kind, flags, action columns, bounds, gains...),
+the row kinds and flags the kernels branch on, and the checks of a whole control-mode dict. Plain numpy tables that
+the binding and the engine upload. Host only.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from .actuator_models import ACT_NET, actuator_rows
-from .errors import ConfigError, MimicJointError
-from .joint import (
-    ControllerConfig,
-    JointEffortControllerConfig,
-    PassiveControllerConfig,
-    PDJointPosControllerConfig,
-    PDJointPosMimicControllerConfig,
-    PDJointPosVelControllerConfig,
-    PDJointVelControllerConfig,
-)
-from .mobile_base import PDBaseForwardVelControllerConfig, PDBaseVelControllerConfig
-from .validate import (
-    _bounds,
-    _check_box,
-    _drive_modes,
-    _joint_names,
-    _mimic_map,
-    _name,
-    _per_joint,
-)
+from .errors import ConfigError
+from .family import ControllerConfig
+from .validate import _joint_names
 
 # Row kinds (one row per controlled joint).
 ROW_POS = 0
@@ -210,279 +193,23 @@ _ROW_ARRAYS = {
 }
 
 
-def _pos_rows(config, qlimits: np.ndarray, *, mimic: bool = False, posvel: bool = False) -> Rows:
-    names = _joint_names(config)
-    n = len(names)
-    low, high = _bounds(config, config.lower, config.upper, qlimits)
-    kp = _per_joint(config, "stiffness", config.stiffness, n, nonneg=True)
-    kd = _per_joint(config, "damping", config.damping, n, nonneg=True)
-    fl = _per_joint(config, "force_limit", config.force_limit, n, nonneg=True)
-    fr = _per_joint(config, "friction", config.friction, n, nonneg=True)
-    accel = _drive_modes(config, n)
-    for f in ("use_delta", "use_target", "interpolate", "normalize_action"):
-        if not isinstance(getattr(config, f), (bool, np.bool_)):
-            raise ConfigError(f"{_name(config)}.{f}: expected a bool, got {getattr(config, f)!r}")
-    flags = 0
-    if config.normalize_action:
-        flags |= FLAG_NORMALIZE
-    if config.use_delta:
-        flags |= FLAG_DELTA
-        if config.use_target:
-            flags |= FLAG_TARGET
-    if config.interpolate:
-        flags |= FLAG_INTERPOLATE
+def controller_rows(config: ControllerConfig, qlimits: np.ndarray) -> tuple[Rows, object]:
+    """Validate one config through its family; return its rows and its spec (None for a family without a part).
 
-    act_col = np.full(n, -1, np.int32)
-    vel_col = np.full(n, -1, np.int32)
-    mimic_src = np.full(n, -1, np.int32)
-    mul = np.ones(n, np.float32)
-    off = np.zeros(n, np.float32)
-    if mimic:
-        mm = _mimic_map(config, names)
-        followers, sources = [], []
-        for m_name, entry in mm.items():
-            if not isinstance(entry, Mapping) or "joint" not in entry:
-                raise ConfigError(
-                    f"{_name(config)}.mimic[{m_name!r}]: expected {{'joint': name, 'multiplier': m, 'offset': o}}, "
-                    f"got {entry!r}"
-                )
-            c_name = entry["joint"]
-            for role, jn in (("mimic joint", m_name), ("control joint", c_name)):
-                if jn not in names:
-                    raise MimicJointError(f"{_name(config)}.mimic: {role} {jn!r} is not in joint_names {names}")
-            raw = (entry.get("multiplier", 1.0), entry.get("offset", 0.0))
-            if any(isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, float, np.integer, np.floating))
-                   for x in raw):  # fmt: skip
-                raise ConfigError(
-                    f"{_name(config)}.mimic[{m_name!r}]: expected numbers for multiplier and offset, got "
-                    f"{raw[0]!r}, {raw[1]!r}"
-                )
-            m, o = float(raw[0]), float(raw[1])
-            # Finite in float32, where they are used (1e39 would become inf).
-            if not all(math.isfinite(x) and abs(x) <= float(np.finfo(np.float32).max) for x in (m, o)):
-                raise ConfigError(
-                    f"{_name(config)}.mimic[{m_name!r}]: expected a finite multiplier and offset (within float32 "
-                    f"range), got multiplier={m!r}, offset={o!r}"
-                )
-            if m_name == c_name:
-                raise ConfigError(f"{_name(config)}.mimic[{m_name!r}]: a joint cannot mimic itself")
-            i, j = names.index(m_name), names.index(c_name)
-            followers.append(i)
-            sources.append(j)
-            mimic_src[i] = j
-            mul[i] = np.float32(m)
-            off[i] = np.float32(o)
-        chained = sorted(set(followers) & set(sources))
-        if chained:
-            # Walk from a follower whose source follows too, to show the whole chain (or cycle).
-            start = next(i for i in followers if mimic_src[i] in chained)
-            path = [start]
-            while mimic_src[path[-1]] >= 0 and path.count(path[-1]) == 1:
-                path.append(int(mimic_src[path[-1]]))
-            what = "cycle" if path.count(path[-1]) > 1 else "chain"
-            shown = " -> ".join(repr(names[i]) for i in path)
-            raise ConfigError(
-                f"{_name(config)}.mimic: expected every follower to mimic a commanded joint directly, got a mimic "
-                f"{what} {shown} (read 'a' -> 'b' as 'a' follows 'b'); make each follower mimic the commanded joint"
-            )
-        control = sorted(set(sources))  # ascending position in joint_names, as ManiSkill's torch.unique
-        for c, j in enumerate(control):
-            act_col[j] = c
-        rows_for_action = control
-    else:
-        act_col[:] = np.arange(n, dtype=np.int32)
-        rows_for_action = list(range(n))
-
-    d = len(rows_for_action)
-    vlo = np.zeros(n, np.float32)
-    vhi = np.zeros(n, np.float32)
-    a_low = low[rows_for_action]
-    a_high = high[rows_for_action]
-    _check_box(config, low, high, names, bool(config.normalize_action), "lower/upper")
-    if posvel:
-        vl = _per_joint(config, "vel_lower", config.vel_lower, n).astype(np.float32)
-        vh = _per_joint(config, "vel_upper", config.vel_upper, n).astype(np.float32)
-        _check_box(config, vl, vh, names, bool(config.normalize_action), "vel_lower/vel_upper")
-        vlo[:], vhi[:] = vl, vh
-        vel_col[:] = np.arange(n, dtype=np.int32) + n
-        flags |= FLAG_VEL_TARGET
-        a_low = np.concatenate([a_low, vl])
-        a_high = np.concatenate([a_high, vh])
-        d = 2 * n
-    act = actuator_rows(config, n)
-    if getattr(config, "ema", None) is not None:
-        flags |= FLAG_EMA
-    binary = getattr(config, "binary", False)
-    if not isinstance(binary, (bool, np.bool_)):
-        raise ConfigError(f"{_name(config)}.binary: expected a bool, got {binary!r}")
-    if binary:
-        if config.use_delta or posvel:
-            what = "use_delta=True" if config.use_delta else "a position-velocity config"
-            raise ConfigError(f"{_name(config)}.binary: a binary command sets absolute targets, not with {what}")
-        flags |= FLAG_BINARY
-    return Rows.of(
-        names,
-        ROW_POS,
-        flags=np.full(n, flags, np.int32),
-        act_col=act_col,
-        vel_col=vel_col,
-        lo=low.astype(np.float32),
-        hi=high.astype(np.float32),
-        vlo=vlo,
-        vhi=vhi,
-        mimic_src=mimic_src,
-        mimic_mul=mul,
-        mimic_off=off,
-        kp=kp.astype(np.float32),
-        kd=kd.astype(np.float32),
-        force_limit=fl.astype(np.float32),
-        friction=fr.astype(np.float32),
-        accel=accel,
-        action_low=a_low,
-        action_high=a_high,
-        normalized=config.normalize_action,
-        action_dim=d,
-        act_model=act["act_model"],
-        sat_effort=act["sat_effort"],
-        vel_limit=act["vel_limit"],
-        ema_alpha=act["ema_alpha"],
-        extras=act["extras"],
-    )
-
-
-def _vel_rows(config, bounds: tuple[np.ndarray, np.ndarray] | None = None) -> Rows:
-    names = _joint_names(config)
-    n = len(names)
-    if bounds is None:
-        lo = _per_joint(config, "lower", config.lower, n).astype(np.float32)
-        hi = _per_joint(config, "upper", config.upper, n).astype(np.float32)
-    else:
-        lo, hi = (b.astype(np.float32) for b in bounds)
-    if not isinstance(config.normalize_action, (bool, np.bool_)):
-        raise ConfigError(f"{_name(config)}.normalize_action: expected a bool, got {config.normalize_action!r}")
-    _check_box(config, lo, hi, names, bool(config.normalize_action), "lower/upper")
-    return Rows.of(
-        names,
-        ROW_VEL,
-        flags=np.full(n, FLAG_NORMALIZE if config.normalize_action else 0, np.int32),
-        act_col=np.arange(n, dtype=np.int32),
-        lo=lo,
-        hi=hi,
-        **_drive_fields(config, n, damping=True),
-        accel=_drive_modes(config, n),
-        action_low=lo.copy(),
-        action_high=hi.copy(),
-        normalized=config.normalize_action,
-        **_vel_actuator(config, n),
-    )
-
-
-def _drive_fields(config, n: int, damping: bool) -> dict:
-    """The config's damping (a velocity or passive drive), force limit and friction, per row, validated."""
-    out = {f: _per_joint(config, f, getattr(config, f), n, nonneg=True).astype(np.float32)
-           for f in (("damping",) if damping else ()) + ("force_limit", "friction")}  # fmt: skip
-    if damping:
-        out["kd"] = out.pop("damping")
-    return out
-
-
-def _vel_actuator(config, n: int) -> dict:
-    act = actuator_rows(config, n)
-    if (act["act_model"] == ACT_NET).any():
-        raise ConfigError(
-            f"{_name(config)}.actuator: an ActuatorNet drives position rows (it reads position errors); use DCMotor "
-            f"or PositionBasedEffortLimit on a velocity controller"
-        )
-    return {k: act[k] for k in ("act_model", "sat_effort", "vel_limit", "extras")}
-
-
-def _effort_rows(config) -> Rows:
-    """Rows of a JointEffortController: the scaled action is the joint effort [N·m or N] (no drive, no target)."""
-    names = _joint_names(config)
-    n = len(names)
-    lo = _per_joint(config, "lower", config.lower, n).astype(np.float32)
-    hi = _per_joint(config, "upper", config.upper, n).astype(np.float32)
-    if not isinstance(config.normalize_action, (bool, np.bool_)):
-        raise ConfigError(f"{_name(config)}.normalize_action: expected a bool, got {config.normalize_action!r}")
-    _check_box(config, lo, hi, names, bool(config.normalize_action), "lower/upper")
-    return Rows.of(
-        names,
-        ROW_EFFORT,
-        flags=np.full(n, FLAG_NORMALIZE if config.normalize_action else 0, np.int32),
-        act_col=np.arange(n, dtype=np.int32),
-        lo=lo,
-        hi=hi,
-        **_drive_fields(config, n, damping=False),
-        action_low=lo.copy(),
-        action_high=hi.copy(),
-        normalized=config.normalize_action,
-    )
-
-
-def _base_rows(config, forward: bool) -> Rows:
-    """Rows of a mobile base: velocity rows whose x / y targets are the planar action rotated by the measured yaw."""
-    names = _joint_names(config)
-    n = len(names)
-    if n < 3 or (forward and n != 3):
-        want = "exactly 3 joints" if forward else "at least 3 joints"
-        raise ConfigError(
-            f"{_name(config)}.joint_names: expected {want} (the base's x, y and yaw joints, in that order), got {n}: "
-            f"{names}"
-        )
-    if forward:
-        # ManiSkill's forward base: action [v, w], bounds broadcast to 2 (not one per joint).
-        a_lo = _per_joint(config, "lower", config.lower, 2).astype(np.float32)
-        a_hi = _per_joint(config, "upper", config.upper, 2).astype(np.float32)
-        if not isinstance(config.normalize_action, (bool, np.bool_)):
-            raise ConfigError(f"{_name(config)}.normalize_action: expected a bool, got {config.normalize_action!r}")
-        _check_box(config, a_lo, a_hi, ["forward velocity", "yaw rate"], bool(config.normalize_action), "lower/upper")
-        rows = _vel_rows(config, bounds=(np.array([a_lo[0], 0, a_lo[1]]), np.array([a_hi[0], 0, a_hi[1]])))
-        rows.act_col[:] = [0, -1, 1]
-        rows.action_low, rows.action_high, rows.action_dim = a_lo, a_hi, 2
-        rows.bx_col[:2] = 0
-    else:
-        rows = _vel_rows(config)
-        rows.bx_col[:2] = 0
-        rows.by_col[:2] = 1
-    rows.yaw_row[:2] = 2
-    rows.base_axis[:2] = [0, 1]
-    return rows
-
-
-def _passive_rows(config) -> Rows:
-    names = _joint_names(config)
-    n = len(names)
-    # no action; ManiSkill's passive drive is always "force"
-    return Rows.of(names, ROW_PASSIVE, **_drive_fields(config, n, damping=True))
+    Args:
+        config: A controller config (its class declares ``family``).
+        qlimits: (n, 2) float joint limits [rad or m] of ``config.joint_names``, in that order.
+    """
+    family = type(config).family if isinstance(config, ControllerConfig) else None
+    if family is None:
+        what = type(config).__name__
+        raise ConfigError(f"config: expected a wpctrl controller config (PDJointPosControllerConfig, ...), got {what}")
+    return family.make(config, qlimits)
 
 
 def config_rows(config: ControllerConfig, qlimits: np.ndarray) -> Rows:
-    """Validate one config and return its rows.
-
-    Args:
-        config: One of this module's config dataclasses.
-        qlimits: (n, 2) float joint limits [rad or m] of ``config.joint_names``, in that order.
-    """
-    # Most derived first: the mimic and pos-vel configs subclass the position config.
-    if isinstance(config, PDJointPosMimicControllerConfig):
-        return _pos_rows(config, qlimits, mimic=True)
-    if isinstance(config, PDJointPosVelControllerConfig):
-        return _pos_rows(config, qlimits, posvel=True)
-    if isinstance(config, PDJointPosControllerConfig):
-        return _pos_rows(config, qlimits)
-    if isinstance(config, PDBaseForwardVelControllerConfig):
-        return _base_rows(config, forward=True)
-    if isinstance(config, PDBaseVelControllerConfig):
-        return _base_rows(config, forward=False)
-    if isinstance(config, PDJointVelControllerConfig):
-        return _vel_rows(config)
-    if isinstance(config, JointEffortControllerConfig):
-        return _effort_rows(config)
-    if isinstance(config, PassiveControllerConfig):
-        return _passive_rows(config)
-    raise ConfigError(
-        f"config: expected a wpctrl controller config (PDJointPosControllerConfig, ...), got {type(config).__name__}"
-    )
+    """Validate one config and return its rows (:func:`controller_rows` without the spec)."""
+    return controller_rows(config, qlimits)[0]
 
 
 def check_mode_dict(configs: Mapping[str, ControllerConfig]) -> None:

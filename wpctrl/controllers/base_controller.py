@@ -1,7 +1,8 @@
 """Controller objects: the ManiSkill-shaped API over one control mode's device engine.
 
-A control mode (a single config or a ManiSkill ``{uid: config}`` dict) is one :class:`wpctrl.engine._Engine`;
-child controllers of a dict are views into the parent's arrays.
+A control mode (a single config or a ManiSkill ``{uid: config}`` dict) is one :class:`wpctrl.engine._Engine`, built
+from the configs' families (:mod:`.mode`); child controllers of a dict are views into the parent's arrays, each of
+its config's controller class.
 """
 
 from __future__ import annotations
@@ -15,20 +16,15 @@ import newton
 import numpy as np
 import warp as wp
 
-from ..binding import bind_joints
-from ..config.ee import EE_CONFIGS, ee_rows
-from ..config.errors import ConfigError
-from ..config.impedance import IMPEDANCE_CONFIGS, impedance_rows
-from ..config.joint import ControllerConfig
 from ..config.options import Actuation, Delay, Diagnostics
-from ..config.rows import Rows, check_mode_dict, config_rows
-from ..config.validate import _joint_names
+from ..config.rows import Rows
 from ..engine.core import _Engine
 from ..engine.parts import gravity
-from ..engine.plan import Options, make_plan
+from ..engine.plan import make_plan
 from .drive_properties import DrivePropertiesMixin
 from .inputs import _action_array, _as_rows_array, _claim, _env_selection, _raise_on_nonfinite, _type_name
 from .introspection import IntrospectionMixin
+from .mode import make_mode
 
 
 class BaseController(IntrospectionMixin, DrivePropertiesMixin):
@@ -64,90 +60,53 @@ class BaseController(IntrospectionMixin, DrivePropertiesMixin):
         self.config = config
         self.control_freq = control_freq
         self.sim_freq = sim_freq
-        num_substeps = _num_substeps(control_freq, sim_freq)
-        actuation = Actuation() if actuation is None else actuation
-        diagnostics = Diagnostics() if diagnostics is None else diagnostics
-        for name, value, kind in (("actuation", actuation, Actuation), ("diagnostics", diagnostics, Diagnostics)):
-            if not isinstance(value, kind):
-                raise ConfigError(f"{name}: expected a wpctrl.{kind.__name__}, got {value!r}")
-        if delay is not None and not isinstance(delay, Delay):
-            raise ConfigError(f"delay: expected a wpctrl.Delay or None, got {delay!r}")
-        if isinstance(config, Mapping):
-            configs = dict(config)
-            balance = configs.pop("balance_passive_force", None)  # an agent-level option, not a controller
-            check_mode_dict(configs)
-        else:
-            configs, balance = {"": config}, None
-        balance = _balance_passive_force(balance, balance_passive_force)
-        if balance:
-            gravity.check_solver(solver)
-        names: list[str] = []
-        for c in configs.values():
-            if not isinstance(c, ControllerConfig):
-                raise ConfigError(f"config: expected a controller config, got {type(c).__name__}")
-            names += _joint_names(c)
-        binding = bind_joints(model, names)  # once for the whole mode
-        parts: list[tuple[str, Any, Rows]] = []
-        ee_specs: dict[int, tuple] = {}  # first row -> (first action column, rows, EESpec)
-        r0 = c0 = 0
-        for uid, c in configs.items():
-            n = len(c.joint_names)
-            if isinstance(c, EE_CONFIGS):  # end-effector controllers: position rows + an EE launch
-                rows, spec = ee_rows(c, binding.qlimits[r0 : r0 + n])
-                ee_specs[r0] = (c0, rows.count, spec)
-            elif isinstance(c, IMPEDANCE_CONFIGS):  # OSC / joint impedance: effort rows + their launches
-                rows, spec = impedance_rows(c, binding.qlimits[r0 : r0 + n])
-                ee_specs[r0] = (c0, rows.count, spec)
-            else:
-                rows = config_rows(c, binding.qlimits[r0 : r0 + n])
-            parts.append((uid, c, rows))
-            r0 += n
-            c0 += rows.action_dim
-        all_rows = Rows.concat([p[2] for p in parts])
-        options = Options(
-            num_substeps=num_substeps,
-            sim_dt=1.0 / sim_freq,
+        mode = make_mode(
+            config,
+            model,
+            control_freq,
+            sim_freq,
             actuation=actuation,
             delay=delay,
             diagnostics=diagnostics,
-            balance_passive_force=balance,
+            balance_passive_force=balance_passive_force,
         )
+        if mode.options.balance_passive_force:
+            gravity.check_solver(solver)
         # The engine: plan (host) -> device state -> parts' model writes -> the first reset; nothing after it.
-        self._engine = _Engine(make_plan(all_rows, binding, options, ee_specs), model, solver)
+        self._engine = _Engine(make_plan(mode.rows, mode.binding, mode.options, mode.specs), model, solver)
         if solver is not None and self._engine.mode_changed and type(solver).__name__ == "SolverMuJoCo":
             warnings.warn(
                 "wpctrl changed Model.joint_target_mode after the MuJoCo solver was built; MuJoCo creates its "
                 "actuators at construction, so build the controller before the solver",
                 stacklevel=3,
             )
-        self._rows = slice(0, all_rows.count)
-        self._cols = slice(0, all_rows.action_dim)
+        children = mode.children
+        self._rows = slice(0, self._engine.rows.count)
+        self._cols = slice(0, self._engine.action_dim)
         self._owner = True
-        ee = self._engine.part("ee")
-        ee_parts = {} if ee is None else dict(ee.parts)  # by first row
-        imp = self._engine.part("impedance")
-        if imp is not None:
-            ee_parts.update(imp.units)
-        self._ee = ee_parts.get(0) if not isinstance(config, Mapping) else None
         self.children: dict[str, BaseController] = {}
         if isinstance(config, Mapping):
-            r0 = c0 = 0
-            for uid, c, rows in parts:
-                child_cls = type(c).controller_cls
+            self._ee = None
+            for ch in children:
+                child_cls = type(ch.config).controller_cls
                 child = child_cls.__new__(child_cls)
-                child._init_view(c, self, slice(r0, r0 + rows.count), slice(c0, c0 + rows.action_dim), rows)
-                child._ee = ee_parts.get(r0)
-                self.children[uid] = child
-                r0 += rows.count
-                c0 += rows.action_dim
+                child._init_view(ch.config, self, ch.row_slice, ch.col_slice, ch.rows)
+                self.children[ch.uid] = child
             self.single_action_space = _flat_space([ch.single_action_space for ch in self.children.values()])
             self.action_mapping = {uid: (ch._cols.start, ch._cols.stop) for uid, ch in self.children.items()}
             self.joint_mapping = {uid: (ch._rows.start, ch._rows.stop) for uid, ch in self.children.items()}
             self.sets_target_qpos = any(ch.sets_target_qpos for ch in self.children.values())
             self.sets_target_qvel = any(ch.sets_target_qvel for ch in self.children.values())
         else:
-            self._set_spaces(parts[0][2])
+            self._ee = self._unit(self._engine, 0)
+            self._set_spaces(children[0].rows)
         self.action_space = _batched(self.single_action_space, self.num_envs)
+
+    @staticmethod
+    def _unit(engine, row0: int):
+        """The device side of the controller whose rows start at ``row0`` in its family's engine part (``_ee``), or
+        None for a family that runs in the joint kernels alone. A family with a part overrides it."""
+        return None
 
     def _init_view(self, config, parent: BaseController, rows_slice: slice, cols_slice: slice, rows: Rows):
         self.config = config
@@ -157,6 +116,7 @@ class BaseController(IntrospectionMixin, DrivePropertiesMixin):
         self._rows = rows_slice
         self._cols = cols_slice
         self._owner = False
+        self._ee = self._unit(self._engine, rows_slice.start)
         self.children = {}
         self._set_spaces(rows)
         self.action_space = _batched(self.single_action_space, self.num_envs)
@@ -398,32 +358,6 @@ class BaseController(IntrospectionMixin, DrivePropertiesMixin):
     def __repr__(self) -> str:
         inner = ", ".join(self.joint_names)
         return f"{type(self).__name__}(dof={self.action_dim}, num_envs={self.num_envs}, joints=({inner}))"
-
-
-def _balance_passive_force(in_mode_dict, keyword) -> bool:
-    """The one value of ``balance_passive_force``: the keyword or the mode dict's entry (given both ways they must
-    agree), else True (ManiSkill's default)."""
-    for v in (keyword, in_mode_dict):
-        if v is not None and not isinstance(v, (bool, np.bool_)):
-            raise ConfigError(f"balance_passive_force: expected True or False, got {v!r}")
-    if keyword is not None and in_mode_dict is not None and bool(keyword) != bool(in_mode_dict):
-        raise ConfigError(
-            f"balance_passive_force: expected None or the mode dict's 'balance_passive_force' entry "
-            f"({bool(in_mode_dict)}), got {keyword!r}"
-        )
-    return bool(True if keyword is None and in_mode_dict is None else (in_mode_dict if keyword is None else keyword))
-
-
-def _num_substeps(control_freq, sim_freq) -> int:
-    for name, v in (("control_freq", control_freq), ("sim_freq", sim_freq)):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v <= 0:
-            raise ConfigError(f"{name}: expected a positive int [Hz], got {v!r}")
-    if sim_freq % control_freq != 0:
-        raise ConfigError(
-            f"sim_freq: expected a multiple of control_freq={control_freq} so that each control step spans whole "
-            f"substeps, got sim_freq={sim_freq} (ManiSkill's env asserts this too)"
-        )
-    return int(sim_freq // control_freq)
 
 
 def _flat_space(spaces: Sequence[gym.spaces.Box]) -> gym.spaces.Box:

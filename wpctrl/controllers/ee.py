@@ -20,6 +20,11 @@ class PDEEPosController(PDJointPosController):
 
     _ee = None
 
+    @staticmethod
+    def _unit(engine, row0: int):
+        """The end-effector part's chain of the controller whose rows start at ``row0``."""
+        return engine.part("ee").parts.get(row0)
+
     @property
     def target_pose(self) -> wp.array:
         """(num_envs, 7) target EE pose ``[x, y, z, qw, qx, qy, qz]`` [m] in the root frame (live array); updated

@@ -15,6 +15,18 @@ import warp as wp
 from ..config.options import ControllerOptions
 
 
+def _option(path: str, doc: str) -> property:
+    """A read-only property: the field ``path`` (dotted) of :attr:`IntrospectionMixin.options`."""
+
+    def get(self):
+        value = self.options
+        for name in path.split("."):
+            value = getattr(value, name)
+        return value
+
+    return property(get, doc=doc)
+
+
 class IntrospectionMixin:
     """The options that run, the controlled joints' indices, the plan (see the module docstring)."""
 
@@ -27,38 +39,23 @@ class IntrospectionMixin:
         :class:`wpctrl.Diagnostics`, and whether gravity is off the robot."""
         return self._engine.plan.resolved_options
 
-    @property
-    def actuation(self) -> str:
-        """``"implicit"`` or ``"explicit"``: who computes the drive force."""
-        return self.options.actuation.mode
-
-    @property
-    def explicit_pd(self) -> str | None:
-        """The explicit PD law that runs (``"naive"``, ``"stable"``, ``"coupled"``), or None with implicit
-        actuation."""
-        return self.options.actuation.explicit_pd
-
-    @property
-    def inertia_update(self) -> str | None:
-        """When the inertia is recomputed (``"control"`` or ``"substep"``), or None when the mode computes none."""
-        return self.options.actuation.inertia_update
-
-    @property
-    def nan_policy(self) -> str:
-        return self.options.diagnostics.nan_policy
-
-    @property
-    def clip_targets(self) -> str:
-        return self.options.diagnostics.clip_targets
-
-    @property
-    def track_effort(self) -> bool:
-        return self.options.diagnostics.track_effort
-
-    @property
-    def balance_passive_force(self) -> bool:
-        """Whether gravity is off the controlled robot's links (ManiSkill's agent-level switch)."""
-        return self.options.balance_passive_force
+    actuation = _option("actuation.mode", """``"implicit"`` or ``"explicit"``: who computes the drive force.""")
+    explicit_pd = _option(
+        "actuation.explicit_pd",
+        """The explicit PD law that runs (``"naive"``, ``"stable"``, ``"coupled"``), or None (implicit actuation).""",
+    )
+    inertia_update = _option(
+        "actuation.inertia_update",
+        """When the inertia is recomputed (``"control"`` or ``"substep"``), or None when the mode computes none.""",
+    )
+    nan_policy = _option("diagnostics.nan_policy", "What an action with NaN/Inf does (:class:`wpctrl.Diagnostics`).")
+    clip_targets = _option(
+        "diagnostics.clip_targets", "The clipping of the position targets (:class:`wpctrl.Diagnostics`)."
+    )
+    track_effort = _option("diagnostics.track_effort", "Whether the computed and applied efforts are read out.")
+    balance_passive_force = _option(
+        "balance_passive_force", "Whether gravity is off the controlled robot's links (ManiSkill's agent-level switch)."
+    )
 
     @property
     def substep_launch(self) -> bool:

@@ -158,9 +158,23 @@ class _Engine:
 
     def _launch(self, kernel, dim, per_call: dict, block_dim=None) -> _Launch:
         """A recorded launch of ``kernel`` with every parameter looked up by name (``per_call`` first)."""
-        names = [a.label for a in kernel.adj.args]
-        params = {n: per_call[n] if n in per_call else self.arrays.lookup(n) for n in names}
+        params = {a.label: per_call[a.label] if a.label in per_call else self._param(a) for a in kernel.adj.args}
         return _Launch(kernel, dim, params, self.device, block_dim=block_dim)
+
+    def _param(self, arg):
+        """A kernel parameter by its name; a ``@wp.struct`` parameter that no part provides is filled field by field,
+        each field by the name of the argument it bundles (a field no active part provides stays unset: the kernel of
+        a mode without that part never reads it)."""
+        if not wp.types.type_is_struct(arg.type):
+            return self.arrays.lookup(arg.label)
+        try:
+            return self.arrays.lookup(arg.label)
+        except KeyError:
+            value = arg.type()
+        for name in arg.type.vars:
+            if (field := self.arrays.lookup(name)) is not None:
+                setattr(value, name, field)
+        return value
 
     # -- stages ---------------------------------------------------------------------------------------------------
 

@@ -1,11 +1,11 @@
 """Float64 helpers for build-time geometry on the host: quaternions and rigid transforms, and :class:`LinkFrames`, a
-robot description's link tree (the frames of links that Newton's importer merged away). Quaternions are (x, y, z, w),
-Warp's order. Private module: the end-effector part (:mod:`.parts.ee`) and the robots (:mod:`wpctrl.robots`) use it."""
+robot description's link tree (the frames of links that Newton's importer merged away) in those terms. Quaternions are
+(x, y, z, w), Warp's order. Private module: the end-effector part (:mod:`.parts.ee`) and the robots
+(:mod:`wpctrl.robots`) use it."""
 
 from __future__ import annotations
 
 import math
-import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -68,11 +68,12 @@ class LinkFrames:
     """Where the description came from, for messages (a URDF path, a robot's name)."""
 
     @classmethod
-    def from_urdf_rows(cls, rows, source: str = "") -> LinkFrames:
-        """From ``(joint, URDF type, parent link, child link, origin xyz, origin rpy)`` rows."""
+    def from_description(cls, description) -> LinkFrames:
+        """From a :class:`wpctrl.config.robot_description.RobotDescription` (a URDF's joint rows)."""
+        rows = description.joints
         return cls(
             tuple((r[0], r[1] == "fixed", r[2], r[3], np.asarray(r[4], np.float64), rpy_quat(r[5])) for r in rows),
-            source,
+            description.source,
         )
 
     @property
@@ -92,31 +93,3 @@ class LinkFrames:
     def joint(self, name: str):
         """The row of the joint ``name``, or None."""
         return next((r for r in self.rows if r[0] == name), None)
-
-
-def urdf_frames(path: str) -> LinkFrames:
-    """The link tree of the URDF file ``path`` (its ``<joint>`` elements; no geometry, no inertia). Raises OSError or
-    ``xml.etree.ElementTree.ParseError`` when the file cannot be read."""
-    rows = []
-    for j in ET.parse(path).getroot().findall("joint"):
-        o = j.find("origin")
-        xyz = [float(v) for v in (o.get("xyz", "0 0 0") if o is not None else "0 0 0").split()]
-        rpy = [float(v) for v in (o.get("rpy", "0 0 0") if o is not None else "0 0 0").split()]
-        rows.append((j.get("name"), j.get("type"), j.find("parent").get("link"), j.find("child").get("link"), xyz, rpy))
-    return LinkFrames.from_urdf_rows(rows, repr(path))
-
-
-_KNOWN: list[LinkFrames] = []
-
-
-def register_link_frames(frames: LinkFrames) -> None:
-    """Make a robot's description known to the end-effector part: it locates links and base frames that a model
-    lacks from the first known description holding them when a controller's ``urdf_path`` is None or unreadable.
-    Robot modules (such as :mod:`wpctrl.robots`) register theirs on import."""
-    if all(f.source != frames.source for f in _KNOWN):
-        _KNOWN.append(frames)
-
-
-def known_link_frames() -> tuple[LinkFrames, ...]:
-    """The registered descriptions, first registered first."""
-    return tuple(_KNOWN)

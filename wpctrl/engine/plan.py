@@ -9,6 +9,7 @@ other two stages follow it in one direction: :mod:`.state` allocates the device 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -16,7 +17,6 @@ from ..binding import JointBinding
 from ..config import ConfigError
 from ..config.actuator_models import ACT_DC_MOTOR, ACT_NET, ACT_NONE, ACT_POSITION_LIMIT
 from ..config.ee import EESpec
-from ..config.impedance import ImpedanceSpec
 from ..config.options import Actuation, ControllerOptions, Delay, Diagnostics
 from ..config.rows import FLAG_INTERPOLATE, FLAG_VEL_TARGET, ROW_EFFORT, ROW_PASSIVE, ROW_POS, ROW_VEL, Rows
 from ..kernels import actuator_models, pd_step
@@ -45,7 +45,9 @@ class Plan:
     rows: Rows
     binding: JointBinding
     options: Options
-    ee_specs: dict[int, EESpec] = field(default_factory=dict)  # first row of each EE controller -> its spec
+    # First row of each controller whose family has a part of its own (end effector, impedance) -> (first action
+    # column, rows, the family's spec); the part reads its specs from here.
+    ee_specs: dict[int, tuple[int, int, EESpec | Any]] = field(default_factory=dict)
     # Index tables: the coordinate / DOF index of (env, row) is table[env or 0, row] + env * stride.
     q_idx: np.ndarray = None
     qd_idx: np.ndarray = None
@@ -248,7 +250,7 @@ def check_options(rows: Rows, options: Options, ee_specs: dict | None = None) ->
             f"actuation.inertia_update: expected None: this mode computes no inertia (no joint has drive_mode "
             f"'acceleration' and the explicit law is {a.law!r}, not 'stable' or 'coupled'), got {a.inertia_update!r}"
         )
-    joint_targets = any(isinstance(s, ImpedanceSpec) and not s.osc for _, _, s in (ee_specs or {}).values())
+    joint_targets = any(s.joint_targets for _, _, s in (ee_specs or {}).values())
     if d.clip_targets != "none" and not ((rows.kind == ROW_POS).any() or joint_targets):
         raise ConfigError(
             f"diagnostics.clip_targets: expected 'none': no joint of this mode has a position target (velocity, "

@@ -5,21 +5,23 @@ substep's, interpolated and delayed as the targets of any other row). Each threa
 row: it gathers ``joint_q`` / ``joint_qd`` / ``joint_target_q``, advances the history (or the recurrent state),
 evaluates the network, applies the DC-motor envelope and the force limit, and writes ``joint_f`` and the effort
 readout; no intermediate row buffer leaves the thread (or, in the tiled and tensor-core kernels, the block's shared
-memory and the warp's registers). Four kernels evaluate the network, all compiled for its shape:
+memory and the warp's registers). Three kernels evaluate the network, all compiled for its shape:
 
 - :mod:`.actuator_net_unrolled` (networks of up to :data:`UNROLLED_MAX_MACS` multiply-adds per row): the weights are
   compiled into the kernel as immediate operands, so each multiply-add is one fused multiply-add instruction with no
   load, no shared memory and no block synchronisation. The kernel is compiled per network (its weights are part of
   it).
-- :mod:`.actuator_net_split` (the same networks, on request only): the unrolled kernel's code with each row split
-  over 2 or 4 warps of a block, each computing a slice of every layer's units; the slices meet in shared memory.
-  Measured slower than the unrolled kernel at every size, so ``"auto"`` never picks it.
 - :mod:`.actuator_net_mma` (MLPs of layers up to :data:`MMA_MAX_WIDTH` wide, CUDA sm_80 or later): one warp per
   32 rows, each layer a warp-wide tensor-core product at float32 accuracy (3xTF32). The weights are data. What
   ``"auto"`` runs for an MLP past :data:`UNROLLED_MAX_MACS` on such a GPU.
 - :mod:`.actuator_net_tiled` (any size up to :data:`TILED_MAX_WEIGHTS` weights): the weights are staged once per
   block in shared memory (``wp.tile_load``), each block evaluates tiles of rows as matrix products
-  (``wp.tile_matmul``), one tile per block pass. Compiled per network shape; the weights are data.
+  (``wp.tile_matmul``), one tile per block pass. Compiled per network shape; the weights are data. What ``"auto"``
+  runs past :data:`UNROLLED_MAX_MACS` where the tensor-core kernel does not apply (an LSTM, a layer wider than
+  :data:`MMA_MAX_WIDTH`, a GPU before sm_80, the CPU).
+
+:func:`read_row` gathers a row's inputs and :func:`write_effort` writes its effort, for every kernel; the unrolled
+kernel's MLP input code (:func:`.actuator_net_unrolled.mlp_row_input`) also feeds the tensor-core kernel.
 
 The MLP's past samples are one ``(num_envs * rows, 2 * past)`` array, a row's position errors then velocities, newest
 first (the unrolled kernel reads and writes a row's as one vector); the LSTM's ``h`` and ``c`` are ``(layers * hidden,
@@ -107,16 +109,15 @@ def mma_unsupported(layout: NetLayout) -> str | None:
 
 
 def choose_kernel(layout: NetLayout, kernel: str, cuda_arch: int = 0) -> str:
-    """``"unrolled"``, ``"3xtf32"``, ``"split"`` or ``"tiled"`` for ``kernel`` (``"auto"`` or a kernel's name) on a
-    device of ``cuda_arch`` (0: the CPU). ``"auto"``: the unrolled kernel up to :data:`UNROLLED_MAX_MACS`
-    multiply-adds per row; past that the tensor-core kernel for an MLP it takes on sm_80 or later (measured 5-7x
-    faster than the tiled kernel on an H100), else the tiled one. It never splits: measured on an H200 the split kernel
-    is slower than the unrolled one at every size (see :mod:`.actuator_net_split`)."""
+    """``"unrolled"``, ``"3xtf32"`` or ``"tiled"`` for ``kernel`` (``"auto"`` or a kernel's name) on a device of
+    ``cuda_arch`` (0: the CPU). ``"auto"``: the unrolled kernel up to :data:`UNROLLED_MAX_MACS` multiply-adds per row
+    (measured faster than the others there); past that the tensor-core kernel for an MLP it takes on sm_80 or later
+    (measured 5-7x faster than the tiled kernel on an H100), else the tiled one."""
     if kernel == "auto":
         if layout.macs <= UNROLLED_MAX_MACS:
             return "unrolled"
         return "3xtf32" if cuda_arch >= MMA_MIN_SM and mma_unsupported(layout) is None else "tiled"
-    return "split" if kernel.startswith("split") else kernel
+    return kernel
 
 
 def dense_matrices(layout: NetLayout, weights: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, int, float]]:
@@ -138,6 +139,14 @@ def lstm_matrices(layout: NetLayout, weights: np.ndarray) -> list[tuple[np.ndarr
         w_hh = weights[whh : whh + g * h].reshape(g, h)
         out.append((w_ih, w_hh, (weights[bih : bih + g] + weights[bhh : bhh + g]).astype(np.float32)))
     return out
+
+
+def net_kernel(f, name: str, grid_stride: bool | None = None, **module_options) -> wp.Kernel:
+    """``f`` as a network kernel named ``name``: a module of its own (each kernel is compiled for one network or
+    shape), no backward pass, fast math and ``module_options``; ``grid_stride=False`` for a launch of exactly one
+    thread per row (or lane)."""
+    return wp.kernel(f, name=name, enable_backward=False, grid_stride=grid_stride, module="unique",
+                     module_options={"fast_math": True, **module_options})  # fmt: skip
 
 
 # -- elementwise functions. The network kernels are compiled with fast math on CUDA, where exp is ``ex2.approx`` of a
@@ -219,7 +228,7 @@ def row_index(io: NetIO, q_lin: int, qd_lin: int, env: int, r: int, j: int):
 
 
 @wp.func
-def row_state(
+def read_row(
     io: NetIO,
     q_lin: int,
     qd_lin: int,
@@ -229,29 +238,12 @@ def row_state(
     joint_q_in: wp.array[float],
     joint_qd_in: wp.array[float],
 ):
-    """The row's coordinate and DOF index (:func:`row_index`'s), position and velocity, force limit and DC-motor
-    envelope: what a network row reads besides its position target (:func:`row_input`)."""
+    """What a network row reads besides its position target, all before the network so that the loads are in flight
+    together: its coordinate and DOF index (:func:`row_index`'s), position and velocity, force limit and DC-motor
+    envelope (saturation effort, velocity limit). The caller reads the target (at the coordinate index) and forms the
+    position error ``q* - q``."""
     qi, di = row_index(io, q_lin, qd_lin, env, r, j)
     return qi, di, joint_q_in[qi], joint_qd_in[di], io.force_limit[env, r], io.sat_effort[env, r], io.vel_limit[env, r]
-
-
-@wp.func
-def row_input(
-    io: NetIO,
-    q_lin: int,
-    qd_lin: int,
-    env: int,
-    r: int,
-    j: int,
-    joint_q_in: wp.array[float],
-    joint_qd_in: wp.array[float],
-    joint_target_q_in: wp.array[float],
-):
-    """Everything the row reads, all before the network so that the loads are in flight together: its DOF index,
-    position error ``q* - q`` (the target from ``joint_target_q``) and velocity, its force limit and DC-motor envelope
-    (saturation effort, velocity limit); the indices are :func:`row_index`'s."""
-    qi, di, q, qd, lim, sat, vl = row_state(io, q_lin, qd_lin, env, r, j, joint_q_in, joint_qd_in)
-    return di, joint_target_q_in[qi] - q, qd, lim, sat, vl
 
 
 @wp.func

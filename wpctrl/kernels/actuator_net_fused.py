@@ -13,7 +13,7 @@ would catch.)
 The two sets of threads write disjoint memory (the substep kernel does not write a network row's ``joint_f`` or effort
 readout; the network writes nothing the substep kernel reads), so nothing has to wait for anything inside the launch,
 with one exception: the network's position target. The substep kernel writes it to ``joint_target_q`` in this very
-launch, so a network row cannot read it from there; it reads the mode's target table (``target_qpos_in``) instead,
+launch, so a network row cannot read it from there; it reads the mode's target table (``target_qpos``) instead,
 which is the same value when the network's rows are neither interpolated nor delayed. :func:`fusable` says whether
 a mode's layout allows it; the engine fuses only then (``ActuatorNet.launch``: by default wherever allowed), with
 bit-identical results to the two launches on the CPU.
@@ -26,9 +26,10 @@ import warp as wp
 
 from ..config.actuator_models import ACT_NET
 from ..config.rows import FLAG_INTERPOLATE
-from .actuator_net import NetIO, NetLayout, row_state
+from .actuator_net import NetIO, NetLayout, net_kernel, read_row
 from .actuator_net_unrolled import unrolled_row
 from .pd_step import substep_func
+from .pd_substep import SubstepArrays
 from .step_layout import StepLayout
 
 wp.set_module_options({"enable_backward": False})
@@ -50,24 +51,6 @@ def fusable(step: StepLayout, row0: int, n: int) -> str | None:
     if not step.explicit or any(int(a) != ACT_NET for a in step.act_model[row0 : row0 + n]):
         return "the rows are not an explicit actuator network's"
     return None
-
-
-@wp.func
-def _table_input(
-    io: NetIO,
-    q_lin: int,
-    qd_lin: int,
-    env: int,
-    r: int,
-    j: int,
-    joint_q_in: wp.array[float],
-    joint_qd_in: wp.array[float],
-    target_qpos_in: wp.array2d[float],
-):
-    """:func:`.actuator_net.row_input` with the position target read from the mode's target table (the value the
-    substep kernel writes to ``joint_target_q`` for a row neither interpolated nor delayed)."""
-    qi, di, q, qd, lim, sat, vl = row_state(io, q_lin, qd_lin, env, r, j, joint_q_in, joint_qd_in)
-    return di, target_qpos_in[env, r] - q, qd, lim, sat, vl
 
 
 def fused_kernel(
@@ -92,62 +75,31 @@ def _make(step: StepLayout, L: NetLayout, weights: np.ndarray, scales: tuple[flo
 
     def fused(
         # The substep kernel's (wpctrl.kernels.pd_substep):
-        q_idx: wp.array2d[wp.int32],
-        qd_idx: wp.array2d[wp.int32],
-        q_stride: int,
-        qd_stride: int,
-        kp: wp.array2d[float],
-        kd: wp.array2d[float],
-        force_limit: wp.array2d[float],
-        sat_effort: wp.array2d[float],
-        vel_limit: wp.array2d[float],
-        num_substeps: int,
-        dt: float,
-        max_delay: int,
+        substep_arrays: SubstepArrays,
         joint_q_in: wp.array[float],
         joint_qd_in: wp.array[float],
-        response_in: wp.array2d[float],
-        start_qpos_in: wp.array2d[float],
-        target_qpos_in: wp.array2d[float],
-        target_qvel_in: wp.array2d[float],
-        target_effort_in: wp.array2d[float],
-        delay_in: wp.array[wp.int32],
-        step_out: wp.array[wp.int32],
-        delay_head_out: wp.array2d[wp.int32],
-        delay_q_out: wp.array3d[float],
-        delay_qd_out: wp.array3d[float],
         joint_target_q_out: wp.array[float],
         joint_target_qd_out: wp.array[float],
         joint_f_out: wp.array[float],
-        computed_effort_out: wp.array2d[float],
-        applied_effort_out: wp.array2d[float],
-        saturation_count_out: wp.array2d[wp.int32],
         # The network's (wpctrl.kernels.actuator_net_unrolled):
         row0: int,
         io: NetIO,
         hist_out: wp.array[vec_p],
     ):
         i = wp.tid()
-        num_envs = step_out.shape[0]
+        num_envs = substep_arrays.step_out.shape[0]
         if i < num_envs * wp.static(N):
             env = i // wp.static(N)
             j = i - env * wp.static(N)
             r = row0 + j
-            di, err, qd, lim, sat, vl = _table_input(io, wp.static(L.q_lin), wp.static(L.qd_lin), env, r, j,
-                                                     joint_q_in, joint_qd_in, target_qpos_in)  # fmt: skip
+            qi, di, q, qd, lim, sat, vl = read_row(io, wp.static(L.q_lin), wp.static(L.qd_lin), env, r, j,
+                                                     joint_q_in, joint_qd_in)  # fmt: skip
+            # the target from the mode's table: what the substep threads write to joint_target_q in this launch
+            err = substep_arrays.target_qpos_in[env, r] - q
             row(i, env, r, di, err, qd, lim, sat, vl, io, hist_out, joint_f_out)
         else:
-            substep(i - num_envs * wp.static(N), q_idx, qd_idx, q_stride, qd_stride, kp, kd, force_limit, sat_effort,
-                    vel_limit, num_substeps, dt, max_delay, joint_q_in, joint_qd_in, response_in, start_qpos_in,
-                    target_qpos_in, target_qvel_in, target_effort_in, delay_in, step_out, delay_head_out,
-                    delay_q_out, delay_qd_out, joint_target_q_out, joint_target_qd_out, joint_f_out,
-                    computed_effort_out, applied_effort_out, saturation_count_out)  # fmt: skip
+            substep(i - num_envs * wp.static(N), substep_arrays, joint_q_in, joint_qd_in, joint_target_q_out,
+                    joint_target_qd_out, joint_f_out)  # fmt: skip
 
     fused.__annotations__["hist_out"] = wp.array[vec_p]  # (the body does not name vec_p: no closure variable)
-    return wp.kernel(
-        fused,
-        name="wpctrl_substep_actuator_net",
-        enable_backward=False,
-        module="unique",
-        module_options={"fast_math": True},
-    )
+    return net_kernel(fused, "wpctrl_substep_actuator_net")

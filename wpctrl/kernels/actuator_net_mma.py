@@ -36,7 +36,20 @@ import hashlib
 import numpy as np
 import warp as wp
 
-from .actuator_net import NetIO, NetLayout, dense_matrices, row_input, write_effort
+from .actuator_net import (
+    ACT_ELU,
+    ACT_LEAKY,
+    ACT_RELU,
+    ACT_SIGMOID,
+    ACT_SOFTSIGN,
+    ACT_TANH,
+    NetIO,
+    NetLayout,
+    dense_matrices,
+    net_kernel,
+    read_row,
+    write_effort,
+)
 from .actuator_net_unrolled import _scaled, mlp_row_input
 
 wp.set_module_options({"enable_backward": False})
@@ -117,21 +130,20 @@ def _f(x: float) -> str:
     return f"{float(np.float32(x))!r}f"
 
 
+_ACT_CPP = {
+    ACT_RELU: "({v} > 0.0f ? {v} : 0.0f)",
+    ACT_ELU: "({v} > 0.0f ? {v} : {a} * (wp::exp({v}) - 1.0f))",
+    ACT_TANH: "(1.0f - 2.0f / (wp::exp(2.0f * {v}) + 1.0f))",
+    ACT_SIGMOID: "(1.0f / (1.0f + wp::exp(-{v})))",
+    ACT_SOFTSIGN: "({v} / (1.0f + wp::abs({v})))",
+    ACT_LEAKY: "({v} > 0.0f ? {v} : {a} * {v})",
+}
+"""C++ of each activation code (:mod:`.actuator_net`'s, the same formulas as its ``activate``); identity: absent."""
+
+
 def _act(v: str, code: int, a: float) -> str:
-    """C++ of activation ``code`` (:mod:`.actuator_net`'s codes, the same formulas as its ``activate``) of ``v``."""
-    if code == 1:
-        return f"({v} > 0.0f ? {v} : 0.0f)"
-    if code == 2:
-        return f"({v} > 0.0f ? {v} : {_f(a)} * (wp::exp({v}) - 1.0f))"
-    if code == 3:
-        return f"(1.0f - 2.0f / (wp::exp(2.0f * {v}) + 1.0f))"
-    if code == 4:
-        return f"(1.0f / (1.0f + wp::exp(-{v})))"
-    if code == 5:
-        return f"({v} / (1.0f + wp::abs({v})))"
-    if code == 6:
-        return f"({v} > 0.0f ? {v} : {_f(a)} * {v})"
-    return v
+    """C++ of activation ``code`` of ``v`` (:data:`_ACT_CPP`)."""
+    return _ACT_CPP.get(code, "{v}").format(v=v, a=_f(a))
 
 
 def _snippet(layout: NetLayout, tag: str) -> str:
@@ -324,19 +336,12 @@ def _make(L: NetLayout, scales: tuple[float, float, float]) -> wp.Kernel:
         sat = float(0.0)
         vl = float(0.0)
         if s < num_rows:
-            di, err, qd, lim, sat, vl = row_input(io, wp.static(L.q_lin), wp.static(L.qd_lin), env, r, j, joint_q_in,
-                                                  joint_qd_in, joint_target_q_in)  # fmt: skip
-            x = mlp_x(s, err, qd, hist_out)
+            qi, di, q, qd, lim, sat, vl = read_row(io, wp.static(L.q_lin), wp.static(L.qd_lin), env, r, j,
+                                                     joint_q_in, joint_qd_in)  # fmt: skip
+            x = mlp_x(s, joint_target_q_in[qi] - q, qd, hist_out)
         y = net_fn(x, wfrag, bfrag)  # every lane of the warp, rows past the end with zero inputs
         if s < num_rows:
             write_effort(_scaled(y, wp.static(TS)), qd, env, r, di, lim, sat, vl, joint_f_out, io)
 
     net.__annotations__["hist_out"] = wp.array[vec_p]
-    return wp.kernel(
-        net,
-        name="wpctrl_actuator_net_mma",
-        enable_backward=False,
-        grid_stride=False,
-        module="unique",
-        module_options={"fast_math": True},
-    )
+    return net_kernel(net, "wpctrl_actuator_net_mma", grid_stride=False)

@@ -17,7 +17,8 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from .actuator_net import NetIO, NetLayout, activate, dense_matrices, lstm_cell, lstm_matrices, row_input, write_effort
+from . import actuator_net
+from .actuator_net import NetIO, NetLayout, activate, dense_matrices, lstm_cell, lstm_matrices, read_row, write_effort
 
 wp.set_module_options({"enable_backward": False})
 
@@ -179,8 +180,9 @@ def _make(L: NetLayout, block_dim: int) -> wp.Kernel:
         sat = float(0.0)
         vl = float(0.0)
         if live:
-            di, err, qd, lim, sat, vl = row_input(io, wp.static(L.q_lin), wp.static(L.qd_lin), env, r, j, joint_q_in,
-                                                  joint_qd_in, joint_target_q_in)  # fmt: skip
+            qi, di, q, qd, lim, sat, vl = read_row(io, wp.static(L.q_lin), wp.static(L.qd_lin), env, r, j,
+                                                     joint_q_in, joint_qd_in)  # fmt: skip
+            err = joint_target_q_in[qi] - q
         x = vec_in()
         if wp.static(MLP):
             hp = vec_t()
@@ -235,12 +237,6 @@ def _make(L: NetLayout, block_dim: int) -> wp.Kernel:
             rows(wts, bs, tile, lane, row0, io, pos_scale, vel_scale, torque_scale, num_rows, joint_q_in, joint_qd_in,
                  joint_target_q_in, hist_out, joint_f_out)  # fmt: skip
 
-    return wp.kernel(
-        net,
-        name="wpctrl_actuator_net_tiled",
-        enable_backward=False,
-        module="unique",
-        # The block size is a module option from the start: the tiles' shapes (and the layer functions built for them)
-        # follow it, and a build for another size would reuse those functions.
-        module_options={"fast_math": True, "enable_mathdx_gemm": False, "block_dim": block_dim},
-    )
+    # The block size is a module option from the start: the tiles' shapes (and the layer functions built for them)
+    # follow it, and a build for another size would reuse those functions.
+    return actuator_net.net_kernel(net, "wpctrl_actuator_net_tiled", enable_mathdx_gemm=False, block_dim=block_dim)

@@ -16,7 +16,8 @@ import hashlib
 import numpy as np
 import warp as wp
 
-from .actuator_net import NetIO, NetLayout, activate, dense_matrices, lstm_cell, lstm_matrices, row_input, write_effort
+from . import actuator_net
+from .actuator_net import NetIO, NetLayout, activate, dense_matrices, lstm_cell, lstm_matrices, read_row, write_effort
 
 wp.set_module_options({"enable_backward": False})
 
@@ -36,7 +37,7 @@ def unrolled_kernel(layout: NetLayout, weights: np.ndarray, scales: tuple[float,
 
 def unrolled_row(layout: NetLayout, weights: np.ndarray, scales: tuple[float, float, float]) -> wp.Function:
     """The unrolled kernel's network as a function of one row, forced inline: ``(s, env, r, di, err, qd, lim, sat,
-    vl, io, hist_out, joint_f_out)``, the row's inputs as :func:`.actuator_net.row_input` returns them. For kernels
+    vl, io, hist_out, joint_f_out)``, the row's inputs as :func:`.actuator_net.read_row` reads them. For kernels
     that run the network's rows beside other work in one launch (:mod:`.actuator_net_fused`)."""
     return _unrolled(layout, weights, scales)[0]
 
@@ -74,13 +75,11 @@ def _floats(a) -> tuple:
     return tuple(_floats(x) for x in a)
 
 
-def mlp_input(L: NetLayout, scales: tuple[float, float], vec_x) -> wp.Function:
-    """An MLP row's input vector and its next history, as a function ``(err, qd, old) -> (x, new)`` of the row's
-    position error and velocity and its stored past samples ``old`` (the history array's row, :func:`history_vectors`):
-    ``x`` (``vec_x``) holds the scaled samples in the network's order, zero past them; ``new`` is what the row's
-    history becomes. The caller reads and writes the history (with no past samples kept, ``new`` is unused): the split
-    kernel reads it before its block synchronisations and writes it after them; the unrolled and tensor-core kernels
-    use :func:`mlp_row_input`."""
+def mlp_row_input(L: NetLayout, scales: tuple[float, float], vec_x) -> wp.Function:
+    """An MLP row's input vector, as a function ``(s, err, qd, hist_out) -> x`` of the row ``s``, its position error
+    and velocity and the history (the vector array of :func:`history_vectors`): ``x`` (``vec_x``) holds the samples at
+    the network's taps, scaled by ``scales`` (``pos_scale``, ``vel_scale``), in the network's order, zero past them;
+    the row's history advances by one substep in place (the current sample becomes the newest past one)."""
     TAPS, POS_FIRST, PAST = L.taps, bool(L.pos_first), L.past
     PS, VS = (float(np.float32(x)) for x in scales)
     T = len(TAPS)
@@ -89,13 +88,16 @@ def mlp_input(L: NetLayout, scales: tuple[float, float], vec_x) -> wp.Function:
     POS_AT = tuple((t if POS_FIRST else T + t) for t in range(T))
     VEL_AT = tuple((T + t if POS_FIRST else t) for t in range(T))
 
-    def x_of(err: float, qd: float, old: vec_p):
+    def row_x(s: int, err: float, qd: float, hist_out: wp.array[vec_p]):
         x = vec_x()
         # The history, newest first (Isaac Lab rolls it and writes the current sample at index 0).
         hp = vec_t()
         hv = vec_t()
         hp[0] = err
         hv[0] = qd
+        old = vec_p()
+        if wp.static(PAST > 0):
+            old = hist_out[s]
         new = vec_p()
         for k in range(wp.static(PAST)):
             hp[k + 1] = old[k]
@@ -105,30 +107,12 @@ def mlp_input(L: NetLayout, scales: tuple[float, float], vec_x) -> wp.Function:
         for t in range(wp.static(T)):
             x[wp.static(POS_AT[t])] = _scaled(hp[wp.static(TAPS[t])], wp.static(PS))
             x[wp.static(VEL_AT[t])] = _scaled(hv[wp.static(TAPS[t])], wp.static(VS))
-        return x, new
-
-    x_of.__annotations__["old"] = vec_p
-    digest = hashlib.sha256(repr((TAPS, POS_FIRST, PAST, PS, VS, vec_x._length_)).encode()).hexdigest()[:16]
-    return wp.func(x_of, name="wpctrl_actuator_net_input_" + digest, module="unique", inline=True)
-
-
-def mlp_row_input(L: NetLayout, scales: tuple[float, float], vec_x) -> wp.Function:
-    """:func:`mlp_input` with the row's history read and written in place: ``(s, err, qd, hist_out) -> x``."""
-    PAST = L.past
-    vec_p = wp.types.vector(length=max(2 * PAST, 1), dtype=wp.float32)
-    x_of = mlp_input(L, scales, vec_x)
-
-    def row_x(s: int, err: float, qd: float, hist_out: wp.array[vec_p]):
-        old = vec_p()
-        if wp.static(PAST > 0):
-            old = hist_out[s]
-        x, new = x_of(err, qd, old)
         if wp.static(PAST > 0):
             hist_out[s] = new
         return x
 
-    row_x.__annotations__["hist_out"] = wp.array[vec_p]
-    digest = hashlib.sha256(repr((L.taps, L.pos_first, PAST, scales, vec_x._length_)).encode()).hexdigest()[:16]
+    row_x.__annotations__["hist_out"] = wp.array[vec_p]  # (the body does not name vec_p: no closure variable)
+    digest = hashlib.sha256(repr((TAPS, POS_FIRST, PAST, PS, VS, vec_x._length_)).encode()).hexdigest()[:16]
     return wp.func(row_x, name="wpctrl_actuator_net_row_input_" + digest, module="unique", inline=True)
 
 
@@ -161,7 +145,7 @@ def _make(L: NetLayout, weights: np.ndarray, scales: tuple[float, float, float])
         s: int,  # (env, joint) row, joint fastest
         env: int,
         r: int,  # the row in the mode's tables
-        # The row's inputs (row_input):
+        # The row's inputs (read_row, and the position error):
         di: int,
         err: float,
         qd: float,
@@ -236,16 +220,9 @@ def _make(L: NetLayout, weights: np.ndarray, scales: tuple[float, float, float])
         j = s - env * wp.static(N)
         r = row0 + j
         # Every input is read here, before the network, so that all loads are in flight together.
-        di, err, qd, lim, sat, vl = row_input(io, wp.static(L.q_lin), wp.static(L.qd_lin), env, r, j, joint_q_in,
-                                              joint_qd_in, joint_target_q_in)  # fmt: skip
-        row(s, env, r, di, err, qd, lim, sat, vl, io, hist_out, joint_f_out)
+        qi, di, q, qd, lim, sat, vl = read_row(io, wp.static(L.q_lin), wp.static(L.qd_lin), env, r, j, joint_q_in,
+                                                 joint_qd_in)  # fmt: skip
+        row(s, env, r, di, joint_target_q_in[qi] - q, qd, lim, sat, vl, io, hist_out, joint_f_out)
 
     net.__annotations__["hist_out"] = wp.array[vec_p]  # (the body does not name vec_p: no closure variable)
-    return row, wp.kernel(
-        net,
-        name="wpctrl_actuator_net",
-        enable_backward=False,
-        grid_stride=False,
-        module="unique",
-        module_options={"fast_math": True},
-    )
+    return row, actuator_net.net_kernel(net, "wpctrl_actuator_net", grid_stride=False)

@@ -3,10 +3,10 @@
 Private module. :func:`spd_solve` compiles the solve of the EE kernels' small systems (``J J^T + λ I``, ``J^T J + λ I``:
 :mod:`.ee_math`) for a size and scalar type. :func:`cholesky_funcs` compiles the float64 factorisation of an
 articulation's n x n joint-space inertia, and the controlled rows' block of its inverse, for the fused kernels
-(:mod:`.inertia_unrolled`, :mod:`.coupled_drive`, :mod:`.impedance`): sizes and the rows' DOFs are compile-time
-constants, every loop unrolled, so the matrices stay in registers on CUDA. Its pivots are floored as in Newton's
-``JointSpaceResponse`` and come from a refined float32 reciprocal square root: no IEEE float64 division or square
-root, whose slow-path branches serialise a one-thread-per-env kernel.
+(:mod:`.inertia_unrolled`, :mod:`.coupled_drive`, :mod:`wpctrl.impedance.warp_kernels`): sizes and the rows' DOFs are
+compile-time constants, every loop unrolled, so the matrices stay in registers on CUDA. Its pivots are floored as in
+Newton's ``JointSpaceResponse`` and come from a refined float32 reciprocal square root: no IEEE float64 division or
+square root, whose slow-path branches serialise a one-thread-per-env kernel.
 """
 
 import warp as wp

@@ -39,20 +39,7 @@ import warp as wp
 
 from .pd_set_action import _make_set_action_kernel
 from .pd_substep import _make_substep_kernel
-from .step_layout import (  # noqa: F401  (the layout and table columns are this module's public face)
-    ROW_F_ALPHA,
-    ROW_F_HI,
-    ROW_F_LO,
-    ROW_F_MUL,
-    ROW_F_OFF,
-    ROW_F_QHI,
-    ROW_F_QLO,
-    ROW_F_VHI,
-    ROW_F_VLO,
-    ROW_F_WIDTH,
-    StepLayout,
-    row_float_table,
-)
+from .step_layout import ROW_F_QHI, ROW_F_QLO, StepLayout, row_float_table  # noqa: F401  (what the engine uses)
 
 _SET_ACTION: dict[StepLayout, wp.Kernel] = {}
 _SUBSTEP: dict[StepLayout, tuple[wp.Function, wp.Kernel]] = {}

@@ -1,5 +1,5 @@
 """Warp functions, constants and the argument bundle shared by the articulation-inertia kernels (:mod:`.inertia`,
-:mod:`.inertia_unrolled`, :mod:`.coupled_drive`, :mod:`.impedance`)."""
+:mod:`.inertia_unrolled`, :mod:`.coupled_drive`, :mod:`wpctrl.impedance.warp_kernels`)."""
 
 from __future__ import annotations
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import copy
 
-from ..config.impedance import JointImpedanceControllerConfig, OperationalSpaceControllerConfig
+from ..impedance.config import JointImpedanceControllerConfig, OperationalSpaceControllerConfig
 
 IMPEDANCE_MODE_NAMES = ("osc_ee_delta_pose", "osc_ee_pose", "joint_impedance_delta_pos")
 

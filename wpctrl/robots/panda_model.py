@@ -28,7 +28,8 @@ import newton
 import numpy as np
 import warp as wp
 
-from ..engine.hostmath import LinkFrames, qaxis, qrotate, register_link_frames, rpy_quat, tmul
+from ..config.robot_description import RobotDescription, register_description
+from ..engine.hostmath import qaxis, qrotate, rpy_quat, tmul
 
 __all__ = [
     "PANDA_ARM_JOINTS",
@@ -438,8 +439,10 @@ PANDA_FRAMES = _panda_frames()
 """Every link of the Panda URDF as ``(kept body or None for the world, (position [m], quaternion xyzw))`` relative to
 the body it is merged into by ``collapse_fixed_joints`` (``panda_hand_tcp`` -> ``panda_link7``)."""
 
-PANDA_LINK_FRAMES = LinkFrames.from_urdf_rows([r[:6] for r in _JOINTS], "the built-in Panda (wpctrl.robots)")
-"""The Panda URDF's link tree. Registered with the EE controllers on import: they locate a Panda link that a model
-lacks (``panda_hand_tcp`` of ``add_urdf(collapse_fixed_joints=True)``) and the base frame there when a controller's
-``urdf_path`` is None or unreadable."""
-register_link_frames(PANDA_LINK_FRAMES)
+PANDA_DESCRIPTION = RobotDescription(
+    tuple((r[0], r[1], r[2], r[3], tuple(r[4]), tuple(r[5])) for r in _JOINTS), "the built-in Panda (wpctrl.robots)"
+)
+"""The Panda URDF's joints. Registered on import: an EE controller locates a Panda link that its model lacks
+(``panda_hand_tcp`` of ``add_urdf(collapse_fixed_joints=True)``) and the base frame there when its ``urdf_path`` is
+None or names no file."""
+register_description(PANDA_DESCRIPTION)

@@ -16,14 +16,7 @@ import warp as wp
 from ...config import ConfigError
 from ...config.actuator_models import ActuatorNet
 from ...config.networks import read_network
-from ...kernels import (
-    actuator_net,
-    actuator_net_fused,
-    actuator_net_mma,
-    actuator_net_split,
-    actuator_net_tiled,
-    actuator_net_unrolled,
-)
+from ...kernels import actuator_net, actuator_net_fused, actuator_net_mma, actuator_net_tiled, actuator_net_unrolled
 from ...kernels.env_selection import MODE_SCALE, _bump_counter_kernel, _select
 from ..launch import _Launch
 from .part import Part
@@ -219,12 +212,6 @@ class _NetGroup:
         cpu = wp.get_device(dev).is_cpu
         arch = 0 if cpu else wp.get_device(dev).arch
         self.kernel_kind = actuator_net.choose_kernel(self.layout, spec.kernel, arch)
-        if self.kernel_kind == "split":
-            # split2 / split4 as named; "split": 4 while that fits 1,024 threads per SM, else 2 (the CPU: 2)
-            lanes = 1 if cpu else actuator_net_split.split_lanes(E * n, wp.get_device(dev).sm_count)
-            self.lanes = int(spec.kernel[5:]) if spec.kernel[5:] else max(2, lanes)
-            if cpu and not wp.config.enable_cpu_blocks:
-                self.kernel_kind = "unrolled"  # the split kernel's blocks need Warp's cooperative CPU blocks
         extra = {}
         if self.kernel_kind == "tiled":
             wmat, bias = actuator_net_tiled.pack(self.layout, net.weights)
@@ -266,11 +253,6 @@ class _NetGroup:
                 "bfrag": wp.array(bfrag.reshape(-1, 2), dtype=wp.vec2, device=dev),
                 "num_rows": E * n,
             }
-        elif self.kernel_kind == "split":
-            self.kernel = actuator_net_split.split_kernel(self.layout, net.weights, scales, self.lanes)
-            self.block_dim = actuator_net_split.WARP * self.lanes
-            self.blocks = -(-E * n // actuator_net_split.WARP)
-            extra = {"hist_out": actuator_net_unrolled.history_vectors(self.hist), "num_rows": E * n}
         else:
             extra["hist_out"] = self.hist
         self._extra = extra
@@ -308,8 +290,6 @@ class _NetGroup:
             }
             if self.kernel_kind == "tiled":
                 dim, block_dim = (self.blocks, self.block_dim), self.block_dim
-            elif self.kernel_kind == "split":
-                dim, block_dim = self.blocks * self.block_dim, self.block_dim
             elif self.kernel_kind == "3xtf32":
                 dim, block_dim = actuator_net_mma.launch_dim(engine.num_envs * self.n), actuator_net_mma.BLOCK_DIM
             else:

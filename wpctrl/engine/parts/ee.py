@@ -7,8 +7,9 @@ the joint reset (measured EE pose, and the target pose with ``use_target``).
 
 Frames come from the Newton model: the chain is its joints (``joint_parent``, ``joint_X_p``, ``joint_X_c``,
 ``joint_axis``), read on the host once; ``ee_link`` is a body or a site on a body. A link the importer merged away
-(``collapse_fixed_joints``) is found in a robot description: ``urdf_path`` when it exists, else the descriptions robot
-modules registered (:func:`wpctrl.engine.hostmath.register_link_frames`).
+(``collapse_fixed_joints``) is found in the robot descriptions the config layer read for the controller
+(:mod:`wpctrl.config.robot_description`: ``urdf_path``'s joints, else the descriptions robot modules registered); this
+module reads no file.
 
 Root frame: the body ``root_link_name`` when given; otherwise the articulation root: the child of the chain's top
 joint when that joint is free or fixed, or, for a fixed base merged into the world, the root link's frame as the
@@ -20,8 +21,6 @@ from __future__ import annotations
 
 import difflib
 import logging
-import os
-import xml.etree.ElementTree as ET
 
 import newton
 import numpy as np
@@ -32,7 +31,7 @@ from ...config.ee import MAX_EE_DOF, EESpec
 from ...kernels import ee as ee_kernels
 from ...kernels.dims import PER_ENV_BLOCK_DIM
 from ...kernels.ee_math import EEChain
-from ..hostmath import LinkFrames, known_link_frames, tmul, urdf_frames
+from ..hostmath import LinkFrames, tmul
 from ..launch import _Launch
 from .part import Part
 
@@ -93,27 +92,25 @@ def _merged_offset(frames: LinkFrames, ee_link: str, kept: set[str]) -> tuple[st
     return link, _wp(x)
 
 
-def _read_urdf(path: str, ee_link: str) -> LinkFrames:
-    try:
-        return urdf_frames(path)
-    except (OSError, ET.ParseError) as e:
-        raise ConfigError(f"urdf_path: cannot read {path!r} to locate ee_link {ee_link!r}: {e}") from e
+def _urdf_frames(spec) -> LinkFrames:
+    """``urdf_path``'s description (the file exists): raises when it could not be read."""
+    found = spec.descriptions.found
+    if not found:
+        raise ConfigError(
+            f"urdf_path: cannot read {spec.urdf_path!r} to locate ee_link {spec.ee_link!r}: {spec.descriptions.error}"
+        )
+    return LinkFrames.from_description(found[0])
 
 
 def _descriptions(spec) -> list[LinkFrames]:
-    """Where links and base frames missing from the model are looked up: ``urdf_path`` when it exists (nothing when
-    it cannot be parsed), else the descriptions registered by :func:`wpctrl.engine.hostmath.register_link_frames`."""
-    if spec.urdf_path is not None and os.path.exists(spec.urdf_path):
-        try:
-            return [urdf_frames(spec.urdf_path)]
-        except (OSError, ET.ParseError):
-            return []
-    return list(known_link_frames())
+    """Where links and base frames missing from the model are looked up: the descriptions the config layer found
+    for the controller (``urdf_path``'s when the file exists and parses, else the registered ones)."""
+    return [LinkFrames.from_description(d) for d in spec.descriptions.found]
 
 
 def _known_offset(spec, labels, bodies0, kept: set[str]):
     """``([body], offset)`` of a link merged away, from a registered description, or None."""
-    for frames in known_link_frames():
+    for frames in _descriptions(spec):
         try:
             link, offset = _merged_offset(frames, spec.ee_link, kept)
         except ConfigError:
@@ -192,14 +189,17 @@ class EEPart:
                 cand = [int(sbody[s])]
                 st = model.shape_transform.numpy()[s]
                 offset = wp.transform(wp.vec3(*st[:3]), wp.quat(*st[3:]))
-            elif spec.urdf_path is not None and os.path.exists(spec.urdf_path):
+            elif spec.descriptions.from_file:
                 kept = {_short(labels[b]) for b in bodies0}
-                link, offset = _merged_offset(_read_urdf(spec.urdf_path, spec.ee_link), spec.ee_link, kept)
+                link, offset = _merged_offset(_urdf_frames(spec), spec.ee_link, kept)
                 cand = _find(labels, bodies0, link)
             elif (known := _known_offset(spec, labels, bodies0, {_short(labels[b]) for b in bodies0})) is not None:
                 cand, offset = known
             elif spec.urdf_path is not None:
-                _read_urdf(spec.urdf_path, spec.ee_link)  # raises: cannot read urdf_path
+                raise ConfigError(
+                    f"urdf_path: cannot read {spec.urdf_path!r} to locate ee_link {spec.ee_link!r}: "
+                    f"{spec.descriptions.error}"
+                )
             else:
                 known = sorted({_short(labels[b]) for b in bodies0})
                 close = difflib.get_close_matches(spec.ee_link, known, n=5, cutoff=0.5)

@@ -16,6 +16,7 @@ import warp as wp
 from ...config import ConfigError
 from ...kernels import inertia
 from ...kernels.pd import _bidx
+from .drive_properties import DriveArrays
 from .part import Part
 
 wp.set_module_options({"enable_backward": False})
@@ -43,31 +44,17 @@ def _response_kernel(
 
 
 @wp.kernel
-def _accel_gains_kernel(
-    # Rows:
-    row_accel: wp.array[wp.int32],
-    row_qd_off: wp.array[wp.int32],
-    # Envs:
-    env_qd_base: wp.array[wp.int32],
-    # Gains (1 | num_envs, rows):
-    kp: wp.array2d[float],
-    kd: wp.array2d[float],
-    # In:
-    response_in: wp.array2d[float],
-    # Out:
-    joint_target_ke_out: wp.array[float],
-    joint_target_kd_out: wp.array[float],
-):
+def _accel_gains_kernel(drive: DriveArrays):
     """Implicit acceleration drive: the solver's per-env gains are Kp / r and Kd / r (r: the joint's response)."""
     tid = wp.tid()
-    num_rows = row_accel.shape[0]
+    num_rows = drive.row_accel.shape[0]
     env = tid // num_rows
     r = tid - env * num_rows
-    if row_accel[r] != 0:
-        di = env_qd_base[env] + row_qd_off[r]
-        resp = response_in[env, r]
-        joint_target_ke_out[di] = kp[_bidx(kp.shape[0], env), r] / resp
-        joint_target_kd_out[di] = kd[_bidx(kd.shape[0], env), r] / resp
+    if drive.row_accel[r] != 0:
+        di = drive.env_qd_base[env] + drive.row_qd_off[r]
+        resp = drive.response[env, r]
+        drive.joint_target_ke[di] = drive.kp[_bidx(drive.kp.shape[0], env), r] / resp
+        drive.joint_target_kd[di] = drive.kd[_bidx(drive.kd.shape[0], env), r] / resp
 
 
 class JointSpaceResponse(Part):
@@ -85,6 +72,7 @@ class JointSpaceResponse(Part):
         self._jsr = None  # Newton's JointSpaceResponse otherwise
         self.update_per_substep = plan.inertia_update == "substep"
         self.write_gains = plan.has_accel and not plan.explicit
+        self._drive: DriveArrays | None = None  # the gains kernel's argument (made once)
 
     def kernel_args(self) -> dict:
         return {"response": self.response}
@@ -133,24 +121,10 @@ class JointSpaceResponse(Part):
                 device=engine.device,
             )
         if self.write_gains:
-            c = engine.core
-            m = engine.model
-            drive = engine.part("drive_properties")
-            wp.launch(
-                _accel_gains_kernel,
-                dim=engine.num_envs * engine.num_rows,
-                inputs=[
-                    c.row_accel,
-                    c.row_qd_off,
-                    c.env_qd_base,
-                    drive.kp,
-                    drive.kd,
-                    self.response,
-                    m.joint_target_ke,
-                    m.joint_target_kd,
-                ],
-                device=engine.device,
-            )
+            if self._drive is None:  # the per-env gains, the model's, the rows' DOFs and acceleration flags, r
+                self._drive = engine.part("drive_properties").arrays(engine)
+            wp.launch(_accel_gains_kernel, dim=engine.num_envs * engine.num_rows, inputs=[self._drive],
+                      device=engine.device)  # fmt: skip
             engine.notify_solver()
 
     def before_set_action(self, engine, action, state) -> None:

@@ -1,6 +1,6 @@
 """ManiSkill-shaped impedance controller classes: operational-space control and joint impedance, torque out.
 
-Both are effort controllers over the shared engine (:mod:`wpctrl.engine.parts.impedance`): the action sets a target
+Both are effort controllers over the shared engine (:mod:`.engine_part`): the action sets a target
 (a pose, or joint positions) and, with variable impedance, the gains; before every solver substep the torque is
 computed from the measured state and written to ``Control.joint_f``, clamped to ``force_limit`` (delay, effort
 readout and NaN holding as for every row).
@@ -10,14 +10,22 @@ from __future__ import annotations
 
 import warp as wp
 
-from .drive_properties import draw_options, draw_ranges
-from .ee import PDEEPosController
-from .joint import JointEffortController
+from ..controllers.drive_properties import draw_options, draw_ranges
+from ..controllers.ee import PDEEPosController
+from ..controllers.joint import JointEffortController
+from . import engine_part  # noqa: F401  (registers the impedance part with the engine)
+
+
+def _impedance_unit(engine, row0: int):
+    """The impedance part's unit of the controller whose rows start at ``row0``."""
+    return engine.part("impedance").units.get(row0)
 
 
 class JointImpedanceController(JointEffortController):
     """Joint impedance ``τ = [M] (Kp (q* − q) − Kd q̇) + g`` toward the joint targets of the action (absolute, delta
     from the measured positions, or delta on the last target). ``stiffness`` / ``damping`` are the per-env gains."""
+
+    _unit = staticmethod(_impedance_unit)
 
     @property
     def target_qpos(self) -> wp.array:
@@ -33,6 +41,7 @@ class OperationalSpaceController(JointEffortController):
     """Operational-space control of ``ee_link`` toward the target pose of the action: ``τ = Jᵀ Λ (Kp ∘ e − Kd ∘ ẋ)``
     (+ null-space posture, + gravity), see :class:`wpctrl.OperationalSpaceControllerConfig`."""
 
+    _unit = staticmethod(_impedance_unit)
     target_pose = PDEEPosController.target_pose
     ee_pose = PDEEPosController.ee_pose
     fk_jacobian = PDEEPosController.fk_jacobian

@@ -1,6 +1,6 @@
 """Warp kernels of the impedance controllers: operational-space control (OSC) and joint impedance.
 
-Private module. Two kernels per controller, one thread per env each:
+Private module (launched by :mod:`.engine_part`). Two kernels per controller, one thread per env each:
 
 - ``set_action`` (once per control step, before the joint kernel): the processed action (NaN/Inf anywhere in the
   env's action: the env is left untouched, as the joint kernel does), the target (OSC: the target pose composed as the
@@ -10,10 +10,11 @@ Private module. Two kernels per controller, one thread per env each:
   from the measured state, written as the effort rows' command (``target_effort``): the substep kernel then delays,
   clamps to ``force_limit``, reads out and writes ``Control.joint_f`` as for any effort row.
 
-The torque kernel is built on the end-effector kernels' chain FK and Jacobian (:mod:`.ee_math`, root frame, float32)
-and the fused inertia pass (:func:`wpctrl.kernels.inertia.chain_hg_func`: the articulation's H and gravity torque from
-``joint_q``, float64, world frame). ``M`` is the controlled rows' block of H (the other joints held, as Newton's
-``ControllerOperationalSpace`` takes it); solves are float64 Cholesky (:mod:`.cholesky`). OSC:
+The torque kernel is built on the end-effector kernels' chain FK and Jacobian (:mod:`wpctrl.kernels.ee_math`, root
+frame, float32) and the fused inertia pass (:func:`wpctrl.kernels.inertia.chain_hg_func`: the articulation's H and
+gravity torque from ``joint_q``, float64, world frame). ``M`` is the controlled rows' block of H (the other joints
+held, as Newton's ``ControllerOperationalSpace`` takes it); solves are float64 Cholesky
+(:mod:`wpctrl.kernels.cholesky`). OSC:
 
     e = [p* − p; log(q* q⁻¹)],  ẋ = J q̇,  a = Kp ∘ e − Kd ∘ ẋ
     F = Λ a  (Λ⁻¹ = J M⁻¹ Jᵀ; partial: its two 3×3 diagonal blocks; none: F = a),   τ = Jᵀ F
@@ -34,11 +35,21 @@ from __future__ import annotations
 
 import warp as wp
 
-from .cholesky import cholesky_funcs
-from .ee_math import EEChain, _chain_fk, _compose, _jacobian, _log3, _pose_action, _read_pose, _write_pose, vecD
-from .inertia import chain_hg_func
-from .pd import _action_finite, _bidx, _scale
-from .spatial import Articulation
+from ..kernels.cholesky import cholesky_funcs
+from ..kernels.ee_math import (
+    EEChain,
+    _chain_fk,
+    _compose,
+    _jacobian,
+    _log3,
+    _pose_action,
+    _read_pose,
+    _write_pose,
+    vecD,
+)
+from ..kernels.inertia import chain_hg_func
+from ..kernels.pd import _action_finite, _bidx, _scale
+from ..kernels.spatial import Articulation
 
 wp.set_module_options({"enable_backward": False})
 
@@ -78,7 +89,7 @@ def _task_solve(A: Mat6d, b: Vec6d, eps: wp.float64):
 class ImpedanceAction:
     """How an impedance controller's ``set_action`` reads its action (one kernel argument instead of sixteen, fixed
     for the controller's life): the action's options, the target columns' raw bounds, the gain limits of the
-    variable modes and the joint targets' clipping. Filled by :mod:`wpctrl.engine.parts.impedance`."""
+    variable modes and the joint targets' clipping. Filled by :mod:`wpctrl.impedance.engine_part`."""
 
     mode: int  # 0 fixed, 1 variable_kp, 2 variable
     use_delta: int
@@ -308,7 +319,7 @@ def torque_kernel(osc: bool, n: int, row_dof: tuple | None, chain_key: tuple | N
                 a0 = VecN()
                 kb = _bidx(kp.shape[0], env)
                 for c in range(wp.static(N)):
-                    qn = float(0.0)
+                    qn = float(0.0)  # a mutable local in a Warp kernel
                     if posture:
                         qn = posture[c]
                     else:

@@ -1,5 +1,6 @@
 """The impedance part of a control mode: operational-space and joint-impedance controllers (and the kernel that
-randomises an OSC controller's task gains).
+randomises an OSC controller's task gains). Registered with the engine when this module is imported, which
+``build_controller`` does for a mode with an impedance config (its family names this module).
 
 Their joints are effort rows of the mode's engine (no action column of their own): the substep kernel delays,
 clamps to ``force_limit``, reads out and writes ``Control.joint_f`` for them as for any effort row, and a reset zeroes
@@ -17,16 +18,17 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from ...config import ConfigError
-from ...config.impedance import DECOUPLE_NONE, MODE_FIXED, ImpedanceSpec
-from ...kernels import impedance as impedance_kernels
-from ...kernels import inertia
-from ...kernels.dims import PER_ENV_BLOCK_DIM
-from ...kernels.env_selection import MODE_SCALE, _bump_counter_kernel, _select
-from ...kernels.spatial import Articulation
-from ..launch import _Launch
-from .ee import EEPart, ee_chain
-from .part import Part
+from ..config.errors import ConfigError
+from ..engine.launch import _Launch
+from ..engine.parts import register_part
+from ..engine.parts.ee import EEPart, ee_chain
+from ..engine.parts.part import Part
+from ..kernels import inertia
+from ..kernels.dims import PER_ENV_BLOCK_DIM
+from ..kernels.env_selection import MODE_SCALE, _bump_counter_kernel, _select
+from ..kernels.spatial import Articulation
+from . import warp_kernels
+from .spec import DECOUPLE_NONE, ImpedanceSpec
 
 
 def _specs(plan) -> dict:
@@ -124,9 +126,9 @@ class _Unit:
         drive = self.engine.part("drive_properties")
         return drive.kp, drive.kd, self.row0
 
-    def _action_params(self) -> impedance_kernels.ImpedanceAction:
+    def _action_params(self) -> warp_kernels.ImpedanceAction:
         eng, s = self.engine, self.spec
-        p = impedance_kernels.ImpedanceAction()
+        p = warp_kernels.ImpedanceAction()
         p.mode, p.use_delta, p.use_target = int(s.mode), int(s.use_delta), int(s.use_target)
         p.normalize, p.frame_bits, p.clip_targets = int(s.normalize), int(s.frame_bits), int(eng.plan.clip_targets)
         p.target_lo, p.target_hi, p.damping_ratio = self.target_lo, self.target_hi, self.damping_ratio
@@ -160,7 +162,7 @@ class _Unit:
                 kp_out=kp,
                 kd_out=kd,
             )
-            kernel = impedance_kernels.set_action_kernel(s.osc, self.num_dof)
+            kernel = warp_kernels.set_action_kernel(s.osc, self.num_dof)
             names = [a.label for a in kernel.adj.args]
             self._set_action = _Launch(
                 kernel, eng.num_envs, {k: params[k] for k in names}, eng.device, block_dim=PER_ENV_BLOCK_DIM
@@ -178,10 +180,10 @@ class _Unit:
             if fused is not None:
                 params.update(fused.chain_args())
                 row_dof = tuple(int(d) for d in fused.layout.row_dof)
-                kernel = impedance_kernels.torque_kernel(s.osc, self.num_dof, row_dof, fused.kernel_key())
+                kernel = warp_kernels.torque_kernel(s.osc, self.num_dof, row_dof, fused.kernel_key())
             else:
                 params["art"] = Articulation()  # no fused inertia pass: never read
-                kernel = impedance_kernels.torque_kernel(s.osc, self.num_dof, None, None)
+                kernel = warp_kernels.torque_kernel(s.osc, self.num_dof, None, None)
             params.update(
                 gravity_in=eng.model.gravity,
                 env_world=self.env_world,
@@ -297,4 +299,4 @@ class Impedance(Part):
             unit.reset(state, env_ids, env_mask)
 
 
-__all__ = ["Impedance", "MODE_FIXED"]
+register_part(Impedance)

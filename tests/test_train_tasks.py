@@ -368,6 +368,39 @@ def test_evaluate_on_newton_reports_a_hand_rolled_episodes_metrics(smoke_run, ex
     assert r["success_at_end_rate"] == float(info["success"].float().mean())
 
 
+_NO_RSL_RL = """
+import importlib.abc, json, sys
+BLOCKED = ("rsl_rl", "wpctrl.train.trainer", "wpctrl.train.task_ppo", "wpctrl.train.task_env")
+
+class Block(importlib.abc.MetaPathFinder):
+    def find_spec(self, name, path=None, target=None):
+        if any(name == b or name.startswith(b + ".") for b in BLOCKED):
+            raise ImportError(f"{name} blocked by the test")
+        return None
+
+sys.meta_path.insert(0, Block())
+from wpctrl.__main__ import main
+rc = main(sys.argv[1:])
+print("LOADED", json.dumps(sorted(m for m in sys.modules if m.startswith(BLOCKED))))
+sys.exit(rc)
+"""
+
+
+@pytest.mark.slow  # needs the PPO smoke run (CI runs it)
+def test_evaluate_on_newton_runs_without_rsl_rl_or_the_trainer(exported, tmp_path):
+    """``wpctrl evaluate --sim newton`` of an exported policy in an interpreter where rsl-rl and the training modules
+    cannot be imported: it runs, and reports what the same command reports with them."""
+    result = tmp_path / "newton.json"
+    argv = ["evaluate", "--policy", exported["policy.ts"], "--sim", "newton", "--episodes", "2", "--seed", "5",
+            "--no-progress", "--out", str(result)]  # fmt: skip
+    done = subprocess.run([sys.executable, "-c", _NO_RSL_RL, *argv], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert done.stdout.strip().splitlines()[-1] == "LOADED []", done.stdout
+    r = json.loads(result.read_text())
+    assert (r["task"], r["sim"], r["episodes"], r["substeps"]) == ("PushCube-v1", "newton", 2, 4)
+    assert 0.0 <= r["success_rate"] <= 1.0
+
+
 @pytest.mark.slow  # needs the PPO smoke run (CI runs it)
 def test_evaluate_in_the_real_maniskill_reports_a_hand_rolled_episodes_metrics(exported, tmp_path):
     pytest.importorskip("mani_skill")

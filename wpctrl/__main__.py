@@ -1,8 +1,12 @@
 """Command line: ``python -m wpctrl <command> [options]`` (also the ``wpctrl`` console script; under
-``torchrun --nproc-per-node=N -m wpctrl demo ...`` one process per rank)."""
+``torchrun --nproc-per-node=N -m wpctrl demo ...`` one process per rank).
+
+The commands are argparse subcommands whose options each command's own module parses: only the chosen command's
+module is imported, so ``--help`` and a refused argument cost milliseconds, not Warp's or torch's import."""
 
 from __future__ import annotations
 
+import argparse
 import sys
 
 COMMANDS = {
@@ -18,33 +22,43 @@ COMMANDS = {
         "evaluate an exported policy in the real ManiSkill or on Newton",
     ),
 }
+"""{command: ("module" (its ``main(argv)``) or "module:function", one-line summary)}."""
 
 
-def _usage() -> str:
-    lines = ["usage: python -m wpctrl <command> [options]", "", "commands:"]
-    lines += [f"  {name:8s} {help}" for name, (_, help) in COMMANDS.items()]
-    lines += [
-        "",
-        "python -m wpctrl <command> --help lists a command's options. Every command is quiet unless given "
+def parser() -> argparse.ArgumentParser:
+    """The top-level parser: the command, then its options, left to the command (``<command> --help`` lists them)."""
+    listing = "\n".join(f"  {name:8s} {summary}" for name, (_, summary) in COMMANDS.items())
+    p = argparse.ArgumentParser(
+        prog="wpctrl",
+        allow_abbrev=False,
+        usage="python -m wpctrl <command> [options]",
+        description=f"commands:\n{listing}",
+        epilog="python -m wpctrl <command> --help lists a command's options. Every command is quiet unless given "
         "--verbose\n(then Warp prints its banner and a line per kernel module it loads).",
-    ]
-    return "\n".join(lines)
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    sub = p.add_subparsers(dest="command", metavar="<command>", help=argparse.SUPPRESS, required=True)
+    for name in COMMANDS:  # listed in the description; the options are the command's own parser's
+        sub.add_parser(name, add_help=False, allow_abbrev=False)
+    return p
 
 
 def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    if not argv or argv[0] in ("-h", "--help"):
-        print(_usage())
-        return 0 if argv else 2
-    if argv[0] not in COMMANDS:
-        print(f"wpctrl: error: unknown command {argv[0]!r}; expected one of {sorted(COMMANDS)}", file=sys.stderr)
+    p = parser()
+    if not argv:
+        p.print_help()
         return 2
+    try:
+        args, rest = p.parse_known_args(argv)
+    except SystemExit as e:  # --help (0), an unknown command (2)
+        return e.code if isinstance(e.code, int) else 1
     import importlib
 
-    path, _, func = COMMANDS[argv[0]][0].partition(":")  # "module" (its main) or "module:function"
+    path, _, func = COMMANDS[args.command][0].partition(":")  # "module" (its main) or "module:function"
     module = importlib.import_module(path)  # light: warp and torch load once the command's arguments are checked
     try:
-        return getattr(module, func or "main")(argv[1:])
+        return getattr(module, func or "main")(rest)
     except SystemExit as e:  # argparse and the commands' checks exit 2 with a one-line message
         return e.code if isinstance(e.code, int) else 1
 

@@ -63,7 +63,7 @@ MUTATIONS = [
     ),
     M(
         "train_eval_rounds_one_seed",
-        "wpctrl/train/task_ppo.py",
+        "wpctrl/train/policy_eval.py",
         "seed=None if seed is None else seed + rounds",
         "seed=seed",
         "every evaluation round replays the first round's episodes (one seed)",
@@ -71,7 +71,7 @@ MUTATIONS = [
     ),
     M(
         "train_eval_success_once_kept",
-        "wpctrl/train/task_ppo.py",
+        "wpctrl/train/policy_eval.py",
         "            hit = torch.zeros(n, dtype=torch.bool, device=env.device)\n",
         "            hit = hit if rounds > 1 else torch.zeros(n, dtype=torch.bool, device=env.device)\n",
         "an evaluation round keeps the last round's success_once",

@@ -45,7 +45,7 @@ MUTATIONS = [
     ),
     M(
         "evaluate_success_unweighted",
-        "wpctrl/train/cli.py",
+        "wpctrl/train/reach_ppo.py",
         'successes += (s["success_rate"] or 0.0) * s["episodes"]',
         'successes += s["success_rate"] or 0.0',
         "the evaluation averages the success rates of its rounds without their episode counts",

@@ -1,7 +1,8 @@
 """``wpctrl export``'s and ``wpctrl evaluate``'s argument parsers and every check of their arguments that needs no
 torch (a missing file, an unknown task, a device this machine cannot have, the train extra not installed): imported
 by the light entry points (:mod:`.commands`) and by the commands themselves (:mod:`.export`, :mod:`.evaluate`), and
-importing none of them."""
+importing none of them. Also the commands' one rule for options a command (or one of its modes) does not use:
+:func:`refuse_unused` refuses them, naming the option and why, instead of ignoring them."""
 
 from __future__ import annotations
 
@@ -19,14 +20,22 @@ __all__ = [
     "SIMS",
     "check_evaluate_args",
     "check_export_args",
+    "command_parser",
     "evaluate_parser",
     "export_parser",
+    "flag",
+    "given_flags",
     "missing_train_extra",
     "refuse",
+    "refuse_unused",
+    "unused_option",
 ]
 
 SIMS = ("maniskill", "newton")
 """``wpctrl evaluate --sim``'s simulators."""
+
+MANISKILL_UNUSED = ("device", "envs", "substeps")
+"""``wpctrl evaluate --sim maniskill``: the options only ``--sim newton`` uses."""
 
 TRAIN_EXTRA = ("torch", "rsl_rl")
 """What ``wpctrl train`` and ``wpctrl export`` import (``evaluate`` needs torch alone)."""
@@ -46,10 +55,45 @@ def missing_train_extra(command: str, modules: tuple[str, ...] = TRAIN_EXTRA, lo
     return None
 
 
+def flag(name: str) -> str:
+    """The command line's option for the setting ``name`` (an argparse destination)."""
+    return "--" + name.replace("_", "-")
+
+
+def given_flags(parser: argparse.ArgumentParser, argv) -> set[str]:
+    """The destinations of the options ``argv`` gives (whatever their value: also one equal to its default)."""
+    saved = [(a, a.default) for a in parser._actions]
+    try:
+        for a, _ in saved:
+            a.default = argparse.SUPPRESS
+        ns, _ = parser.parse_known_args(argv)
+    finally:
+        for a, d in saved:
+            a.default = d
+    return set(vars(ns))
+
+
+def unused_option(given, unused) -> str | None:
+    """The first setting of ``unused`` (in its order) that ``given`` holds, or None."""
+    return next((name for name in unused if name in given), None)
+
+
+def refuse_unused(parser: argparse.ArgumentParser, given, unused, why: str) -> None:
+    """Exit 2 (``parser.error``) naming the first option of ``unused`` that was ``given`` and ``why`` it has no use
+    here: a command's options that the chosen task or mode ignores are refused, not silently dropped."""
+    if name := unused_option(given, unused):
+        parser.error(f"{flag(name)}: {why}")
+
+
+def command_parser(command: str, description: str, **kwargs) -> argparse.ArgumentParser:
+    """``wpctrl <command>``'s argument parser: its usage line and its errors name the command."""
+    return argparse.ArgumentParser(prog=f"wpctrl {command}", description=description, **kwargs)
+
+
 def export_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="wpctrl export",
-        description="Export the policy of a `wpctrl train --task PushCube-v1 | PickCube-v1` run as TorchScript "
+    p = command_parser(
+        "export",
+        "Export the policy of a `wpctrl train --task PushCube-v1 | PickCube-v1` run as TorchScript "
         "(policy.ts, loadable with torch alone) and ONNX (policy.onnx, if the onnx package is importable): "
         "ManiSkill's flattened state observation -> deterministic action, observation normaliser included.",
     )
@@ -61,9 +105,9 @@ def export_parser() -> argparse.ArgumentParser:
 
 
 def evaluate_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="wpctrl evaluate",
-        description="Evaluate an exported policy (policy.ts from `wpctrl export`) on fresh episodes of ManiSkill's "
+    p = command_parser(
+        "evaluate",
+        "Evaluate an exported policy (policy.ts from `wpctrl export`) on fresh episodes of ManiSkill's "
         "PushCube-v1 / PickCube-v1, in the real ManiSkill (PhysX CPU) or on Newton through wpctrl.",
     )
     p.add_argument("--policy", required=True, help="the exported TorchScript policy (policy.ts)")
@@ -99,10 +143,13 @@ def refuse(command: str, message: str):
     raise SystemExit(2)
 
 
-def check_evaluate_args(p: argparse.ArgumentParser, args) -> None:
-    """``wpctrl evaluate``'s arguments, checked without torch, Warp or ManiSkill: exits 2 with one line for the first
-    that cannot work (the policy file, the numbers, a device this machine cannot have; Warp confirms the device
-    later)."""
+def check_evaluate_args(p: argparse.ArgumentParser, args, argv) -> None:
+    """``wpctrl evaluate``'s arguments (parsed from ``argv``), checked without torch, Warp or ManiSkill: exits 2 with
+    one line for the first that cannot work (an option ``--sim maniskill`` does not use, the policy file, the
+    numbers, a device this machine cannot have; Warp confirms the device later)."""
+    if args.sim == "maniskill":
+        refuse_unused(p, given_flags(p, argv), MANISKILL_UNUSED, "not used with --sim maniskill (ManiSkill runs one "
+                      "env at a time on its own CPU PhysX)")  # fmt: skip
     for name in ("episodes", "envs", "substeps"):
         v = getattr(args, name)
         if v is not None and v < 1:

@@ -59,7 +59,7 @@ def evaluate_main(argv=None) -> int:
     if hint := missing_train_extra("evaluate", ("torch",), load=False):
         print(hint, file=sys.stderr)
         return 2
-    check_evaluate_args(p, args)
+    check_evaluate_args(p, args, argv)
     if hint := missing_train_extra("evaluate", ("torch",)):
         print(hint, file=sys.stderr)
         return 2

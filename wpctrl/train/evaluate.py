@@ -22,7 +22,7 @@ import torch
 
 from .command_args import check_evaluate_args, evaluate_parser
 
-__all__ = ["evaluate_maniskill", "load_policy", "main"]
+__all__ = ["PolicyError", "evaluate", "evaluate_maniskill", "load_policy", "main"]
 
 SAPIEN_VULKAN_NOTE = "Failed to find system libvulkan"
 """SAPIEN's warning, on import, that it falls back to its own Vulkan library: not shown (unless ``--verbose``), as the
@@ -72,7 +72,7 @@ def load_policy(path, task: str | None = None, device="cpu"):
 
 def evaluate_maniskill(policy, task: str, control_mode: str, episodes: int, seed: int = 0, progress=None) -> dict:
     """``policy`` on ``episodes`` episodes of the real ManiSkill (PhysX CPU, one env); metrics as
-    :func:`wpctrl.train.task_ppo.evaluate_policy`, plus per-episode records."""
+    :func:`wpctrl.train.policy_eval.evaluate_policy`, plus per-episode records."""
     from wpctrl import console
     from wpctrl.tasks.maniskill_side import make_maniskill
 
@@ -116,7 +116,7 @@ def _summary(records: list, seconds: float) -> dict:
 
 
 class _CountEpisodes:
-    """``env`` as :func:`~wpctrl.train.task_ppo.evaluate_policy` uses it, advancing ``bar`` by the episodes that end
+    """``env`` as :func:`~wpctrl.train.policy_eval.evaluate_policy` uses it, advancing ``bar`` by the episodes that end
     with each round of ``max_episode_steps`` steps (``env.num_envs`` at a time, the last round's share only)."""
 
     def __init__(self, env, bar, episodes: int):
@@ -136,13 +136,63 @@ class _CountEpisodes:
         return out
 
 
+def evaluate(policy, sim: str = "newton", episodes: int = 100, seed: int = 0, task: str | None = None,
+             device="cpu", envs: int | None = None, substeps: int | None = None, video=None,
+             progress: bool = True, verbose: bool = False) -> dict:  # fmt: skip
+    """The exported policy in file ``policy`` on ``episodes`` fresh episodes of ``sim`` (``"newton"``: wpctrl's
+    task env on ``device``, ``envs`` at a time (default: min(episodes, 256)), ``substeps`` defaulting to the
+    policy's training value; ``"maniskill"``: the real ManiSkill, one env on its CPU PhysX); what ``wpctrl
+    evaluate`` reports. ``video``: also film env 0's first episodes into this file (Newton only). Raises
+    :class:`PolicyError` for a policy that cannot drive ``task``."""
+    from .. import console
+
+    device = device if sim == "newton" else "cpu"
+    model, meta = load_policy(policy, task, device)
+    task, control_mode = meta["task"], meta.get("control_mode", "pd_joint_delta_pos")
+    if not str(device).startswith("cuda"):
+        torch.set_num_threads(1)  # a small network: see wpctrl.train.task_ppo
+    if video:
+        from .video import open_recorder
+    if sim == "maniskill":
+        bar = console.progress(episodes, f"{task} on ManiSkill", "episode", progress)
+
+        def report(i, records):
+            bar.update(1)
+            if not progress and (i % 10 == 0 or i == episodes):
+                ok = sum(r["success_once"] for r in records)
+                print(f"  {i:4d} episodes: {ok} successful", flush=True)
+
+        if video:
+            open_recorder(None, video, sim=sim)  # says why it is skipped
+        result = evaluate_maniskill(model, task, control_mode, episodes, seed, report)
+    else:
+        import wpctrl.tasks as T
+
+        from .policy_eval import evaluate_policy
+
+        substeps = substeps or meta.get("substeps")
+        physics = T.TaskPhysics(substeps=substeps) if substeps else T.TaskPhysics()
+        with console.compile_notice(f"Warp kernels for {task} on {device}"):
+            env = T.make(task, num_envs=envs or min(episodes, 256), device=device, control_mode=control_mode,
+                         seed=seed, auto_reset=False, ignore_terminations=True, physics=physics,
+                         verbose=verbose)  # fmt: skip
+        bar = console.progress(episodes, f"{task} on Newton", "episode", progress)
+        rec = open_recorder(env, video) if video else None  # None, saying why, where no renderer works
+        result = evaluate_policy(model, _CountEpisodes(rec or env, bar, episodes), episodes, seed=seed)
+        if rec is not None:
+            rec.close()
+        result["substeps"] = physics.substeps
+        env.close()
+    bar.close()
+    return {"task": task, "sim": sim, "control_mode": control_mode, "policy": str(policy), "seed": seed, **result}
+
+
 def main(argv=None) -> int:
     p = evaluate_parser()
     args = p.parse_args(argv)
-    check_evaluate_args(p, args)  # without torch's, Warp's or ManiSkill's imports (wpctrl evaluate ran them already)
+    check_evaluate_args(p, args, argv)  # no torch, Warp or ManiSkill needed (wpctrl evaluate ran them already)
     from .. import console
     from ..config import ConfigError
-    from ..console import compile_notice, progress
     from ..devices import check_device
 
     console.VERBOSE = args.verbose
@@ -153,56 +203,13 @@ def main(argv=None) -> int:
         except ConfigError as e:
             print(f"wpctrl evaluate: error: {e}", file=sys.stderr)
             return 2
-    device = args.device if args.sim == "newton" else "cpu"
     try:
-        policy, meta = load_policy(args.policy, args.task, device)
+        result = evaluate(args.policy, args.sim, args.episodes, args.seed, args.task, args.device, args.envs,
+                          args.substeps, args.video, args.progress, args.verbose)  # fmt: skip
     except PolicyError as e:
         print(f"wpctrl evaluate: error: {e}", file=sys.stderr)
         return 2
-    task, control_mode = meta["task"], meta.get("control_mode", "pd_joint_delta_pos")
-    if not str(device).startswith("cuda"):
-        torch.set_num_threads(1)  # a small network: see wpctrl.train.task_ppo
-    bar = None
-    if args.sim == "maniskill":
-        bar = progress(args.episodes, f"{task} on ManiSkill", "episode", args.progress)
-
-        def report(i, records):
-            bar.update(1)
-            if not args.progress and (i % 10 == 0 or i == args.episodes):
-                ok = sum(r["success_once"] for r in records)
-                print(f"  {i:4d} episodes: {ok} successful", flush=True)
-
-        if args.video:
-            from .video import open_recorder
-
-            open_recorder(None, args.video, sim=args.sim)  # says why it is skipped
-        result = evaluate_maniskill(policy, task, control_mode, args.episodes, args.seed, report)
-    else:
-        import wpctrl.tasks as T
-
-        from .task_ppo import evaluate_policy
-
-        substeps = args.substeps or meta.get("substeps")
-        physics = T.TaskPhysics(substeps=substeps) if substeps else T.TaskPhysics()
-        with compile_notice(f"Warp kernels for {task} on {device}"):
-            env = T.make(task, num_envs=args.envs or min(args.episodes, 256), device=device, control_mode=control_mode,
-                         seed=args.seed, auto_reset=False, ignore_terminations=True, physics=physics,
-                         verbose=args.verbose)  # fmt: skip
-        bar = progress(args.episodes, f"{task} on Newton", "episode", args.progress)
-        rec = None
-        if args.video:
-            from .video import open_recorder
-
-            rec = open_recorder(env, args.video)  # None, saying why, where no renderer works
-        result = evaluate_policy(policy, _CountEpisodes(rec or env, bar, args.episodes), args.episodes, seed=args.seed)
-        if rec is not None:
-            rec.close()
-        result["substeps"] = physics.substeps
-        env.close()
-    bar.close()
-    result = {"task": task, "sim": args.sim, "control_mode": control_mode, "policy": str(args.policy),
-              "seed": args.seed, **result}  # fmt: skip
-    print(f"{task} on {args.sim}: success {100 * result['success_rate']:.1f} % (at the end "
+    print(f"{result['task']} on {args.sim}: success {100 * result['success_rate']:.1f} % (at the end "
           f"{100 * result['success_at_end_rate']:.1f} %) over {result['episodes']} episodes, mean return "
           f"{result['mean_episode_reward']:.2f}")  # fmt: skip
     if args.out:

@@ -1,5 +1,5 @@
 """rsl-rl's runner configuration: the one skeleton both PPO setups fill (the reach task's Isaac Lab settings in
-:func:`wpctrl.train.cli.train_cfg`, the ManiSkill tasks' baseline settings in
+:func:`wpctrl.train.reach_ppo.train_cfg`, the ManiSkill tasks' baseline settings in
 :func:`wpctrl.train.task_ppo.maniskill_ppo_cfg`)."""
 
 from __future__ import annotations
@@ -26,10 +26,12 @@ def runner_cfg(*, seed: int, num_steps_per_env: int, algorithm: dict, mlp: dict,
     }
 
 
-def batch_error(envs: int, steps: int, minibatches: int, min_samples: int, minibatch_flag: str | None) -> str | None:
+def batch_error(envs: int, steps: int, minibatches: int, min_samples: int, minibatch_flag: str | None,
+                name=lambda key: "--" + key.replace("_", "-")) -> str | None:  # fmt: skip
     """Why a rollout of ``envs`` x ``steps`` samples cannot be split into ``minibatches`` mini-batches of at least
     ``min_samples`` samples each (rsl-rl's mini-batch is ``batch // minibatches`` samples), naming the flags that
-    fix it; None when it can. ``minibatch_flag``: the option that sets the mini-batch count, None when fixed."""
+    fix it (``name``: a setting's name as the caller shows it); None when it can. ``minibatch_flag``: the option
+    that sets the mini-batch count, None when fixed."""
     batch = envs * steps
     per = batch // minibatches
     if per >= min_samples:
@@ -43,11 +45,12 @@ def batch_error(envs: int, steps: int, minibatches: int, min_samples: int, minib
         )
     else:
         why = f"PPO needs at least {min_samples} sample per mini-batch (an empty one makes the losses NaN)"
-    fixes = [f"raise --envs to {-(-need // steps)}", f"--steps-per-env to {-(-need // envs)}"]
+    envs_, steps_ = name("envs"), name("steps_per_env")
+    fixes = [f"raise {envs_} to {-(-need // steps)}", f"{steps_} to {-(-need // envs)}"]
     if minibatch_flag and batch >= min_samples:
         fixes.append(f"lower {minibatch_flag} to {batch // min_samples}")
     return (
-        f"--envs {envs} x --steps-per-env {steps} = a batch of {batch} samples per iteration, split into "
+        f"{envs_} {envs} x {steps_} {steps} = a batch of {batch} samples per iteration, split into "
         f"{split}, leaves {per} sample{'s' * (per != 1)} per mini-batch; {why}. "
         f"The rule: envs x steps per env >= {min_samples} x mini-batches = {need}. Fix: "
         f"{', or '.join(fixes)}"

@@ -145,59 +145,26 @@ class ReachEnv(VecEnv):
     # -- the step (captured on CUDA) -------------------------------------------------------------------------------
 
     def _reset_envs(self, mask: wp.array) -> None:
-        wp.launch(
-            task_kernels.reset_kernel,
-            dim=self.num_envs,
-            inputs=[
-                self.seed,
-                self.dofs,
-                self.coords,
-                self.start_noise,
-                wp.vec3(*GOAL_LO),
-                wp.vec3(*GOAL_HI),
-                self.start_q,
-                mask,
-                self.counter,
-                self.state.joint_q,
-                self.state.joint_qd,
-                self.goal,
-            ],
-            device=self.wp_device,
-        )
+        inputs = [self.seed, self.dofs, self.coords, self.start_noise, wp.vec3(*GOAL_LO), wp.vec3(*GOAL_HI),
+                  self.start_q, mask, self.counter, self.state.joint_q, self.state.joint_qd, self.goal]  # fmt: skip
+        wp.launch(task_kernels.reset_kernel, dim=self.num_envs, inputs=inputs, device=self.wp_device)
         wp.launch(task_kernels.bump_kernel, dim=1, inputs=[self.counter], device=self.wp_device)
 
-    def _observe(self) -> None:
-        """Reward, done flags and episode bookkeeping of the control step just taken (and its observations)."""
+    def _kinematics(self) -> list:
+        """Forward kinematics of the current state, and the inputs both observation kernels start with: the env
+        layout, the TCP, the state's arrays and the goals."""
         import newton
 
         newton.eval_fk(self.model, self.state.joint_q, self.state.joint_qd, self.state)
-        wp.launch(
-            task_kernels.observe_kernel,
-            dim=self.num_envs,
-            inputs=[
-                self.dofs,
-                self.coords,
-                self.bodies,
-                self.tcp_body,
-                self.tcp_offset,
-                self.max_episode_length,
-                self.success_radius,
-                self.env_origin,
-                self.state.joint_q,
-                self.state.joint_qd,
-                self.state.body_q,
-                self.goal,
-                self.episode_step,
-                self.episode_return,
-                self.obs,
-                self.reward,
-                self.done,
-                self.time_out,
-                self.distance,
-                self.stats,
-            ],
-            device=self.wp_device,
-        )
+        return [self.dofs, self.coords, self.bodies, self.tcp_body, self.tcp_offset, self.env_origin,
+                self.state.joint_q, self.state.joint_qd, self.state.body_q, self.goal]  # fmt: skip
+
+    def _observe(self) -> None:
+        """Reward, done flags and episode bookkeeping of the control step just taken (and its observations)."""
+        inputs = [*self._kinematics(), self.max_episode_length, self.success_radius, self.episode_step,
+                  self.episode_return, self.obs, self.reward, self.done, self.time_out, self.distance,
+                  self.stats]  # fmt: skip
+        wp.launch(task_kernels.observe_kernel, dim=self.num_envs, inputs=inputs, device=self.wp_device)
 
     def _step_impl(self) -> None:
         ctrl, s0, s1 = self.ctrl, self.state, self._other
@@ -215,27 +182,8 @@ class ReachEnv(VecEnv):
 
     def _observe_obs_only(self) -> None:
         """Observations again after the reset (reset envs start their new episode); reward and done are kept."""
-        import newton
-
-        newton.eval_fk(self.model, self.state.joint_q, self.state.joint_qd, self.state)
-        wp.launch(
-            task_kernels.obs_kernel,
-            dim=self.num_envs,
-            inputs=[
-                self.dofs,
-                self.coords,
-                self.bodies,
-                self.tcp_body,
-                self.tcp_offset,
-                self.env_origin,
-                self.state.joint_q,
-                self.state.joint_qd,
-                self.state.body_q,
-                self.goal,
-                self.obs,
-            ],
-            device=self.wp_device,
-        )
+        wp.launch(task_kernels.obs_kernel, dim=self.num_envs, inputs=[*self._kinematics(), self.obs],
+                  device=self.wp_device)  # fmt: skip
 
     def _reset_all(self) -> None:
         self._reset_envs(self._all)

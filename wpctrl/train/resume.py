@@ -11,28 +11,16 @@ resumed with another task, mode or env count would not be the same run. ``--iter
 
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
+
+from .command_args import given_flags as explicit_flags
 
 __all__ = ["ResumeError", "apply_resume", "explicit_flags", "load_checkpoint", "read_run", "recorded_config"]
 
 
 class ResumeError(ValueError):
     """A run folder that cannot be resumed, or flags that contradict it (the message says which)."""
-
-
-def explicit_flags(p: argparse.ArgumentParser, argv) -> set[str]:
-    """The destinations of the options ``argv`` gives (whatever their value: also one equal to its default)."""
-    saved = [(a, a.default) for a in p._actions]
-    try:
-        for a, _ in saved:
-            a.default = argparse.SUPPRESS
-        ns, _ = p.parse_known_args(argv)
-    finally:
-        for a, d in saved:
-            a.default = d
-    return set(vars(ns))
 
 
 def read_run(run_dir) -> dict:
@@ -74,8 +62,9 @@ def _flag(name: str, value) -> str:
 
 
 def apply_resume(args, given: set[str]) -> dict:
-    """Fill ``args`` with the configuration of the run ``args.resume`` names; refuse an explicit flag that contradicts
-    it (:class:`ResumeError`). The seed and the evaluation envs default to the run's; the output folder to the run's.
+    """Fill ``args`` (an argparse namespace or a :class:`~wpctrl.train.train_config.TrainConfig`) with the
+    configuration of the run ``args.resume`` names; refuse a setting in ``given`` that contradicts it
+    (:class:`ResumeError`). The seed and the evaluation envs default to the run's; the output folder to the run's.
     Returns the run's ``train.json``."""
     summary = read_run(args.resume)
     where = str(Path(args.resume) / "train.json")

@@ -16,10 +16,9 @@ from __future__ import annotations
 
 import torch
 
-__all__ = ["SAMPLINGS", "act", "sync_free"]
+from .train_config import SAMPLINGS
 
-SAMPLINGS = ("sync-free", "rsl-rl")
-"""``--action-sampling`` values: :func:`act` or rsl-rl's ``PPO.act``."""
+__all__ = ["SAMPLINGS", "act", "sync_free"]
 
 
 def sync_free(alg) -> str | None:

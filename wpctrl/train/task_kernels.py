@@ -63,13 +63,13 @@ def observe_kernel(
     bodies_per_env: int,
     tcp_body: int,  # the TCP's body in env 0
     tcp_offset: wp.transform,  # the TCP site in that body's frame
-    max_steps: int,
-    success_radius: float,  # [m]
     env_origin: wp.array[wp.vec3],  # (num_envs,) each env's world offset [m]
     joint_q: wp.array[float],
     joint_qd: wp.array[float],
     body_q: wp.array[wp.transform],
     goal: wp.array[wp.vec3],  # (num_envs,) in the env's frame [m]
+    max_steps: int,
+    success_radius: float,  # [m]
     # In/out:
     episode_step: wp.array[wp.int32],
     episode_return: wp.array[float],

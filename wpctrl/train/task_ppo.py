@@ -1,6 +1,7 @@
 """PPO (rsl-rl) on ManiSkill's ``PushCube-v1`` / ``PickCube-v1`` through wpctrl: ManiSkill's PPO baseline settings
 mapped onto rsl-rl, the rollout with ManiSkill's bootstrapping at episode ends, and evaluations of the deterministic
-policy on fresh episodes (``python -m wpctrl train --task PushCube-v1``; :mod:`wpctrl.train.cli` parses).
+policy on fresh episodes (``python -m wpctrl train --task PushCube-v1``; :class:`wpctrl.train.trainer.Trainer` runs
+the loop).
 
 ManiSkill's baseline (``examples/baselines/ppo/ppo_fast.py`` and its ``baselines.sh``: 4,096 envs, 4 steps per env
 and iteration, 8 epochs of 32 mini-batches, gamma 0.8, lambda 0.9, learning rate 3e-4, clip 0.2, no value clipping,
@@ -12,12 +13,10 @@ what transfers to rsl-rl and what does not.
 from __future__ import annotations
 
 import math
-import sys
-import time
 
 import torch
 
-from ..console import compile_notice
+from .policy_eval import evaluate_policy
 from .ppo_config import MANISKILL_EPOCHS as EPOCHS
 from .ppo_config import MANISKILL_MINIBATCHES as MINIBATCHES
 from .ppo_config import MANISKILL_STEPS_PER_ENV as STEPS_PER_ENV
@@ -26,7 +25,11 @@ from .ppo_update import CapturedUpdate
 from .sampling import SAMPLINGS, act, sync_free
 from .task_env import TaskVecEnv
 
-__all__ = ["Collector", "checkpoint_infos", "evaluate_policy", "maniskill_init", "maniskill_ppo_cfg", "train"]
+__all__ = ["Collector", "ManiSkillTraining", "checkpoint_infos", "evaluate_policy", "maniskill_init",
+           "maniskill_ppo_cfg"]  # fmt: skip
+
+EVAL_SEED = 10_000
+"""Added to the run's seed for the evaluation env: episodes the training env never draws."""
 
 
 def maniskill_ppo_cfg(
@@ -112,45 +115,6 @@ class Collector:
         return obs
 
 
-def evaluate_policy(policy, env, episodes: int, seed: int | None = None) -> dict:
-    """``policy`` (flattened observations -> actions, torch) on fresh episodes of ``env`` (an env of
-    :func:`wpctrl.tasks.make` with ``auto_reset=False`` and ``ignore_terminations=True``: every episode runs its
-    ``max_episode_steps``, as ManiSkill's PPO evaluates), ``env.num_envs`` episodes at a time, until ``episodes`` have
-    run. Returns the success rate (success at any step: ManiSkill's ``success_once``), the success rate at the last
-    step (``success_at_end``), the mean return (sum of the env's rewards) and the mean first success step."""
-    n = env.num_envs
-    done, once, at_end, ret, first = 0, 0.0, 0.0, 0.0, []
-    t = time.perf_counter()
-    rounds = 0
-    with torch.inference_mode():
-        while done < episodes:
-            obs, _ = env.reset(seed=None if seed is None else seed + rounds)
-            rounds += 1
-            hit = torch.zeros(n, dtype=torch.bool, device=env.device)
-            first_step = torch.full((n,), -1, dtype=torch.int64, device=env.device)
-            total = torch.zeros(n, device=env.device)
-            for k in range(env.max_episode_steps):
-                obs, reward, _, _, info = env.step(policy(obs))
-                total += reward
-                new = info["success"] & ~hit
-                first_step = torch.where(new, k + 1, first_step)
-                hit |= info["success"]
-            m = min(n, episodes - done)
-            once += float(hit[:m].float().sum())
-            at_end += float(info["success"][:m].float().sum())
-            ret += float(total[:m].sum())
-            first += [s for s in first_step[:m].tolist() if s > 0]
-            done += m
-    return {
-        "episodes": done,
-        "success_rate": once / done,
-        "success_at_end_rate": at_end / done,
-        "mean_episode_reward": ret / done,
-        "mean_first_success_step": sum(first) / len(first) if first else None,
-        "eval_s": time.perf_counter() - t,
-    }
-
-
 def checkpoint_infos(env: TaskVecEnv, cfg: dict) -> dict:
     """What ``policy.pt`` records besides rsl-rl's state dicts, so that ``wpctrl export`` rebuilds the actor and
     refuses a mismatched task without the env."""
@@ -172,186 +136,86 @@ def checkpoint_infos(env: TaskVecEnv, cfg: dict) -> dict:
     }
 
 
-def train(args, t_main: float) -> int:
-    """``python -m wpctrl train --task PushCube-v1 | PickCube-v1`` (``args`` from :func:`wpctrl.train.cli.parse`)."""
-    import contextlib
-    import io
-    from pathlib import Path
+class ManiSkillTraining:
+    """PushCube-v1 / PickCube-v1 as the trainer's loop drives them (``cfg``: a resolved
+    :class:`~wpctrl.train.train_config.TrainConfig`): a :class:`TaskVecEnv` to train on and a separate evaluation
+    env (every episode runs its 50 steps, on held-out seeds), ManiSkill's initialisation and Adam, the captured PPO
+    update where asked, and :class:`Collector`'s rollout."""
 
-    import warp as wp
-    from rsl_rl.runners import OnPolicyRunner
-    from tensordict import TensorDict
+    success_label = "success rate (success at any step)"
+    evaluates_untrained = True
 
-    import wpctrl.tasks as T
+    def __init__(self, cfg):
+        self.cfg = cfg
+        self.builds = f"{cfg.envs} {cfg.task} envs and {cfg.eval_envs} evaluation envs"
+        self.captured_update = cfg.ppo_update == "captured"
+        self.env = self.eval_env = self.alg = self.collector = None
 
-    from .logger import RunLogger
-    from .outputs import fmt, median, plot, write_json
-    from .resume import load_checkpoint
+    def build(self) -> None:
+        import wpctrl.tasks as T
 
-    device = args.device or ("cuda:0" if wp.is_cuda_available() else "cpu")
-    cuda = device.startswith("cuda")
-    envs = args.envs or (4096 if cuda else 64)
-    iterations = args.iterations or (2000 if cuda else 20)
-    steps = args.steps_per_env or STEPS_PER_ENV
-    eval_envs = args.eval_envs or min(envs, 512)
-    eval_episodes = args.eval_episodes or eval_envs
-    control_mode = args.control_mode or "pd_joint_delta_pos"
-    if control_mode not in T.CONTROL_MODES:
-        print(f"wpctrl train: --control-mode: expected one of the Panda's modes {list(T.CONTROL_MODES)}, got "
-              f"{control_mode!r}", file=sys.stderr)  # fmt: skip
-        return 2
-    ppo_update = args.ppo_update or ("captured" if cuda else "rsl-rl")
-    if ppo_update == "captured" and not cuda:
-        print(f"wpctrl train: --ppo-update: 'captured' needs a CUDA device, got --device {device}", file=sys.stderr)
-        return 2
-    sampling = args.action_sampling or "sync-free"
-    if not cuda:
-        # the networks' matrices are small: one thread, since OpenMP workers spin-waiting for a busy core slow each
-        # update down tens of times on a shared CPU
-        torch.set_num_threads(1)
-    torch.manual_seed(args.seed)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+        c = self.cfg
+        if not c.device.startswith("cuda"):
+            # the networks' matrices are small: one thread, since OpenMP workers spin-waiting for a busy core slow each
+            # update down tens of times on a shared CPU
+            torch.set_num_threads(1)
+        graph = not c.no_graph
+        self.env = TaskVecEnv(c.task, c.envs, device=c.device, control_mode=c.control_mode, seed=c.seed,
+                              partial_reset=not c.no_partial_reset, substeps=c.substeps, graph=graph)  # fmt: skip
+        self.eval_env = T.make(c.task, num_envs=c.eval_envs, device=c.device, control_mode=c.control_mode,
+                               seed=c.seed + EVAL_SEED, auto_reset=False, ignore_terminations=True,
+                               physics=T.TaskPhysics(substeps=self.env.substeps), graph=graph)  # fmt: skip
 
-    t0 = time.perf_counter()
-    graph = not args.no_graph
-    print(f"wpctrl train: building {envs} {args.task} envs and {eval_envs} evaluation envs on {device} ...", flush=True)
-    with compile_notice(f"Warp kernels for {args.task} on {device}", say=lambda msg: print(msg, flush=True)):
-        env = TaskVecEnv(args.task, envs, device=device, control_mode=control_mode, seed=args.seed,
-                         partial_reset=not args.no_partial_reset, substeps=args.substeps, graph=graph)  # fmt: skip
-        eval_env = T.make(args.task, num_envs=eval_envs, device=device, control_mode=control_mode,
-                          seed=args.seed + 10_000, auto_reset=False, ignore_terminations=True,
-                          physics=T.TaskPhysics(substeps=env.substeps), graph=graph)  # fmt: skip
-    cfg = maniskill_ppo_cfg(steps, args.epochs or EPOCHS, args.minibatches or MINIBATCHES, args.seed,
-                            obs_normalization=args.obs_normalization == "on")  # fmt: skip
-    with contextlib.redirect_stdout(io.StringIO()):  # rsl-rl prints its observation sets and both networks
-        runner = OnPolicyRunner(env, cfg, log_dir=None, device=device)
-    alg = runner.alg
-    maniskill_init(alg.actor, 0.01 * math.sqrt(2.0))
-    maniskill_init(alg.critic, math.sqrt(2.0))
-    for group in alg.optimizer.param_groups:
-        group["eps"] = 1e-5  # ManiSkill's Adam
-    resumed = getattr(args, "resumed", None)
-    start = 0
-    if resumed is not None:  # weights, normaliser, Adam's state and the iteration count of the run's checkpoint
-        start = load_checkpoint(runner, args.resume, device, resumed, captured=ppo_update == "captured")
-    if ppo_update == "captured":
-        alg.update = CapturedUpdate(alg, graph=True)
-    collector = Collector(env, alg, sampling)
-    log = RunLogger(args.logger, out, cfg=cfg, env_cfg=env.cfg, start_iteration=start)
-    setup_s = time.perf_counter() - t0
-    print(f"wpctrl train: {args.task}, {envs} envs on {device} ({env.substeps} MuJoCo steps per physics step), "
-          f"{control_mode}, evaluation on {eval_envs} envs, PPO update {ppo_update}, {sampling} action sampling; "
-          f"set up in {setup_s:.1f} s",
-          flush=True)  # fmt: skip
+    def ppo_cfg(self) -> dict:
+        c = self.cfg
+        return maniskill_ppo_cfg(c.steps_per_env, c.epochs, c.minibatches, c.seed,
+                                 obs_normalization=c.obs_normalization == "on")  # fmt: skip
 
-    def deterministic(obs):
-        return alg.actor(TensorDict({"policy": obs}, batch_size=[obs.shape[0]]))
+    def init_networks(self, alg) -> None:
+        """ManiSkill's orthogonal initialisation and Adam's epsilon (before a resumed run's checkpoint loads)."""
+        maniskill_init(alg.actor, 0.01 * math.sqrt(2.0))
+        maniskill_init(alg.critic, math.sqrt(2.0))
+        for group in alg.optimizer.param_groups:
+            group["eps"] = 1e-5  # ManiSkill's Adam
 
-    eval_seed = args.seed + 10_000  # held-out episodes: a seed the training env never draws from
+    def attach(self, runner) -> None:
+        self.alg = alg = runner.alg
+        if self.captured_update:
+            alg.update = CapturedUpdate(alg, graph=True)
+        self.collector = Collector(self.env, alg, self.cfg.action_sampling)
 
-    def evaluation(it: int) -> dict:
-        ev = evaluate_policy(deterministic, eval_env, eval_episodes, seed=eval_seed)
-        ev.update(iteration=it, wall_s=wall0 + time.perf_counter() - t_start, env_steps=(it + 1) * envs * steps)
-        evaluations.append(ev)
-        log.evaluation(ev)
-        print(f"       evaluation: success {ev['success_rate']:.3f} (at the end {ev['success_at_end_rate']:.3f}) "
-              f"over {ev['episodes']} episodes, return {ev['mean_episode_reward']:.2f}", flush=True)  # fmt: skip
-        return ev
+    def describe(self) -> str:
+        c = self.cfg
+        return (f"{c.task}, {c.envs} envs on {c.device} ({self.env.substeps} MuJoCo steps per physics step), "
+                f"{c.control_mode}, evaluation on {c.eval_envs} envs, PPO update {c.ppo_update}, "
+                f"{c.action_sampling} action sampling")  # fmt: skip
 
-    # a resumed run continues its history, evaluations and wall time
-    history, evaluations = list(resumed["history"]) if resumed else [], list(resumed["evaluations"]) if resumed else []
-    wall0, n_prev = max([r["wall_s"] for r in history[-1:] + evaluations[-1:]], default=0.0), len(evaluations)
-    t_start = time.perf_counter()
-    obs = env.get_observations()
-    if args.eval_every and not resumed:
-        evaluation(-1)  # the untrained policy: the curve's start
-    alg.train_mode()
-    stop = None
-    for it in range(start, start + iterations):
-        t_it = time.perf_counter()
-        with torch.inference_mode():
-            obs = collector.rollout(obs, steps)
-            if cuda:
-                torch.cuda.synchronize()
-            collect_s = time.perf_counter() - t_it
-            alg.compute_returns(obs)
-        losses = alg.update()
-        learn_s = time.perf_counter() - t_it - collect_s
-        stats = env.take_stats()
-        row = {"iteration": it, **{k: stats[k] for k in ("mean_episode_reward", "success_rate", "success_at_end_rate",
-                                                          "mean_episode_length", "episodes", "mean_step_reward")},
-               "collection_env_steps_per_s": envs * steps / collect_s, "collect_s": collect_s, "learn_s": learn_s,
-               "env_steps": (it + 1) * envs * steps, "iteration_s": time.perf_counter() - t_it,
-               "wall_s": wall0 + time.perf_counter() - t_start,
-               "action_std": float(alg.get_policy().output_std.detach().mean()),
-               "losses": {k: float(v) for k, v in losses.items()}}  # fmt: skip
-        history.append(row)
-        log.iteration(row, alg.learning_rate)
-        print(f"[{it:4d}] step reward {fmt(row['mean_step_reward'])} episode reward {fmt(row['mean_episode_reward'])} "
-              f"success {fmt(row['success_rate'])} collect {row['collection_env_steps_per_s']:,.0f} env-steps/s  "
-              f"wall {row['wall_s']:.1f} s", flush=True)  # fmt: skip
-        last_it = it + 1 == start + iterations
-        over = args.time_limit is not None and time.perf_counter() - t_main >= args.time_limit
-        if args.eval_every and (it + 1) % args.eval_every == 0 and not last_it and not over:
-            ev = evaluation(it)
-            if args.target_success is not None and ev["success_rate"] >= args.target_success:
-                stop = "target"
-                break
-        if over:
-            stop = "time_limit"
-            break
-    train_s = time.perf_counter() - t_start
-    runner.current_learning_iteration = len(history)
-    infos = checkpoint_infos(env, cfg)
-    runner.save(str(out / "policy.pt"), infos=infos)
-    last = evaluations[-1] if evaluations and evaluations[-1]["iteration"] == history[-1]["iteration"] else None
-    if last is None:
-        last = evaluation(history[-1]["iteration"])
-    target = args.target_success
-    reached = [e for e in evaluations[n_prev:] if target is not None and e["success_rate"] >= target]
-    summary = {
-        "task": args.task,
-        "control_mode": control_mode,
-        "envs": envs,
-        "eval_envs": eval_envs,
-        "device": device,
-        "device_name": torch.cuda.get_device_name(torch.device(device)) if cuda else "cpu",
-        "graph": env.graph is not None,
-        "ppo_update": ppo_update,
-        "action_sampling": sampling,
-        "substeps": env.substeps,
-        "partial_reset": env.partial_reset,
-        "seed": args.seed,
-        "iterations": len(history),
-        "steps_per_env": steps,
-        "env_steps": len(history) * envs * steps,
-        "stopped_by": stop or "iterations",
-        "import_s": t0 - t_main,
-        "setup_s": setup_s,
-        "train_wall_s": train_s,
-        "total_s": time.perf_counter() - t_main,
-        "collection_env_steps_per_s_median": median([h["collection_env_steps_per_s"] for h in history[1:] or history]),
-        "target_success": target,
-        "time_to_target_s": (t_start - t_main + reached[0]["wall_s"] - wall0) if reached else None,
-        "env_steps_to_target": reached[0]["env_steps"] if reached else None,
-        "resumed_from": {"run": str(args.resume), "iteration": start} if resumed else None,
-        "logger": args.logger,
-        "ppo": cfg,
-        "checkpoint": infos,
-        "history": history,
-        "evaluations": evaluations,
-        "evaluation": last,
-    }
-    write_json(out / "train.json", summary)
-    plot(history, evaluations, out / "learning_curve.png",
-         f"{args.task}, {envs} envs on {device}: {len(history)} iterations in {history[-1]['wall_s']:.0f} s",
-         "success rate (success at any step)", window=envs)  # fmt: skip
-    log.close()
-    print(f"wrote {out / 'train.json'}, {out / 'learning_curve.png'}, {out / 'policy.pt'}", flush=True)
-    if reached:
-        first = reached[0]
-        print(f"success {first['success_rate']:.3f} >= {target} after {summary['time_to_target_s']:.1f} s", flush=True)
-    env.close()
-    eval_env.close()
-    return 0
+    def start(self, seed: int):
+        return self.env.get_observations()
+
+    def rollout(self, obs, steps: int):
+        return self.collector.rollout(obs, steps)
+
+    def evaluate(self) -> dict:
+        from tensordict import TensorDict
+
+        def deterministic(obs):
+            return self.alg.actor(TensorDict({"policy": obs}, batch_size=[obs.shape[0]]))
+
+        # held-out episodes: a seed the training env never draws from
+        return evaluate_policy(deterministic, self.eval_env, self.cfg.eval_episodes, seed=self.cfg.seed + EVAL_SEED)
+
+    def after_evaluation(self, obs, seed: int):
+        return obs  # evaluated on its own env: the training episodes go on
+
+    def summary(self) -> dict:
+        c = self.cfg
+        return {"eval_envs": c.eval_envs, "ppo_update": c.ppo_update, "action_sampling": c.action_sampling,
+                "substeps": self.env.substeps, "partial_reset": self.env.partial_reset}  # fmt: skip
+
+    def checkpoint_infos(self, ppo: dict) -> dict:
+        return checkpoint_infos(self.env, ppo)
+
+    def close(self) -> None:
+        self.env.close()
+        self.eval_env.close()

@@ -14,8 +14,8 @@ MUTATIONS = [
     M(
         "effort_limit_of_env_0",
         "wpctrl/kernels/pd_substep.py",
-        "lim[r] = sub.force_limit[lb, r]",
-        "lim[r] = sub.force_limit[0, r]",
+        "lim[r] = force_limit[lb, r]",
+        "lim[r] = force_limit[0, r]",
         "the explicit clamp and the effort readout use env 0's force limit",
         ("tests/test_actuator_setups.py", "tests/test_actuation.py"),
     ),

@@ -46,8 +46,8 @@ MUTATIONS = [
     M(
         "stable_pd_denominator_without_kp",
         "wpctrl/kernels/pd_substep.py",
-        "1.0 + resp[r] * sub.dt * (kdr + sub.dt * kpr)",
-        "1.0 + resp[r] * sub.dt * kdr",
+        "1.0 + resp[r] * dt * (kdr + dt * kpr)",
+        "1.0 + resp[r] * dt * kdr",
         "stable explicit PD drops the dt^2 Kp term of its denominator",
         ("tests/test_coupled.py", "tests/test_acceleration.py"),
     ),

@@ -6,7 +6,7 @@ MUTATIONS = [
     M(
         "stable_pd_on_the_start_state",
         "wpctrl/kernels/pd_substep.py",
-        "u[r] = (kpr * (e - sub.dt * qd[r]) + kdr * (tqd[r] - qd[r])) / (",
+        "u[r] = (kpr * (e - dt * qd[r]) + kdr * (tqd[r] - qd[r])) / (",
         "u[r] = (kpr * e + kdr * (tqd[r] - qd[r])) / (",
         "stable explicit PD evaluates its position error on the start state, not the predicted one",
         ("tests/test_acceleration.py",),
@@ -30,8 +30,8 @@ MUTATIONS = [
     M(
         "delay_off_by_one",
         "wpctrl/kernels/pd_substep.py",
-        "d = wp.clamp(sub.delay_in[env], 0, sub.max_delay)",
-        "d = wp.clamp(sub.delay_in[env] + 1, 0, sub.max_delay)",
+        "d = wp.clamp(delay_in[env], 0, max_delay)",
+        "d = wp.clamp(delay_in[env] + 1, 0, max_delay)",
         "the command delay is one substep longer than drawn",
         ("tests/test_actuation.py",),
     ),

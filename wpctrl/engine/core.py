@@ -27,6 +27,7 @@ import newton
 import warp as wp
 
 from ..kernels import pd_step
+from ..kernels.actuator_net import NetIO
 from ..kernels.dims import step_block_dim
 from ..kernels.pd import _reset_kernel, _step_view_kernel, _targets_kernel
 from .launch import _Launch, _Targets
@@ -158,23 +159,10 @@ class _Engine:
 
     def _launch(self, kernel, dim, per_call: dict, block_dim=None) -> _Launch:
         """A recorded launch of ``kernel`` with every parameter looked up by name (``per_call`` first)."""
-        params = {a.label: per_call[a.label] if a.label in per_call else self._param(a) for a in kernel.adj.args}
+        params = {
+            a.label: per_call[a.label] if a.label in per_call else self.arrays.lookup(a.label) for a in kernel.adj.args
+        }
         return _Launch(kernel, dim, params, self.device, block_dim=block_dim)
-
-    def _param(self, arg):
-        """A kernel parameter by its name; a ``@wp.struct`` parameter that no part provides is filled field by field,
-        each field by the name of the argument it bundles (a field no active part provides stays unset: the kernel of
-        a mode without that part never reads it)."""
-        if not wp.types.type_is_struct(arg.type):
-            return self.arrays.lookup(arg.label)
-        try:
-            return self.arrays.lookup(arg.label)
-        except KeyError:
-            value = arg.type()
-        for name in arg.type.vars:
-            if (field := self.arrays.lookup(name)) is not None:
-                setattr(value, name, field)
-        return value
 
     # -- stages ---------------------------------------------------------------------------------------------------
 
@@ -225,8 +213,9 @@ class _Engine:
             }
             models = self.part("actuator_models")
             fused = None if models is None else models.substep_launch(self)
-            if fused is None:
+            if fused is None:  # (the kernel's network parameters unused)
                 kernel, dim, block_dim = pd_step.substep_kernel(self.layout), self.num_envs, self.block_dim
+                per_call.update(row0=0, io=NetIO(), hist_out=None)
             else:  # an actuator network's rows in the same launch (ActuatorModels.choose_launch)
                 kernel, dim, block_dim, extra = fused
                 per_call.update(extra)

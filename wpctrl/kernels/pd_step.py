@@ -35,6 +35,7 @@ Semantics are those of ManiSkill's controllers (:mod:`wpctrl.kernels.pd` states 
 
 from __future__ import annotations
 
+import numpy as np
 import warp as wp
 
 from .pd_set_action import _make_set_action_kernel
@@ -42,7 +43,7 @@ from .pd_substep import _make_substep_kernel
 from .step_layout import ROW_F_QHI, ROW_F_QLO, StepLayout, row_float_table  # noqa: F401  (what the engine uses)
 
 _SET_ACTION: dict[StepLayout, wp.Kernel] = {}
-_SUBSTEP: dict[StepLayout, tuple[wp.Function, wp.Kernel]] = {}
+_SUBSTEP: dict[tuple, wp.Kernel] = {}
 
 
 def set_action_kernel(layout: StepLayout) -> wp.Kernel:
@@ -55,22 +56,18 @@ def set_action_kernel(layout: StepLayout) -> wp.Kernel:
     return k
 
 
-def substep_kernel(layout: StepLayout) -> wp.Kernel:
-    """The substep kernel of ``layout``; set_action-only fields of the layout are ignored."""
-    return _substep(layout)[1]
-
-
-def substep_func(layout: StepLayout) -> wp.Function:
-    """The substep of ``layout`` as a function ``(env, *the substep kernel's parameters)``, forced inline: what a
-    kernel that also does other work in the same launch calls for its env threads."""
-    return _substep(layout)[0]
-
-
-def _substep(layout: StepLayout) -> tuple[wp.Function, wp.Kernel]:
+def substep_kernel(layout: StepLayout, net: tuple | None = None) -> wp.Kernel:
+    """The substep kernel of ``layout``; set_action-only fields of the layout are ignored. ``net`` =
+    ``(NetLayout, weights, scales)``: the kernel that also runs that network's rows in its launch
+    (:mod:`.actuator_net_fused`)."""
     key = layout._replace(
         act_col=(), vel_col=(), mimic_src=(), action_dim=0, clip=False, yaw_row=(), base_axis=(), bx_col=(), by_col=()
     )
-    k = _SUBSTEP.get(key)
+    if net is not None:
+        weights = np.ascontiguousarray(net[1], dtype=np.float32)
+        net = (net[0], weights, tuple(float(np.float32(x)) for x in net[2]))
+    cache_key = (key, None if net is None else (net[0], net[1].tobytes(), net[2]))
+    k = _SUBSTEP.get(cache_key)
     if k is None:
-        k = _SUBSTEP[key] = _make_substep_kernel(key)
+        k = _SUBSTEP[cache_key] = _make_substep_kernel(key, net)
     return k

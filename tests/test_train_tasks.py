@@ -179,23 +179,38 @@ def exported(smoke_run):
     return export(smoke_run)
 
 
-@pytest.mark.slow  # needs the PPO smoke run (CI runs it)
-def test_exported_policy_is_the_actors_deterministic_action(smoke_run, exported):
-    """TorchScript and ONNX (checked with ONNX's own reference evaluator) against the rsl-rl actor, on 1,000
-    random observations of the training data's scale; the metadata names the task."""
+def _rsl_rl_actor(checkpoint):
+    """rsl-rl's own actor (``MLPModel``) of a checkpoint: the independent reference for the exported policy."""
+    from rsl_rl.models import MLPModel
     from tensordict import TensorDict
 
+    data = torch.load(checkpoint, map_location="cpu", weights_only=False)
+    infos = data["infos"]
+    cfg = {k: v for k, v in infos["actor"].items() if k != "class_name"}
+    obs = TensorDict({"policy": torch.zeros(1, infos["obs_dim"])}, batch_size=[1])
+    actor = MLPModel(obs, {"actor": ["policy"]}, "actor", infos["num_actions"], **cfg)
+    actor.load_state_dict(data["actor_state_dict"])
+    return actor.eval(), lambda x: actor(TensorDict({"policy": x}, batch_size=[x.shape[0]]))
+
+
+@pytest.mark.slow  # needs the PPO smoke run (CI runs it)
+def test_exported_policy_is_the_actors_deterministic_action(smoke_run, exported):
+    """TorchScript and ONNX (checked with ONNX's own reference evaluator) against the rsl-rl actor of the checkpoint,
+    on 1,000 random observations of the training data's scale; the metadata names the task."""
     from wpctrl.train.export import EXTRA_FILE, load_actor
 
+    _, rsl_rl_actor = _rsl_rl_actor(smoke_run / "policy.pt")
     actor, infos = load_actor(smoke_run / "policy.pt")
     g = torch.Generator().manual_seed(1)
     obs = 0.5 * torch.randn(1000, 35, generator=g)  # raw observations: joint angles, velocities and poses of this size
     extra = {EXTRA_FILE: ""}
     module = torch.jit.load(exported["policy.ts"], _extra_files=extra)
     with torch.inference_mode():
-        reference = actor(TensorDict({"policy": obs}, batch_size=[1000]))
+        reference = rsl_rl_actor(obs)
+        np.testing.assert_allclose(actor(obs).numpy(), reference.numpy(), rtol=0, atol=1e-6)
         np.testing.assert_allclose(module(obs).numpy(), reference.numpy(), rtol=0, atol=1e-6)
     assert float(reference.abs().max()) > 0.05  # a policy that acts, not a zero map
+    assert exported["ts_max_abs_diff"] <= 1e-6
     meta = json.loads(extra[EXTRA_FILE])
     assert (meta["task"], meta["obs_dim"], meta["num_actions"], meta["control_mode"]) == (
         "PushCube-v1", 35, 8, "pd_joint_delta_pos")  # fmt: skip
@@ -370,7 +385,7 @@ def test_evaluate_on_newton_reports_a_hand_rolled_episodes_metrics(smoke_run, ex
 
 _NO_RSL_RL = """
 import importlib.abc, json, sys
-BLOCKED = ("rsl_rl", "wpctrl.train.trainer", "wpctrl.train.task_ppo", "wpctrl.train.task_env")
+BLOCKED = ("rsl_rl", "tensordict", "wpctrl.train.trainer", "wpctrl.train.task_ppo", "wpctrl.train.task_env")
 
 class Block(importlib.abc.MetaPathFinder):
     def find_spec(self, name, path=None, target=None):
@@ -399,6 +414,29 @@ def test_evaluate_on_newton_runs_without_rsl_rl_or_the_trainer(exported, tmp_pat
     r = json.loads(result.read_text())
     assert (r["task"], r["sim"], r["episodes"], r["substeps"]) == ("PushCube-v1", "newton", 2, 4)
     assert 0.0 <= r["success_rate"] <= 1.0
+
+
+@pytest.mark.slow  # needs the PPO smoke run (CI runs it)
+def test_export_runs_without_rsl_rl_or_the_trainer(smoke_run, exported, tmp_path):
+    """``wpctrl export`` in an interpreter where rsl-rl, tensordict and the training modules cannot be imported: it
+    runs, and writes the policy the same command writes with them (same metadata, same actions)."""
+    out = tmp_path / "blocked"
+    argv = ["export", str(smoke_run), "--out", str(out)]
+    done = subprocess.run([sys.executable, "-c", _NO_RSL_RL, *argv], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert done.stdout.strip().splitlines()[-1] == "LOADED []", done.stdout
+    assert (out / "policy.json").read_text() == (smoke_run / "policy.json").read_text()
+    obs = 0.5 * torch.randn(200, 35, generator=torch.Generator().manual_seed(2))
+    with torch.inference_mode():
+        want = torch.jit.load(exported["policy.ts"])(obs)
+        assert torch.equal(torch.jit.load(str(out / "policy.ts"))(obs), want)
+    if "policy.onnx" in exported:
+        from onnx.reference import ReferenceEvaluator
+
+        def run(path):
+            return ReferenceEvaluator(str(path)).run(None, {"obs": obs.numpy()})[0]
+
+        np.testing.assert_array_equal(run(out / "policy.onnx"), run(exported["policy.onnx"]))
 
 
 @pytest.mark.slow  # needs the PPO smoke run (CI runs it)
@@ -472,7 +510,9 @@ def test_export_refuses_what_it_cannot_export(smoke_run, tmp_path, capsys):
     data["infos"]["obs_dim"] = 42  # PickCube's observation size with PushCube's weights
     torch.save(data, tmp_path / "policy.pt")
     err = refused(tmp_path)
-    assert "do not fit its recorded observation / action sizes (42 / 8)" in err
+    want = (f"{tmp_path / 'policy.pt'}: actor_state_dict: the weights do not fit the recorded sizes (observations 42, "
+            "actions 8, hidden [256, 256, 256]): mlp.0.weight is (256, 35), the record makes (256, 42)")  # fmt: skip
+    assert want in err
 
 
 @pytest.mark.slow  # needs the PPO smoke run (CI runs it)

@@ -1,7 +1,7 @@
 """Training from Python and the command line's one rule for unused options: :class:`wpctrl.train.TrainConfig`
 refuses a field that cannot work before anything is built (naming the field, what it expects and what it got),
-importing ``wpctrl.train`` loads neither torch nor rsl-rl, the evaluation and export modules import no rsl-rl and no
-trainer, and an option a command or mode does not use is refused, naming it and why."""
+importing ``wpctrl.train`` loads neither torch nor rsl-rl, the evaluation and export modules import no rsl-rl, no
+tensordict and no trainer, and an option a command or mode does not use is refused, naming it and why."""
 
 from __future__ import annotations
 
@@ -28,9 +28,11 @@ def test_importing_the_train_package_loads_neither_torch_nor_rsl_rl():
 def test_evaluation_and_export_modules_import_neither_rsl_rl_nor_the_trainer():
     code = (
         "import sys\n"
-        "for name in ('rsl_rl', 'wpctrl.train.trainer', 'wpctrl.train.task_ppo', 'wpctrl.train.task_env'):\n"
+        "blocked = ('rsl_rl', 'tensordict', 'wpctrl.train.trainer', 'wpctrl.train.task_ppo', 'wpctrl.train.task_env')\n"
+        "for name in blocked:\n"
         "    sys.modules[name] = None\n"
-        "import wpctrl.train.evaluate, wpctrl.train.export, wpctrl.train.policy_eval, wpctrl.train.commands\n"
+        "import wpctrl.train.evaluate, wpctrl.train.export, wpctrl.train.actor, wpctrl.train.policy_eval\n"
+        "import wpctrl.train.commands\n"
         "print('ok')\n"
     )
     done = _python(code)
@@ -119,6 +121,26 @@ def test_evaluate_on_maniskill_refuses_the_newton_only_options(option, tmp_path,
     assert main(["evaluate", "--policy", str(policy), "--sim", "maniskill", *option]) == 2
     err = capsys.readouterr().err.splitlines()[-1]
     assert err.startswith(f"wpctrl evaluate: error: {option[0]}: not used with --sim maniskill (ManiSkill runs"), err
+
+
+def test_evaluate_on_maniskill_refuses_a_video(tmp_path, capsys):
+    """Only ``--sim newton`` is filmed: ``--video`` with ``--sim maniskill`` is refused, not skipped after the run."""
+    from wpctrl.__main__ import main
+
+    policy = tmp_path / "policy.ts"
+    policy.write_text("not read: the option is refused first")
+    assert main(["evaluate", "--policy", str(policy), "--sim", "maniskill", "--video", str(tmp_path / "e.mp4")]) == 2
+    err = capsys.readouterr().err.splitlines()[-1]
+    assert err.startswith("wpctrl evaluate: error: --video: only --sim newton is recorded"), err
+    assert not (tmp_path / "e.mp4").exists()
+
+
+def test_evaluate_from_python_refuses_a_video_of_maniskill(tmp_path):
+    pytest.importorskip("torch", reason="torch is not installed")
+    from wpctrl.train.evaluate import evaluate
+
+    with pytest.raises(ValueError, match="video: only sim='newton' is recorded, got sim='maniskill'"):
+        evaluate(tmp_path / "policy.ts", sim="maniskill", video=tmp_path / "e.mp4")
 
 
 def test_the_top_level_command_line_refuses_an_unknown_command(capsys):

@@ -35,10 +35,12 @@ SIMS = ("maniskill", "newton")
 """``wpctrl evaluate --sim``'s simulators."""
 
 MANISKILL_UNUSED = ("device", "envs", "substeps")
-"""``wpctrl evaluate --sim maniskill``: the options only ``--sim newton`` uses."""
+"""``wpctrl evaluate --sim maniskill``: the options of the Newton env only ``--sim newton`` builds."""
+MANISKILL_UNRECORDED = ("video",)
+"""``wpctrl evaluate --sim maniskill``: the video, which only ``--sim newton`` records."""
 
 TRAIN_EXTRA = ("torch", "rsl_rl")
-"""What ``wpctrl train`` and ``wpctrl export`` import (``evaluate`` needs torch alone)."""
+"""What ``wpctrl train`` imports (``export`` and ``evaluate`` need torch alone)."""
 
 
 def missing_train_extra(command: str, modules: tuple[str, ...] = TRAIN_EXTRA, load: bool = True) -> str | None:
@@ -145,11 +147,14 @@ def refuse(command: str, message: str):
 
 def check_evaluate_args(p: argparse.ArgumentParser, args, argv) -> None:
     """``wpctrl evaluate``'s arguments (parsed from ``argv``), checked without torch, Warp or ManiSkill: exits 2 with
-    one line for the first that cannot work (an option ``--sim maniskill`` does not use, the policy file, the
-    numbers, a device this machine cannot have; Warp confirms the device later)."""
+    one line for the first that cannot work (an option ``--sim maniskill`` does not use, ``--video`` included, the
+    policy file, the numbers, a device this machine cannot have; Warp confirms the device later)."""
     if args.sim == "maniskill":
-        refuse_unused(p, given_flags(p, argv), MANISKILL_UNUSED, "not used with --sim maniskill (ManiSkill runs one "
-                      "env at a time on its own CPU PhysX)")  # fmt: skip
+        given = given_flags(p, argv)
+        refuse_unused(p, given, MANISKILL_UNUSED, "not used with --sim maniskill (ManiSkill runs one env at a time "
+                      "on its own CPU PhysX)")  # fmt: skip
+        refuse_unused(p, given, MANISKILL_UNRECORDED, "only --sim newton is recorded (MuJoCo's renderer draws the "
+                      "model Newton's solver built; ManiSkill's env here renders nothing)")  # fmt: skip
     for name in ("episodes", "envs", "substeps"):
         v = getattr(args, name)
         if v is not None and v < 1:

@@ -32,17 +32,17 @@ __all__ = [
 
 
 def export_main(argv=None) -> int:
-    """``wpctrl export``: the arguments parsed (``--help`` included), the extra and the run folder checked before
-    torch loads."""
+    """``wpctrl export``: the arguments parsed (``--help`` included), torch and the run folder checked before torch
+    loads. Export rebuilds the actor in plain torch (:mod:`.actor`): it needs no rsl-rl."""
     argv = list(sys.argv[1:] if argv is None else argv)
     args = export_parser().parse_args(argv)
-    if hint := missing_train_extra("export", load=False):
+    if hint := missing_train_extra("export", ("torch",), load=False):
         print(hint, file=sys.stderr)
         return 2
     if why := check_export_args(args):
         print(f"wpctrl export: error: {why}", file=sys.stderr)
         return 2
-    if hint := missing_train_extra("export"):  # installed but broken: the import's own error
+    if hint := missing_train_extra("export", ("torch",)):  # installed but broken: the import's own error
         print(hint, file=sys.stderr)
         return 2
     from .export import main

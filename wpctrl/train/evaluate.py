@@ -142,17 +142,18 @@ def evaluate(policy, sim: str = "newton", episodes: int = 100, seed: int = 0, ta
     """The exported policy in file ``policy`` on ``episodes`` fresh episodes of ``sim`` (``"newton"``: wpctrl's
     task env on ``device``, ``envs`` at a time (default: min(episodes, 256)), ``substeps`` defaulting to the
     policy's training value; ``"maniskill"``: the real ManiSkill, one env on its CPU PhysX); what ``wpctrl
-    evaluate`` reports. ``video``: also film env 0's first episodes into this file (Newton only). Raises
-    :class:`PolicyError` for a policy that cannot drive ``task``."""
+    evaluate`` reports. ``video``: also film env 0's first episodes into this file (Newton only: a ValueError with
+    ``sim="maniskill"``). Raises :class:`PolicyError` for a policy that cannot drive ``task``."""
     from .. import console
+
+    if video and sim != "newton":
+        raise ValueError(f"video: only sim='newton' is recorded, got sim={sim!r}")
 
     device = device if sim == "newton" else "cpu"
     model, meta = load_policy(policy, task, device)
     task, control_mode = meta["task"], meta.get("control_mode", "pd_joint_delta_pos")
     if not str(device).startswith("cuda"):
         torch.set_num_threads(1)  # a small network: see wpctrl.train.task_ppo
-    if video:
-        from .video import open_recorder
     if sim == "maniskill":
         bar = console.progress(episodes, f"{task} on ManiSkill", "episode", progress)
 
@@ -162,13 +163,12 @@ def evaluate(policy, sim: str = "newton", episodes: int = 100, seed: int = 0, ta
                 ok = sum(r["success_once"] for r in records)
                 print(f"  {i:4d} episodes: {ok} successful", flush=True)
 
-        if video:
-            open_recorder(None, video, sim=sim)  # says why it is skipped
         result = evaluate_maniskill(model, task, control_mode, episodes, seed, report)
     else:
         import wpctrl.tasks as T
 
         from .policy_eval import evaluate_policy
+        from .video import open_recorder
 
         substeps = substeps or meta.get("substeps")
         physics = T.TaskPhysics(substeps=substeps) if substeps else T.TaskPhysics()

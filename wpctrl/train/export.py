@@ -3,7 +3,8 @@ module (``policy.ts``) and, where the ``onnx`` package is importable, an ONNX mo
 
 Both map ManiSkill's flattened ``obs_mode="state"`` observation ``(batch, obs_dim)`` (float32) to the deterministic
 action ``(batch, num_actions)`` (the Gaussian's mean; ManiSkill's controllers clip it to the action space): rsl-rl's
-running observation normaliser, then the actor's MLP. ``policy.ts`` loads with torch alone
+running observation normaliser, then the actor's MLP, both rebuilt from the checkpoint in plain torch
+(:mod:`.actor`), so that exporting needs torch alone, not rsl-rl. ``policy.ts`` loads with torch alone
 (``torch.jit.load``); its extra file (``EXTRA_FILE``) (and ``policy.json`` beside it, and the ONNX model's metadata)
 name the task, control mode, observation layout and action bounds.
 """
@@ -20,16 +21,13 @@ from pathlib import Path
 
 import torch
 
+from .actor import ExportError, PolicyActor, build_actor
 from .command_args import export_parser
 
-__all__ = ["EXTRA_FILE", "TaskPolicy", "export", "load_actor", "main"]
+__all__ = ["EXTRA_FILE", "ExportError", "TaskPolicy", "export", "load_actor", "main"]
 
 EXTRA_FILE = "wpctrl.json"
 """The TorchScript extra file holding the policy's metadata (``torch.jit.load(path, _extra_files=...)``)."""
-
-
-class ExportError(ValueError):
-    """A run folder or checkpoint that cannot be exported (the message names what and why)."""
 
 
 class TaskPolicy(torch.nn.Module):
@@ -53,11 +51,9 @@ class TaskPolicy(torch.nn.Module):
         return self.actor(obs)
 
 
-def load_actor(checkpoint: Path):
-    """The rsl-rl actor (``MLPModel``) of a ManiSkill-task checkpoint and its metadata (``policy.pt``'s ``infos``)."""
-    from rsl_rl.models import MLPModel
-    from tensordict import TensorDict
-
+def load_actor(checkpoint: Path) -> tuple[PolicyActor, dict]:
+    """The deterministic actor of a ManiSkill-task checkpoint (:func:`.actor.build_actor`: plain torch, no rsl-rl)
+    and its metadata (``policy.pt``'s ``infos``)."""
     try:
         data = torch.load(checkpoint, map_location="cpu", weights_only=False)
     except Exception as e:  # noqa: BLE001  (torch raises several kinds for a file that is not a checkpoint)
@@ -66,16 +62,8 @@ def load_actor(checkpoint: Path):
     if not isinstance(infos, dict) or infos.get("format") != "wpctrl-task-policy-1":
         raise ExportError(f"{checkpoint}: not a checkpoint of a ManiSkill-task run (no task record in its infos; "
                           "export takes runs of `wpctrl train --task PushCube-v1 | PickCube-v1`)")  # fmt: skip
-    cfg = dict(infos["actor"])
-    cfg.pop("class_name", None)
-    obs = TensorDict({"policy": torch.zeros(1, int(infos["obs_dim"]))}, batch_size=[1])
-    actor = MLPModel(obs, {"actor": ["policy"]}, "actor", int(infos["num_actions"]), **cfg)
-    try:
-        actor.load_state_dict(data["actor_state_dict"])
-    except RuntimeError as e:
-        raise ExportError(f"{checkpoint}: the actor's weights do not fit its recorded observation / action sizes "
-                          f"({infos['obs_dim']} / {infos['num_actions']}): {e}") from e  # fmt: skip
-    actor.eval()
+    actor = build_actor(infos.get("actor"), int(infos["obs_dim"]), int(infos["num_actions"]),
+                        data.get("actor_state_dict"), checkpoint)  # fmt: skip
     return actor, infos
 
 
@@ -91,7 +79,7 @@ def _metadata(infos: dict) -> dict:
 
 def export(run_dir, out_dir=None, onnx: bool = True) -> dict:
     """Write ``policy.ts`` (and ``policy.onnx``) and ``policy.json`` for the run in ``run_dir``; returns the paths
-    and the largest difference between the exported modules' actions and the rsl-rl actor's on 1,000 observations
+    and the largest difference between the exported modules' actions and the actor's on 1,000 observations
     drawn around the normaliser's statistics."""
     run = Path(run_dir)
     if not run.is_dir():
@@ -103,7 +91,7 @@ def export(run_dir, out_dir=None, onnx: bool = True) -> dict:
     out = Path(out_dir) if out_dir else run
     out.mkdir(parents=True, exist_ok=True)
     meta = _metadata(infos)
-    module = TaskPolicy(actor.as_jit(), infos["task"], infos["control_mode"], int(infos["obs_dim"]),
+    module = TaskPolicy(actor, infos["task"], infos["control_mode"], int(infos["obs_dim"]),
                         int(infos["num_actions"]))  # fmt: skip
     scripted = torch.jit.script(module.eval())
     ts_path = out / "policy.ts"
@@ -111,7 +99,7 @@ def export(run_dir, out_dir=None, onnx: bool = True) -> dict:
     (out / "policy.json").write_text(json.dumps(meta, indent=1))
     obs = _probe_observations(actor, 1000)
     with torch.inference_mode():
-        reference = actor(_td(obs))
+        reference = actor(obs)
         loaded = torch.jit.load(str(ts_path))
         result = {"policy.ts": str(ts_path), "policy.json": str(out / "policy.json"),
                   "ts_max_abs_diff": float((loaded(obs) - reference).abs().max())}  # fmt: skip
@@ -120,22 +108,14 @@ def export(run_dir, out_dir=None, onnx: bool = True) -> dict:
     return result
 
 
-def _td(obs):
-    from tensordict import TensorDict
-
-    return TensorDict({"policy": obs}, batch_size=[obs.shape[0]])
-
-
-def _probe_observations(actor, n: int) -> torch.Tensor:
+def _probe_observations(actor: PolicyActor, n: int) -> torch.Tensor:
     """Observations spread as the training data were (the normaliser's mean and std), seeded."""
     g = torch.Generator().manual_seed(0)
-    norm = actor.obs_normalizer
-    mean = norm.mean if hasattr(norm, "mean") else torch.zeros(actor.obs_dim)
-    std = norm.std if hasattr(norm, "std") else torch.ones(actor.obs_dim)
+    mean, std = actor.observation_statistics()
     return mean + 2.0 * std * torch.randn(n, actor.obs_dim, generator=g)
 
 
-def _export_onnx(actor, meta: dict, path: Path, obs, reference) -> dict:
+def _export_onnx(actor: PolicyActor, meta: dict, path: Path, obs, reference) -> dict:
     """ONNX (opset 18, dynamic batch) with the metadata as model properties; checked with ONNX's own reference
     evaluator against the actor."""
     try:
@@ -143,7 +123,7 @@ def _export_onnx(actor, meta: dict, path: Path, obs, reference) -> dict:
         from onnx.reference import ReferenceEvaluator
     except ImportError:
         return {"onnx": "skipped: the onnx package is not importable (pip install onnx onnxscript)"}
-    model = actor.as_onnx(verbose=False).eval()
+    model = actor.eval()
     example = (torch.zeros(1, int(meta["obs_dim"])),)
     with warnings.catch_warnings(), contextlib.redirect_stdout(io.StringIO()):
         warnings.simplefilter("ignore")
@@ -207,8 +187,8 @@ def main(argv=None) -> int:
     except (ExportError, ImportError) as e:
         print(f"wpctrl export: error: {e}", file=sys.stderr)
         return 2
-    print(f"wrote {result['policy.ts']} (TorchScript; actions within {result['ts_max_abs_diff']:.1e} of the rsl-rl "
-          f"actor's on 1,000 observations)")  # fmt: skip
+    print(f"wrote {result['policy.ts']} (TorchScript; actions within {result['ts_max_abs_diff']:.1e} of the "
+          f"checkpoint's actor on 1,000 observations)")  # fmt: skip
     if "policy.onnx" in result:
         print(f"wrote {result['policy.onnx']} (ONNX; within {result['onnx_max_abs_diff']:.1e}, ONNX's reference "
               "evaluator)")  # fmt: skip

@@ -49,8 +49,8 @@ def _random_state(env, rng, n=N) -> dict:
     yaw = rng.uniform(0, 2 * np.pi, n)
     cube = np.column_stack([rng.uniform(-0.15, 0.15, (n, 2)), np.full(n, 0.02), np.cos(yaw / 2), np.zeros((n, 2)),
                             np.sin(yaw / 2), rng.normal(0, 0.05, (n, 6))])  # fmt: skip
-    goal = np.column_stack([rng.uniform(-0.1, 0.1, (n, 2)), rng.uniform(0.0, 0.3, n), np.tile(spec.goal_quat, (n, 1)),
-                            np.zeros((n, 6))])  # fmt: skip
+    goal = np.column_stack([rng.uniform(-0.1, 0.1, (n, 2)), rng.uniform(0.0, 0.3, n),
+                            np.tile(spec.markers[0].quat, (n, 1)), np.zeros((n, 6))])  # fmt: skip
     state = env.get_state_dict()
     state["actors"]["cube"] = torch.tensor(cube, dtype=torch.float32)
     state["actors"][spec.goal_name] = torch.tensor(goal, dtype=torch.float32)
@@ -358,12 +358,12 @@ def _bad_states(env):
 def test_bad_state_dicts_are_refused_and_nothing_is_written(push_env):
     push_env.reset(seed=2)
     before_q = push_env.state.joint_q.numpy().copy()
-    before_goal = push_env.goal_pos.numpy().copy()
+    before_goal = push_env.marker_pos.numpy().copy()
     for state, match in _bad_states(push_env):
         with pytest.raises(wpctrl.ConfigError, match=match):
             push_env.set_state_dict(state)
         np.testing.assert_array_equal(push_env.state.joint_q.numpy(), before_q)
-        np.testing.assert_array_equal(push_env.goal_pos.numpy(), before_goal)
+        np.testing.assert_array_equal(push_env.marker_pos.numpy(), before_goal)
     with pytest.raises(wpctrl.ConfigError, match="env_idx"):
         push_env.set_state_dict(push_env.get_state_dict(), env_idx=[0, N])
 

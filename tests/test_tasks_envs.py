@@ -3,7 +3,9 @@ env against ManiSkill's distributions), a partial ``set_state_dict`` leaves the 
 state, drive targets, observation and step count, and their next step against a twin env never touched), the final
 info of an episode ended by success inside an auto-resetting step, and the edges of the tasks' ranges (every arm
 joint of PickCube's "robot static" at the threshold, the grasp cone's angle and force limit, the goal radii) against
-numpy re-derivations of ManiSkill's definitions (tests/reference_tasks.py)."""
+numpy re-derivations of ManiSkill's definitions (tests/reference_tasks.py); a task declared outside the package
+(two bodies, a capsule, a marker) built from its declaration, and what a task refuses (unknown ids, another task's
+state dict)."""
 
 from __future__ import annotations
 
@@ -18,8 +20,10 @@ scipy_stats = pytest.importorskip("scipy.stats")
 import reference_tasks as R  # noqa: E402
 import warp as wp  # noqa: E402
 
+import wpctrl  # noqa: E402
 import wpctrl.tasks as T  # noqa: E402
-from wpctrl.tasks.definitions import PANDA_REST_QPOS  # noqa: E402
+from wpctrl.tasks import funcs as F  # noqa: E402
+from wpctrl.tasks.definitions import PANDA_REST_QPOS, Actor, Box, Capsule, Marker, ObsField  # noqa: E402
 
 N = 4
 FAST = T.TaskPhysics(substeps=2)
@@ -282,3 +286,135 @@ def test_goal_radius_and_height_edges(task, push_env, pick_env):
         ref = R.pick_evaluate(parts["cube_p"], parts["goal_p"], parts["qvel"], np.zeros(N, bool))["success"]
     assert ref.tolist() == [True, False, True, False]
     assert got.tolist() == ref.tolist()
+
+
+# -- a task declared outside the package ------------------------------------------------------------------------------
+
+BLOCK_HALF = (0.02, 0.03, 0.01)
+BLOCK_HALF_Z = BLOCK_HALF[2]
+PEG_RADIUS, PEG_HALF_LENGTH = 0.01, 0.04
+
+
+@wp.func
+def _blocks_initialize(s: F.Sim, e: int, rng: wp.uint32):
+    x = (wp.randf(rng) * 2.0 - 1.0) * 0.05
+    F.set_actor_pose(s, e, 0, wp.vec3(x, 0.1, BLOCK_HALF_Z), wp.quat_identity())
+    F.set_actor_pose(s, e, 1, wp.vec3(0.0, -0.1, PEG_RADIUS), F.yaw_quat(wp.randf(rng) * 2.0 * wp.pi))
+    F.set_marker_pos(s, e, 0, wp.vec3(x, 0.0, 0.1))
+
+
+@wp.func
+def _blocks_evaluate(s: F.Sim, e: int):
+    s.info[e, 0] = F.actor_pos(s, e, 0)[2] > 0.05
+    s.info[e, 1] = F.actor_pos(s, e, 1)[2] < PEG_RADIUS + 1.0e-3
+
+
+@wp.func
+def _blocks_reward(s: F.Sim, e: int) -> float:
+    return -wp.length(F.actor_pos(s, e, 1) - F.tcp_pos(s, e))
+
+
+@wp.func
+def _blocks_box_pose(s: F.Sim, e: int) -> F.vec7:
+    return F.actor_pose7(s, e, 0)
+
+
+@wp.func
+def _blocks_peg_pos(s: F.Sim, e: int) -> wp.vec3:
+    return F.actor_pos(s, e, 1)
+
+
+@wp.func
+def _blocks_goal_pos(s: F.Sim, e: int) -> wp.vec3:
+    return F.marker_pos(s, e, 0)
+
+
+class _Blocks(T.Task):
+    """Two free bodies (a box and a capsule lying along x), one goal marker, a flag besides success."""
+
+    actors = (Actor("box", (Box(BLOCK_HALF),), build_height=BLOCK_HALF[2]),
+              Actor("peg", (Capsule(PEG_RADIUS, PEG_HALF_LENGTH),), build_height=PEG_RADIUS),
+              Marker("goal"))  # fmt: skip
+    contact_actors = ("peg",)
+    obs_extra = (ObsField("extra", "box_pose", 7, _blocks_box_pose), ObsField("extra", "peg_pos", 3, _blocks_peg_pos),
+                 ObsField("extra", "goal_pos", 3, _blocks_goal_pos))  # fmt: skip
+    info_keys = ("peg_on_table",)
+    max_reward = 1.0
+    initialize = _blocks_initialize
+    evaluate = _blocks_evaluate
+    dense_reward = _blocks_reward
+
+
+def test_a_task_declared_outside_the_package_builds_from_its_declaration(monkeypatch):
+    """A third task, registered from here: a box and a capsule (two free bodies), a goal marker, three observation
+    fields, a flag besides success. The state dict lists its actors in the declared order, the observation packs its
+    fields in the declared order (each equal to the state it reports), every env draws its own episode, the bodies
+    weigh what their shapes and density give, the capsule lies along x (it rests at its radius), and a state dict of
+    PushCube is refused naming the actor it lacks. The registry forgets the task afterwards."""
+    from wpctrl.tasks import registry
+
+    built_in = dict(T.TASKS)  # the built-in modules imported before the registry is patched
+    monkeypatch.setattr(registry, "_REGISTERED", built_in)
+    T.register_task("Blocks-test", max_episode_steps=10)(_Blocks)
+    assert "Blocks-test" in T.TASKS and T.get_task("Blocks-test").obs_dim == 18 + 13
+    env = T.make("Blocks-test", num_envs=3, physics=FAST, auto_reset=False)
+    obs, info = env.reset(seed=5)
+    assert sorted(info) == ["elapsed_steps", "fail", "peg_on_table", "success"]
+    for _ in range(3):
+        obs, *_ = env.step(torch.zeros(3, env.single_action_space.shape[0]))
+    state = env.get_state_dict()
+    assert list(state["actors"]) == ["table-workspace", "box", "peg", "goal"]
+    s = env.task_spec.obs_slices()["extra"]
+    np.testing.assert_array_equal(obs[:, s["box_pose"]].numpy(), state["actors"]["box"][:, :7].numpy())
+    np.testing.assert_array_equal(obs[:, s["peg_pos"]].numpy(), state["actors"]["peg"][:, :3].numpy())
+    np.testing.assert_array_equal(obs[:, s["goal_pos"]].numpy(), state["actors"]["goal"][:, :3].numpy())
+    assert len(set(state["actors"]["box"][:, 0].tolist())) == 3  # each env its own draw
+    np.testing.assert_allclose(state["actors"]["peg"][:, 2].numpy(), PEG_RADIUS, atol=5e-4)  # lying along x
+    np.testing.assert_allclose(state["actors"]["box"][:, 2].numpy(), BLOCK_HALF[2], atol=5e-4)
+    assert env.evaluate()["peg_on_table"].tolist() == [True] * 3
+    mass = env.model.body_mass.numpy()
+    box_mass = 1000.0 * 8 * np.prod(BLOCK_HALF)
+    peg_mass = 1000.0 * math.pi * PEG_RADIUS**2 * (2 * PEG_HALF_LENGTH + 4 / 3 * PEG_RADIUS)
+    assert mass[env.scene.actor_body0["box"]] == pytest.approx(box_mass, rel=1e-5)
+    assert mass[env.scene.actor_body0["peg"]] == pytest.approx(peg_mass, rel=1e-5)
+    push = T.make("PushCube-v1", num_envs=3, physics=FAST, graph=False)
+    with pytest.raises(wpctrl.ConfigError, match=r"state\['actors'\]\['cube'\] is not part of Blocks-test"):
+        env.set_state_dict(push.get_state_dict())
+    monkeypatch.undo()
+    assert "Blocks-test" not in T.TASKS
+
+
+def test_unknown_task_ids_and_another_tasks_state_dict_are_refused_naming_them(push_env, pick_env):
+    """An unknown task id lists the known ones (make, get_task, TASKS); PushCube's state dict on PickCube and back is
+    refused naming the actor the other task has, before anything is written."""
+    for call in (lambda: T.make("StackCube-v1"), lambda: T.get_task("StackCube-v1")):
+        with pytest.raises(wpctrl.ConfigError, match=r"'StackCube-v1'.*\['PickCube-v1', 'PushCube-v1'\]"):
+            call()
+    with pytest.raises(KeyError, match="PickCube-v1"):
+        T.TASKS["StackCube-v1"]
+    before = pick_env.get_state_dict()
+    with pytest.raises(wpctrl.ConfigError, match=r"state\['actors'\]\['goal_region'\] is not part of PickCube-v1"):
+        pick_env.set_state_dict(push_env.get_state_dict())
+    for name, v in pick_env.get_state_dict()["actors"].items():
+        torch.testing.assert_close(v, before["actors"][name], rtol=0, atol=0)
+    with pytest.raises(wpctrl.ConfigError, match=r"state\['actors'\]\['goal_site'\] is not part of PushCube-v1"):
+        push_env.set_state_dict(pick_env.get_state_dict())
+    missing = push_env.get_state_dict()
+    del missing["actors"]["goal_region"]
+    with pytest.raises(wpctrl.ConfigError, match=r"no 'goal_region' entry, which PushCube-v1 needs"):
+        push_env.set_state_dict(missing)
+
+
+@pytest.mark.parametrize("name", ["PushCube-v1__pd_ee_delta_pos.json", "PickCube-v1__pd_ee_delta_pos.json"])
+def test_the_observation_layout_generated_from_the_declared_fields_is_maniskills(name):
+    """The flattened observation's fields, generated from each task module's declaration, against the layout
+    ManiSkill's recordings carry (names, order, widths)."""
+    import json
+    from pathlib import Path
+
+    header = json.loads((Path(__file__).parent / "data" / "tasks" / name).read_text())["header"]
+    task = T.TASKS[header["task"]]
+    ours = [(f"{g}/{n}", s.start, s.stop) for g, fields in task.obs_slices().items() for n, s in fields.items()]
+    theirs = [(f["name"], f["start"], f["stop"]) for f in header["obs_layout"]["fields"]]
+    assert ours == theirs and task.obs_dim == header["obs_layout"]["dim"]
+    assert [f.boolean for f in task.obs_fields] == [f["dtype"] == "bool" for f in header["obs_layout"]["fields"]]

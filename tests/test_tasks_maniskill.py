@@ -12,6 +12,7 @@ settled, see the replay results in docs/tasks.md).
 
 from __future__ import annotations
 
+import inspect
 import math
 
 import numpy as np
@@ -24,7 +25,8 @@ pytestmark = pytest.mark.slow  # the real ManiSkill side by side: `-m slow` (CI 
 from maniskill_tasks_side import make_maniskill, record_episode, replay_shifted  # noqa: E402
 
 import wpctrl.tasks as T  # noqa: E402
-from wpctrl.tasks.definitions import PANDA_REST_QPOS, PANDA_ROOT_POSE, PICK_CUBE, PUSH_CUBE, TABLE  # noqa: E402
+from wpctrl.tasks.definitions import PANDA_REST_QPOS, PANDA_ROOT_POSE, TABLE  # noqa: E402
+from wpctrl.tasks.funcs import GRASP_MAX_ANGLE, GRASP_MIN_FORCE  # noqa: E402
 from wpctrl.tasks.scene import PANDA_FINGER_MATERIAL  # noqa: E402
 from wpctrl.tasks.scripted import policy_for  # noqa: E402
 
@@ -41,21 +43,33 @@ def pair(request):
 
 
 def test_definitions_are_maniskills():
-    """Every constant of wpctrl.tasks.definitions against ManiSkill's classes and a live env's PhysX objects."""
+    """Every constant of wpctrl.tasks.definitions and of the task modules against ManiSkill's classes and a live env's
+    PhysX objects."""
     import gymnasium as gym
     from mani_skill.agents.robots.panda.panda import Panda
     from mani_skill.envs.tasks.tabletop.pick_cube_cfgs import PICK_CUBE_CONFIGS
     from mani_skill.envs.tasks.tabletop.push_cube import PushCubeEnv
 
+    from wpctrl.tasks import pick_cube, push_cube
+
+    PICK_CUBE, PUSH_CUBE = T.PICK_CUBE, T.PUSH_CUBE
     cfg = PICK_CUBE_CONFIGS["panda"]
-    assert (PICK_CUBE.cube_half_size, PICK_CUBE.goal_radius, PICK_CUBE.cube_spawn_half_size,
+    assert (PICK_CUBE.cube_half_size, PICK_CUBE.goal_thresh, PICK_CUBE.cube_spawn_half_size,
             PICK_CUBE.max_goal_height) == (cfg["cube_half_size"], cfg["goal_thresh"], cfg["cube_spawn_half_size"],
                                            cfg["max_goal_height"])  # fmt: skip
     assert cfg["cube_spawn_center"] == (0, 0)
     assert (PUSH_CUBE.goal_radius, PUSH_CUBE.cube_half_size) == (PushCubeEnv.goal_radius, PushCubeEnv.cube_half_size)
-    assert PUSH_CUBE.push_goal_offset == pytest.approx(0.1 + PushCubeEnv.goal_radius)
+    assert push_cube.GOAL_OFFSET == pytest.approx(0.1 + PushCubeEnv.goal_radius)
+    from mani_skill.envs.tasks.tabletop.pick_cube import PickCubeEnv
+
+    assert f"is_static({pick_cube.STATIC_THRESHOLD})" in inspect.getsource(PickCubeEnv.evaluate)
+    push_init = inspect.getsource(PushCubeEnv._initialize_episode)
+    assert f"torch.rand((b, 2)) * {2 * push_cube.SPAWN_HALF} - {push_cube.SPAWN_HALF}" in push_init
+    assert f"target_region_xyz[..., 2] = {push_cube.GOAL_Z:.0e}".replace("e-03", "e-3") in push_init
     for spec in (PUSH_CUBE, PICK_CUBE):
         assert gym.spec(spec.env_id).max_episode_steps == spec.max_episode_steps
+    is_grasping = inspect.signature(Panda.is_grasping).parameters
+    assert (is_grasping["min_force"].default, is_grasping["max_angle"].default) == (GRASP_MIN_FORCE, GRASP_MAX_ANGLE)
     mat = Panda.urdf_config["_materials"]["gripper"]
     assert {k: mat[k] for k in PANDA_FINGER_MATERIAL} == PANDA_FINGER_MATERIAL
     assert {link for link, c in Panda.urdf_config["link"].items() if c.get("material") == "gripper"} == {
@@ -79,9 +93,10 @@ def test_definitions_are_maniskills():
     assert box.physical_material.static_friction == pytest.approx(TABLE.static_friction)
     cube = base.cube._objs[0].find_component_by_type(sapien.physx.PhysxRigidDynamicComponent)
     newton_env = T.make("PickCube-v1", num_envs=1)
-    assert float(newton_env.model.body_mass.numpy()[newton_env.scene.cube_body0]) == pytest.approx(cube.mass, rel=1e-6)
+    cube_body = newton_env.scene.actor_body0["cube"]
+    assert float(newton_env.model.body_mass.numpy()[cube_body]) == pytest.approx(cube.mass, rel=1e-6)
     (cube_box,) = cube.collision_shapes
-    np.testing.assert_allclose(cube_box.half_size, [PICK_CUBE.cube_half_size] * 3, atol=1e-7)
+    np.testing.assert_allclose(cube_box.half_size, [T.PICK_CUBE.cube_half_size] * 3, atol=1e-7)
     assert cube_box.physical_material.static_friction == pytest.approx(TABLE.static_friction)
     ground = base.table_scene.ground._objs[0]
     (plane,) = ground.find_component_by_type(sapien.physx.PhysxRigidBaseComponent).collision_shapes
@@ -104,7 +119,7 @@ def _maniskill_states(ms, task: str, seeds=(0, 1, 2), steps=(0, 3, 9)):
 def test_same_state_gives_maniskills_obs_reward_and_evaluation(pair):
     task, ms, nw = pair
     base = ms.unwrapped
-    grasp_col = PICK_CUBE.obs_slices()["extra"]["is_grasped"].start if task == "PickCube-v1" else None
+    grasp_col = T.PICK_CUBE.obs_slices()["extra"]["is_grasped"].start if task == "PickCube-v1" else None
     for state in _maniskill_states(ms, task):
         base.set_state_dict(state)
         info = base.get_info()

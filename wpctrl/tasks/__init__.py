@@ -5,16 +5,23 @@ the same observations (``obs_mode="state"``: the flattened state vector, entries
 success and evaluation flags, control modes and action spaces, and ManiSkill's state dict, so a ManiSkill state,
 action sequence or policy moves across unchanged. ``replay`` runs ManiSkill's recorded episodes on it.
 
+A task is one module (``push_cube.py``, ``pick_cube.py``): a :class:`Task` subclass registered with
+:func:`register_task`, its scene, observation fields, evaluation and reward declared once (``docs/tasks.md``, "Adding
+a task"). :data:`TASKS` maps the ids to the tasks; ``PUSH_CUBE`` / ``PICK_CUBE`` are the two built-in ones.
+
 Needs the ``tasks`` extra (MuJoCo-Warp, Newton's mesh importer, torch) and ManiSkill's Panda asset (the ``maniskill``
 extra, or ``asset_dir`` / ``WPCTRL_MANISKILL_ASSETS``).
 """
 
 from __future__ import annotations
 
-from .definitions import PICK_CUBE, PUSH_CUBE, TASKS, TaskSpec
 from .factory import CONTROL_MODES, OBS_MODES, make
 from .physics import TaskPhysics
+from .registry import TASKS, Task, get_task, register_task
 from .replay import load_episodes, replay
+
+TaskSpec = Task
+"""The base class of the tasks (:class:`Task`), by its former name."""
 
 __all__ = [
     "CONTROL_MODES",
@@ -22,9 +29,21 @@ __all__ = [
     "PICK_CUBE",
     "PUSH_CUBE",
     "TASKS",
+    "Task",
     "TaskPhysics",
     "TaskSpec",
+    "get_task",
     "load_episodes",
     "make",
+    "register_task",
     "replay",
 ]
+
+_BUILT_IN = {"PUSH_CUBE": "PushCube-v1", "PICK_CUBE": "PickCube-v1"}
+
+
+def __getattr__(name: str):
+    """``PUSH_CUBE`` / ``PICK_CUBE``: the built-in tasks, their modules imported (with Warp) on first use."""
+    if name in _BUILT_IN:
+        return TASKS[_BUILT_IN[name]]
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -11,16 +11,16 @@ Warp replays it without Python's per-launch cost: ~30x faster than eager launche
 
 from __future__ import annotations
 
-import math
-
 import gymnasium as gym
 import newton
 import numpy as np
 import warp as wp
 
-from . import kernels as K
-from .definitions import PANDA_REST_QPOS, ROBOT_INIT_QPOS_NOISE, TaskSpec
+from .definitions import PANDA_REST_QPOS, ROBOT_INIT_QPOS_NOISE
+from .funcs import Sim
+from .kernels import episode_kernel, task_kernels
 from .physics import TaskPhysics
+from .registry import Task
 from .scene import build_scene
 from .state_dict import StateDictMixin
 
@@ -37,13 +37,14 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
 
     ``step(action)`` returns ``obs, reward, terminated, truncated, info`` as torch tensors on :attr:`device`:
     ``info`` holds ``success``, ``fail`` (always False: the tasks define no failure), ``elapsed_steps`` and the
-    task's evaluation flags, and, for the envs reset inside the step (``info["_final_info"]``), the observation and
-    info they ended with (``final_observation``, ``final_info``), as ``ManiSkillVectorEnv`` returns them.
+    task's evaluation flags (its ``info_keys``), and, for the envs reset inside the step (``info["_final_info"]``),
+    the observation and info they ended with (``final_observation``, ``final_info``), as ``ManiSkillVectorEnv``
+    returns them.
     """
 
     def __init__(
         self,
-        spec: TaskSpec,
+        task: Task,
         num_envs: int,
         device,
         control_mode: str,
@@ -62,7 +63,7 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
         import wpctrl
         from wpctrl.robots import panda_control_modes
 
-        self.task_spec = spec
+        self.task_spec = task
         self.physics = physics
         self.control_mode = control_mode
         self.obs_mode = obs_mode
@@ -70,7 +71,7 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
         self.auto_reset = bool(auto_reset)
         self.ignore_terminations = bool(ignore_terminations)
         self.controller_semantics = controller_semantics
-        self.max_episode_steps = spec.max_episode_steps
+        self.max_episode_steps = task.max_episode_steps
         self.sim_freq, self.control_freq = 100, 20
         self.num_envs = n = int(num_envs)
         self._torch = torch
@@ -81,7 +82,7 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
             torch.cuda.set_stream(self._torch_stream)
             wp.set_stream(wp.stream_from_torch(self._torch_stream), dev)
 
-        self.scene = sc = build_scene(spec, n, dev, physics, asset_dir)
+        self.scene = sc = build_scene(task, n, dev, physics, asset_dir)
         self.model = model = sc.model
         mode = panda_control_modes()[control_mode]
         if controller_semantics == "physx_cpu":  # SAPIEN's CLIK, as ManiSkill's EE controllers on its CPU sim
@@ -97,51 +98,24 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
         self._contacts = newton.CollisionPipeline(
             model, rigid_contact_max=self.solver.get_max_contact_count(), soft_contact_max=0
         ).contacts()
-        fingers = []
-        for e in range(n):
-            fingers += [b + e * sc.bodies_per_env for b in sc.finger_bodies0]
-        cubes = [sc.cube_body0 + e * sc.bodies_per_env for e in range(n)]
-        self._sensor = newton.sensors.SensorContact(
-            model, sensing_bodies=fingers, counterpart_bodies=cubes, measure_total=False,
-            request_contact_attributes=False,
-        )  # fmt: skip
-        self._observables = self.solver.observables(self._sensor.solver_observable_kinds, contacts=self._contacts)
-
-        self._layout = L = K.Layout()
-        L.nq, L.nqd, L.nb = sc.coords_per_env, sc.dofs_per_env, sc.bodies_per_env
-        L.robot_q0, L.robot_qd0 = sc.robot_coord0, sc.robot_dof0
-        L.cube_q0, L.cube_qd0 = sc.cube_coord0, sc.cube_dof0
-        L.cube_body0, L.tcp_body0 = sc.cube_body0, sc.tcp_body0
-        L.lfinger_body0, L.rfinger_body0 = sc.finger_bodies0
-        self._params = P = K.TaskParams()
-        P.kind = spec.kind
-        P.half_size = spec.cube_half_size
-        P.spawn_half = spec.cube_spawn_half_size
-        P.random_yaw = int(spec.random_cube_yaw)
-        P.goal_radius = spec.goal_radius
-        P.max_goal_height = spec.max_goal_height
-        P.push_goal_offset = spec.push_goal_offset
-        P.max_reward = spec.max_reward
-        P.static_threshold = spec.static_threshold
-        P.grasp_min_force = spec.grasp_min_force
-        P.grasp_cos_max_angle = math.cos(math.radians(spec.grasp_max_angle))
-        P.qpos_noise = ROBOT_INIT_QPOS_NOISE
-        P.goal_quat = wp.quat(*spec.goal_quat)
-
         z = lambda dtype, *shape: wp.zeros(shape if len(shape) > 1 else shape[0], dtype=dtype, device=dev)  # noqa: E731
-        self.obs_buf = z(wp.float32, n, spec.obs_dim)
-        self.final_obs_buf = z(wp.float32, n, spec.obs_dim)
+        finger_force = self._contact_sensor(task)
+        self.info_keys = ("success",) + tuple(task.info_keys)
+        """The columns of :attr:`info_buf`: ``evaluate()``'s keys, ``success`` first."""
+        m = max(len(task.markers), 1)
+        self.obs_buf = z(wp.float32, n, task.obs_dim)
+        self.final_obs_buf = z(wp.float32, n, task.obs_dim)
         self.action_buf = z(wp.float32, n, self.ctrl.action_dim)
-        self.goal_pos = z(wp.vec3, n)
-        self.goal_quat = wp.array(np.tile(np.asarray(spec.goal_quat, np.float32), (n, 1)), dtype=wp.float32,
-                                  device=dev)  # fmt: skip
+        self.marker_pos = z(wp.vec3, n, m)
+        quats = [mk.quat for mk in task.markers] + [(1.0, 0.0, 0.0, 0.0)] * (m - len(task.markers))
+        self.marker_quat = wp.array(np.tile(np.asarray(quats, np.float32), (n, 1, 1)), dtype=wp.vec4, device=dev)
         self.rest_qpos = wp.array(np.asarray(PANDA_REST_QPOS, np.float32), dtype=wp.float32, device=dev)
         self.seed_buf = wp.array([int(seed)], dtype=wp.int32, device=dev)
         self.reset_count = z(wp.int32, n)
         self.elapsed = z(wp.int32, n)
         self.final_elapsed = z(wp.int32, n)
-        self.flags = {k: z(wp.bool, n) for k in ("success", "is_grasped", "is_obj_placed", "is_robot_static")}
-        self.final_flags = {k: z(wp.bool, n) for k in self.flags}
+        self.info_buf = z(wp.bool, n, len(self.info_keys))
+        self.final_info_buf = z(wp.bool, n, len(self.info_keys))
         self.reward_dense = z(wp.float32, n)
         self.reward_buf = z(wp.float32, n)
         self.terminated = z(wp.bool, n)
@@ -150,11 +124,16 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
         self._all = wp.ones(n, dtype=wp.bool, device=dev)
         self._fail = torch.zeros(n, dtype=torch.bool, device=self.device)
         self._t = {name: wp.to_torch(a) for name, a in self._torch_views().items()}
+        for i, k in enumerate(self.info_keys):
+            self._t[k], self._t["final_" + k] = self._t["info"][:, i], self._t["final_info"][:, i]
+
+        self._sim = self._sim_struct(task, finger_force)
+        self._reset_kernel, self._observe_kernel = task_kernels(task)
 
         self.single_action_space = self.ctrl.single_action_space
         self.action_space = self.ctrl.action_space
-        self.single_observation_space = gym.spaces.Box(-np.inf, np.inf, (spec.obs_dim,), np.float32)
-        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (n, spec.obs_dim), np.float32)
+        self.single_observation_space = gym.spaces.Box(-np.inf, np.inf, (task.obs_dim,), np.float32)
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (n, task.obs_dim), np.float32)
         self.metadata = {"autoreset_mode": gym.vector.AutoresetMode.SAME_STEP}
 
         self._reset_envs(self._all)
@@ -171,41 +150,63 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
 
     # -- device work ------------------------------------------------------------------------------------------------
 
+    def _contact_sensor(self, task: Task) -> wp.array:
+        """Newton's contact sensor between every env's fingers and its task's ``contact_actors`` (none without them);
+        the (2 num_envs, actors) force matrix the device functions read."""
+        sc, n = self.scene, self.num_envs
+        self._sensor = self._observables = None
+        if not task.contact_actors:
+            return wp.zeros((2 * n, 1), dtype=wp.vec3, device=self.wp_device)
+        fingers = [b + e * sc.bodies_per_env for e in range(n) for b in sc.finger_bodies0]
+        touched = [sc.actor_body0[a] + e * sc.bodies_per_env for e in range(n) for a in task.contact_actors]
+        self._sensor = newton.sensors.SensorContact(
+            self.model, sensing_bodies=fingers, counterpart_bodies=touched, measure_total=False,
+            request_contact_attributes=False,
+        )  # fmt: skip
+        self._observables = self.solver.observables(self._sensor.solver_observable_kinds, contacts=self._contacts)
+        return self._sensor.force_matrix
+
+    def _sim_struct(self, task: Task, finger_force: wp.array) -> Sim:
+        """The :class:`~wpctrl.tasks.funcs.Sim` the kernels get: the scene's layout and the env's arrays (the same
+        arrays for the env's life: a captured graph binds them)."""
+        sc, S = self.scene, Sim()
+        S.nq, S.nqd, S.nb = sc.coords_per_env, sc.dofs_per_env, sc.bodies_per_env
+        S.robot_q0, S.robot_qd0, S.tcp_body0 = sc.robot_coord0, sc.robot_dof0, sc.tcp_body0
+        S.lfinger_body0, S.rfinger_body0 = sc.finger_bodies0
+        index = lambda where: wp.array([where[a.name] for a in task.bodies] or [0], dtype=wp.int32,  # noqa: E731
+                                       device=self.wp_device)  # fmt: skip
+        S.actor_q0, S.actor_qd0, S.actor_body0 = index(sc.actor_coord0), index(sc.actor_dof0), index(sc.actor_body0)
+        S.joint_q, S.joint_qd, S.body_q = self.state.joint_q, self.state.joint_qd, self.state.body_q
+        S.finger_force, S.marker_pos, S.marker_quat = finger_force, self.marker_pos, self.marker_quat
+        S.info = self.info_buf
+        return S
+
     def _torch_views(self) -> dict:
         v = {"obs": self.obs_buf, "final_obs": self.final_obs_buf, "action": self.action_buf, "reward": self.reward_buf,
              "terminated": self.terminated, "truncated": self.truncated, "elapsed": self.elapsed,
-             "final_elapsed": self.final_elapsed, "reset_count": self.reset_count}  # fmt: skip
-        v.update({k: a for k, a in self.flags.items()})
-        v.update({"final_" + k: a for k, a in self.final_flags.items()})
+             "final_elapsed": self.final_elapsed, "reset_count": self.reset_count, "info": self.info_buf,
+             "final_info": self.final_info_buf}  # fmt: skip
         return v
 
     def _observe(self) -> None:
         newton.eval_fk(self.model, self.state.joint_q, self.state.joint_qd, self.state)
-        f = self.flags
-        wp.launch(
-            K.observe_kernel,
-            dim=self.num_envs,
-            inputs=[self._layout, self._params, self.state.joint_q, self.state.joint_qd, self.state.body_q,
-                    self._sensor.force_matrix, self.goal_pos],
-            outputs=[self.obs_buf, f["success"], f["is_grasped"], f["is_obj_placed"], f["is_robot_static"],
-                     self.reward_dense],
-            device=self.wp_device,
-        )  # fmt: skip
+        wp.launch(self._observe_kernel, dim=self.num_envs, inputs=[self._sim],
+                  outputs=[self.obs_buf, self.reward_dense], device=self.wp_device)  # fmt: skip
 
     def _reset_envs(self, mask: wp.array) -> None:
         """Initialise the episodes of ``mask``'s envs (device draws), their controller targets and observations."""
         wp.launch(
-            K.reset_kernel,
+            self._reset_kernel,
             dim=self.num_envs,
-            inputs=[self._layout, self._params, self.seed_buf, mask, self.rest_qpos, self.reset_count],
-            outputs=[self.state.joint_q, self.state.joint_qd, self.goal_pos, self.elapsed],
+            inputs=[self._sim, self.seed_buf, mask, self.rest_qpos, ROBOT_INIT_QPOS_NOISE, self.reset_count],
+            outputs=[self.elapsed],
             device=self.wp_device,
         )
         self._after_state_write(mask)
 
     def _after_state_write(self, mask: wp.array) -> None:
         """The envs of ``mask`` hold a new state: no contact force yet, drive targets at their qpos, fresh obs."""
-        wp.launch(_zero_forces, dim=self.num_envs, inputs=[mask, self._sensor.force_matrix], device=self.wp_device)
+        wp.launch(_zero_forces, dim=self.num_envs, inputs=[mask, self._sim.finger_force], device=self.wp_device)
         newton.eval_fk(self.model, self.state.joint_q, self.state.joint_qd, self.state)
         self.ctrl.reset(self.state, mask, control=self.control)
         self._observe()
@@ -226,7 +227,8 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
                 src, dst = dst, src
         if src is not self.state:
             self.state.assign(src)  # the env's state is always self.state (a captured graph binds its arrays)
-        self._sensor.update(None, self._contacts, observables=self._observables)
+        if self._sensor is not None:
+            self._sensor.update(None, self._contacts, observables=self._observables)
 
     def _step_impl(self) -> None:
         self._simulate()
@@ -236,17 +238,16 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
         """Evaluation, observation, reward and episode bookkeeping of the step just simulated; the auto reset."""
         self._observe()
         wp.launch(
-            K.episode_kernel,
+            episode_kernel,
             dim=self.num_envs,
             inputs=[self.max_episode_steps, self.task_spec.max_reward, _REWARD_CODE[self.reward_mode],
-                    int(self.ignore_terminations), self.flags["success"], self.reward_dense],
+                    int(self.ignore_terminations), self.info_buf, self.reward_dense],
             outputs=[self.elapsed, self.reward_buf, self.terminated, self.truncated, self.done],
             device=self.wp_device,
         )  # fmt: skip
         wp.copy(self.final_obs_buf, self.obs_buf)
         wp.copy(self.final_elapsed, self.elapsed)
-        for k, a in self.flags.items():
-            wp.copy(self.final_flags[k], a)
+        wp.copy(self.final_info_buf, self.info_buf)
         if self.auto_reset:
             self._reset_envs(self.done)
 
@@ -288,8 +289,9 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
         out = {}
         for group, fields_ in self.task_spec.obs_slices().items():
             out[group] = {name: flat[:, s] for name, s in fields_.items()}
-        if self.task_spec.kind == K.PICK and "extra" in out:
-            out["extra"]["is_grasped"] = out["extra"]["is_grasped"][:, 0] > 0.5
+        for f in self.task_spec.obs_fields:
+            if f.boolean:
+                out[f.group][f.name] = out[f.group][f.name][:, 0] > 0.5
         return out
 
     def reset(self, *, seed=None, options: dict | None = None):

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 from ..config import ConfigError
-from .definitions import TASKS
 from .names import CONTROL_MODES, OBS_MODES
 from .physics import TaskPhysics
+from .registry import TASKS, unknown_task
 
 SIM_BACKENDS = ("mujoco",)
 CONTROLLER_SEMANTICS = ("physx_cpu", "physx_cuda")
@@ -33,7 +33,8 @@ def make(
     """A ManiSkill task on Newton (:class:`~wpctrl.tasks.env.TaskEnv`), ``num_envs`` copies on ``device``.
 
     Args:
-        env_id: ``"PushCube-v1"`` or ``"PickCube-v1"`` (the Panda).
+        env_id: A registered task's ManiSkill id (:data:`~wpctrl.tasks.TASKS`: ``"PushCube-v1"``, ``"PickCube-v1"``,
+            and any task registered with :func:`~wpctrl.tasks.register_task`); the Panda.
         num_envs: Parallel envs (separate Newton worlds).
         device: Warp device (``"cpu"``, ``"cuda:0"``); the torch tensors in and out live there. A device this machine
             does not have is refused (:class:`~wpctrl.config.ConfigError` listing those it has).
@@ -60,7 +61,7 @@ def make(
             ``wpctrl``'s command line with ``--verbose``.
     """
     if env_id not in TASKS:
-        raise ConfigError(f"make: unknown env_id {env_id!r}; expected one of {sorted(TASKS)}")
+        raise ConfigError(f"make: env_id: {unknown_task(env_id)}")
     if control_mode not in CONTROL_MODES:
         raise ConfigError(f"make: unknown control_mode {control_mode!r} for the Panda; expected one of "
                           f"{list(CONTROL_MODES)}")  # fmt: skip

@@ -5,9 +5,12 @@ tasks are built from (:data:`wpctrl.tasks.TASKS`, :func:`wpctrl.robots.panda_con
 
 from __future__ import annotations
 
-__all__ = ["CONTROL_MODES", "DEFAULT_CONTROL_MODE", "OBS_MODES", "TASK_IDS"]
+__all__ = ["CONTROL_MODES", "DEFAULT_CONTROL_MODE", "OBS_MODES", "TASK_IDS", "TASK_MODULES"]
 
-TASK_IDS: tuple[str, ...] = ("PushCube-v1", "PickCube-v1")
+TASK_MODULES: dict[str, str] = {"PushCube-v1": "push_cube", "PickCube-v1": "pick_cube"}
+"""The built-in tasks: ManiSkill env id -> its module under ``wpctrl/tasks/`` (imported when the task is first used)."""
+
+TASK_IDS: tuple[str, ...] = tuple(TASK_MODULES)
 """The ManiSkill tasks :func:`wpctrl.tasks.make` builds."""
 
 CONTROL_MODES: tuple[str, ...] = (

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ..config import ConfigError
+from . import maniskill_trajectory as trajectory
 from .names import CONTROL_MODES, TASK_IDS
 
 __all__ = ["EpisodeResult", "ReplayReport", "load_episodes", "main", "replay"]
@@ -109,12 +110,18 @@ class ReplayReport:
         return "\n".join(lines)
 
 
-EXPECTED = "ManiSkill's episode JSON (an object with 'header' and 'episodes'), plain or gzip-compressed (.json.gz)"
+EXPECTED = (
+    "ManiSkill's episode JSON (an object with 'header' and 'episodes'), plain or gzip-compressed (.json.gz), "
+    "or ManiSkill's trajectory file (X.h5 with its X.json)"
+)
 """What a replay file must be, as the refusals say it."""
 
 
 def _read(path: Path) -> dict:
-    """A recording's JSON, from a plain or a gzip-compressed file (told by its first bytes)."""
+    """A recording's JSON, from a plain or a gzip-compressed file (told by its first bytes), or ManiSkill's
+    trajectory file (a ``.h5``, or the ``.json`` of one: it has ``env_info``) as the same episode structure."""
+    if trajectory.is_trajectory(path):
+        return trajectory.read_trajectory(path)
     with path.open("rb") as f:
         raw = f.read()
     why = "not a readable gzip file"
@@ -122,15 +129,22 @@ def _read(path: Path) -> dict:
         if raw[:2] == b"\x1f\x8b":
             raw = gzip.decompress(raw)
         why = "not JSON text"
-        return json.loads(raw)
+        data = json.loads(raw)
     except (ValueError, OSError, EOFError, zlib.error) as e:  # JSONDecodeError and UnicodeDecodeError are ValueErrors
         raise ConfigError(f"replay: {str(path)!r} is not a recording ({why}); expected {EXPECTED}") from e
+    return trajectory.read_trajectory(path, data) if trajectory.is_trajectory_metadata(data) else data
 
 
 def load_episodes(source) -> dict:
-    """A recorded episode file (path: JSON or ``.json.gz``) or its loaded dict, checked for what the replay reads:
+    """A recorded episode file (path: JSON or ``.json.gz``, or ManiSkill's trajectory file, ``.h5`` with its
+    ``.json``: see :mod:`wpctrl.tasks.maniskill_trajectory`) or its loaded dict, checked for what the replay reads:
     ManiSkill's format, a task and control mode :func:`wpctrl.tasks.make` builds, equal episode lengths. Host only
     (no Warp, Newton or torch)."""
+    return _checked(*_load(source))
+
+
+def _load(source) -> tuple:
+    """The recording of ``source`` (a path, or a loaded dict as it is) and how the refusals name it."""
     data = source
     where = ""
     if not isinstance(source, dict):
@@ -139,6 +153,11 @@ def load_episodes(source) -> dict:
             raise FileNotFoundError(f"replay: no episode file {str(path)!r}")
         data = _read(path)
         where = f"{str(path)!r}: "
+    return data, where
+
+
+def _checked(data, where: str) -> dict:
+    """``data`` after the checks of :func:`load_episodes`; ``where`` prefixes the refusals."""
     if not isinstance(data, dict) or "header" not in data or "episodes" not in data:
         raise ConfigError(f"replay: {where}expected ManiSkill's episode format: a dict with 'header' and 'episodes' "
                           f"({EXPECTED})")  # fmt: skip
@@ -159,7 +178,8 @@ def load_episodes(source) -> dict:
                 raise ConfigError(f"replay: {where}episode {i} has no {key!r}")
     lengths = {len(ep["actions"]) for ep in data["episodes"]}
     if len(lengths) != 1:
-        raise ConfigError(f"replay: {where}the episodes must have the same number of actions, got {sorted(lengths)}")
+        raise ConfigError(f"replay: {where}the episodes must have the same number of actions, got {sorted(lengths)} "
+                          f"(maniskill_trajectory.by_length splits them; `wpctrl replay` does)")  # fmt: skip
     return data
 
 
@@ -234,7 +254,8 @@ def _parser() -> argparse.ArgumentParser:
         description="Replay ManiSkill's recorded PushCube-v1 / PickCube-v1 episodes open-loop on Newton and compare "
         "success and the cube's trajectory with ManiSkill's.",
     )
-    p.add_argument("episodes", nargs="+", help="episode files (ManiSkill's recording format: JSON, or .json.gz)")
+    p.add_argument("episodes", nargs="+", help="episode files (ManiSkill's recording format: JSON, or .json.gz; or "
+                   "ManiSkill's trajectory files: X.h5 with its X.json)")  # fmt: skip
     p.add_argument("--device", default="cpu", help="Warp device (default: cpu)")
     p.add_argument("--out", default=None, help="write the full report (every step of every episode) as JSON here")
     p.add_argument("--asset-dir", default=None, help="a copy of mani_skill/assets (default: the installed package)")
@@ -254,7 +275,10 @@ def main(argv=None) -> int:
     if why := device_refusal(args.device, "--device"):  # no Warp needed to know
         return _refuse(why)
     try:  # every file read and checked before anything heavy is imported
-        recordings = [(path, load_episodes(path)) for path in args.episodes]
+        recordings = []
+        for path in args.episodes:  # a file's episodes of different lengths: one recording per length
+            data, where = _load(path)
+            recordings += [(path, _checked(part, where)) for part in trajectory.by_length(data)]
     except (ConfigError, FileNotFoundError) as e:
         return _refuse(str(e))
     cli_output(args.verbose)

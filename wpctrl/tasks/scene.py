@@ -1,7 +1,7 @@
 """The tasks' scene on Newton: ManiSkill's Panda (its own ``panda_v2.urdf``: collision meshes, finger pads, SRDF
-pairs), the table box, the ground and the cube, ``num_envs`` times in separate worlds at the same place (as
-ManiSkill's GPU sim keeps its sub-scenes), with the contact, friction and joint-limit settings of
-:class:`~wpctrl.tasks.physics.TaskPhysics`.
+pairs), the table box, the ground and the task's actors (free bodies of boxes and capsules), ``num_envs`` times in
+separate worlds at the same place (as ManiSkill's GPU sim keeps its sub-scenes), with the contact, friction and
+joint-limit settings of :class:`~wpctrl.tasks.physics.TaskPhysics`.
 
 The Panda's asset is read from the installed mani-skill package (found without importing it) or from
 ``asset_dir`` / the ``WPCTRL_MANISKILL_ASSETS`` variable (a copy of ``mani_skill/assets``). Only the collision
@@ -21,8 +21,9 @@ import numpy as np
 import warp as wp
 
 from ..maniskill.collision import filter_srdf_pairs
-from .definitions import PANDA_DOF, PANDA_REST_QPOS, PANDA_ROOT_POSE, TABLE, TaskSpec
+from .definitions import PANDA_DOF, PANDA_REST_QPOS, PANDA_ROOT_POSE, TABLE, Actor, Box, Capsule
 from .physics import TaskPhysics, mujoco_friction
+from .registry import Task
 
 __all__ = ["PANDA_FINGER_MATERIAL", "Scene", "build_scene", "panda_urdf_path"]
 
@@ -80,15 +81,16 @@ class Scene:
     robot_coord0: int
     """Env 0's first robot coordinate (the robot's 9 joint positions follow, ManiSkill's qpos order)."""
     robot_dof0: int
-    cube_coord0: int
-    """Env 0's cube free joint: 7 coordinates (p, q xyzw)."""
-    cube_dof0: int
-    """Env 0's cube free joint: 6 DOFs (linear, angular velocity, world frame)."""
-    cube_body0: int
+    actor_coord0: dict[str, int]
+    """Env 0's free joint of each task actor, by name: 7 coordinates (p, q xyzw)."""
+    actor_dof0: dict[str, int]
+    """Env 0's free joint of each task actor: 6 DOFs (linear, angular velocity, world frame)."""
+    actor_body0: dict[str, int]
     tcp_body0: int
     finger_bodies0: tuple[int, int]
     shape_mu: dict[str, float]
-    """MuJoCo friction coefficient by material (``default``, ``gripper``) after the combination rule."""
+    """MuJoCo friction coefficient by material (``default``, ``gripper``, a task actor's name where it has its own)
+    after the combination rule."""
 
 
 def _panda_builder(urdf: str, physics: TaskPhysics) -> newton.ModelBuilder:
@@ -110,13 +112,12 @@ def _panda_builder(urdf: str, physics: TaskPhysics) -> newton.ModelBuilder:
     return robot
 
 
-def build_scene(spec: TaskSpec, num_envs: int, device, physics: TaskPhysics, asset_dir: str | None = None) -> Scene:
-    """``num_envs`` worlds of ``spec``'s scene, finalized on ``device``."""
+def build_scene(task: Task, num_envs: int, device, physics: TaskPhysics, asset_dir: str | None = None) -> Scene:
+    """``num_envs`` worlds of ``task``'s scene (the Panda, the table, the task's actors), finalized on ``device``."""
     urdf = panda_urdf_path(asset_dir)
-    mu = mujoco_friction(
-        {"default": TABLE.static_friction, "gripper": PANDA_FINGER_MATERIAL["static_friction"]},
-        physics.friction_combine,
-    )
+    materials = {"default": TABLE.static_friction, "gripper": PANDA_FINGER_MATERIAL["static_friction"]}
+    materials.update({a.name: a.static_friction for a in task.bodies if a.static_friction is not None})
+    mu = mujoco_friction(materials, physics.friction_combine)
     env = newton.ModelBuilder()
     env.rigid_gap = float(physics.contact_gap)
     newton.solvers.SolverMuJoCo.register_custom_attributes(env)
@@ -132,10 +133,8 @@ def build_scene(spec: TaskSpec, num_envs: int, device, physics: TaskPhysics, ass
                       hz=TABLE.half_size[2], cfg=static, label=TABLE.name)  # fmt: skip
     env.add_shape_plane(-1, xform=wp.transform(wp.vec3(0.0, 0.0, -TABLE.height), wp.quat_identity()),
                         width=0.0, length=0.0, cfg=static, label="ground")  # fmt: skip
-    h = spec.cube_half_size
-    cube = env.add_body(xform=wp.transform(wp.vec3(0.0, 0.0, h), wp.quat_identity()), label="cube")
-    cube_cfg = newton.ModelBuilder.ShapeConfig(mu=mu["default"], restitution=0.0, density=1000.0)
-    env.add_shape_box(cube, hx=h, hy=h, hz=h, label="cube", cfg=cube_cfg)
+    for actor in task.bodies:
+        _add_actor(env, actor, mu.get(actor.name, mu["default"]))
     n_shapes = env.shape_count
 
     builder = newton.ModelBuilder()
@@ -145,31 +144,48 @@ def build_scene(spec: TaskSpec, num_envs: int, device, physics: TaskPhysics, ass
     _apply_mujoco_attributes(model, physics, n_shapes * int(num_envs))
 
     labels = [lb.rsplit("/", 1)[-1] for lb in model.body_label]
-    bodies_per_env = model.body_count // num_envs
-    coords = model.joint_coord_count // num_envs
-    dofs = model.joint_dof_count // num_envs
     jq = model.joint_q_start.numpy()
     jqd = model.joint_qd_start.numpy()
     jlabels = [lb.rsplit("/", 1)[-1] for lb in model.joint_label]
     j1 = jlabels.index("panda_joint1")
-    jc = next(j for j, lb in enumerate(jlabels) if model.joint_type.numpy()[j] == newton.JointType.FREE)
+    free = {a.name: jlabels.index(f"{a.name}_free_joint") for a in task.bodies}
     scene = Scene(
         model=model,
         num_envs=int(num_envs),
-        coords_per_env=coords,
-        dofs_per_env=dofs,
-        bodies_per_env=bodies_per_env,
+        coords_per_env=model.joint_coord_count // num_envs,
+        dofs_per_env=model.joint_dof_count // num_envs,
+        bodies_per_env=model.body_count // num_envs,
         robot_coord0=int(jq[j1]),
         robot_dof0=int(jqd[j1]),
-        cube_coord0=int(jq[jc]),
-        cube_dof0=int(jqd[jc]),
-        cube_body0=labels.index("cube"),
+        actor_coord0={name: int(jq[j]) for name, j in free.items()},
+        actor_dof0={name: int(jqd[j]) for name, j in free.items()},
+        actor_body0={a.name: labels.index(a.name) for a in task.bodies},
         tcp_body0=labels.index(TCP_LINK),
         finger_bodies0=(labels.index(FINGER_LINKS[0]), labels.index(FINGER_LINKS[1])),
         shape_mu=mu,
     )
-    _check_layout(scene, jlabels)
+    _check_layout(scene)
     return scene
+
+
+def _add_actor(env: newton.ModelBuilder, actor: Actor, mu: float) -> None:
+    """One free body with the actor's collision shapes (its mass and inertia from their density)."""
+    body = env.add_body(xform=wp.transform(wp.vec3(0.0, 0.0, actor.build_height), wp.quat_identity()),
+                        label=actor.name)  # fmt: skip
+    cfg = newton.ModelBuilder.ShapeConfig(mu=mu, restitution=0.0, density=actor.density)
+    for shape in actor.shapes:
+        q = shape.quat
+        xform = wp.transform(wp.vec3(*shape.offset), wp.quat(q[1], q[2], q[3], q[0]))
+        if isinstance(shape, Box):
+            env.add_shape_box(body, xform=xform, hx=shape.half_size[0], hy=shape.half_size[1], hz=shape.half_size[2],
+                              label=actor.name, cfg=cfg)  # fmt: skip
+        elif isinstance(shape, Capsule):  # SAPIEN's capsules lie along x, Newton's along z
+            turn = wp.quat_from_axis_angle(wp.vec3(0.0, 1.0, 0.0), 0.5 * math.pi)
+            xform = wp.transform(wp.transform_get_translation(xform), wp.transform_get_rotation(xform) * turn)
+            env.add_shape_capsule(body, xform=xform, radius=shape.radius, half_height=shape.half_length,
+                                  label=actor.name, cfg=cfg)  # fmt: skip
+        else:
+            raise TypeError(f"actor {actor.name}: unknown shape {shape!r}")
 
 
 def _apply_mujoco_attributes(model: newton.Model, physics: TaskPhysics, n_shapes: int) -> None:
@@ -191,23 +207,15 @@ def _apply_mujoco_attributes(model: newton.Model, physics: TaskPhysics, n_shapes
     ns.solimplimit.assign(np.tile(np.array([*physics.limit_solimp, 0.5, 2.0], np.float32), (ndof, 1)))
 
 
-def _check_layout(scene: Scene, jlabels: list[str]) -> None:
-    """Every env's robot and cube sit at env 0's indices plus the per-env stride (replicate's layout)."""
+def _check_layout(scene: Scene) -> None:
+    """Every env's robot and actors sit at env 0's indices plus the per-env stride (replicate's layout)."""
     m = scene.model
     if m.joint_coord_count != scene.coords_per_env * scene.num_envs or m.body_count % scene.num_envs:
         raise RuntimeError("scene: the model is not num_envs equal worlds")
-    if scene.cube_coord0 - scene.robot_coord0 < PANDA_DOF:
-        raise RuntimeError("scene: the robot's 9 coordinates are not contiguous before the cube")
+    if min(scene.actor_coord0.values(), default=scene.robot_coord0 + PANDA_DOF) - scene.robot_coord0 < PANDA_DOF:
+        raise RuntimeError("scene: the robot's 9 coordinates are not contiguous before the actors")
     last = scene.num_envs - 1
     labels = [lb.rsplit("/", 1)[-1] for lb in m.body_label]
-    if labels[scene.cube_body0 + last * scene.bodies_per_env] != "cube":
-        raise RuntimeError("scene: the worlds' bodies are not laid out with a constant stride")
-    del jlabels
-
-
-def quat_wxyz_to_xyzw(q) -> tuple[float, float, float, float]:
-    return (q[1], q[2], q[3], q[0])
-
-
-def yaw_quat_wxyz(yaw: float) -> tuple[float, float, float, float]:
-    return (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
+    for name, b in scene.actor_body0.items():
+        if labels[b + last * scene.bodies_per_env] != name:
+            raise RuntimeError("scene: the worlds' bodies are not laid out with a constant stride")

@@ -10,7 +10,7 @@ gripper +1 open, -1 closed.
 
 from __future__ import annotations
 
-from .definitions import PICK_CUBE, PUSH_CUBE, TaskSpec
+from .registry import TASKS
 
 __all__ = ["pick_cube_policy", "policy_for", "push_cube_low_policy", "push_cube_policy"]
 
@@ -22,8 +22,8 @@ _PUSH_Z = 0.03
 """PushCube: TCP height [m] above the table top while pushing (the fingertips clear the table)."""
 
 
-def _fields(spec: TaskSpec, obs):
-    s = spec.obs_slices()["extra"]
+def _fields(env_id: str, obs):
+    s = TASKS[env_id].obs_slices()["extra"]
     return obs[:, s["tcp_pose"]][:, :3], obs[:, s["obj_pose"]][:, :3], obs[:, s["goal_pos"]]
 
 
@@ -39,7 +39,7 @@ def push_cube_policy(obs):
     goal's, hold (zero action). The fingertips stay clear of the table (compare :func:`push_cube_low_policy`)."""
     import torch
 
-    tcp, cube, goal = _fields(PUSH_CUBE, obs)
+    tcp, cube, goal = _fields("PushCube-v1", obs)
     hover = torch.stack([cube[:, 0] - 0.05, cube[:, 1], torch.full_like(cube[:, 2], _PUSH_HOVER_Z)], dim=1)
     lower = torch.stack([cube[:, 0] - 0.045, cube[:, 1], torch.full_like(cube[:, 2], _PUSH_Z)], dim=1)
     # lowering: within 1 cm (xy) of the hover point, or already on the way down near the lowering line
@@ -62,15 +62,15 @@ def push_cube_low_policy(obs):
     contact, where MuJoCo and PhysX differ (docs/tasks.md)."""
     import torch
 
-    tcp, cube, goal = _fields(PUSH_CUBE, obs)
+    tcp, cube, goal = _fields("PushCube-v1", obs)
     behind = cube.clone()
-    behind[:, 0] = cube[:, 0] - (PUSH_CUBE.cube_half_size + 0.025)
+    behind[:, 0] = cube[:, 0] - (TASKS["PushCube-v1"].cube_half_size + 0.025)
     aligned = ((tcp[:, 1] - cube[:, 1]).abs() < 0.01) & (tcp[:, 0] < behind[:, 0] + 0.01)
     low = tcp[:, 2] < cube[:, 2] + 0.01
     hover = behind.clone()
     hover[:, 2] = cube[:, 2] + 0.05
     push = behind.clone()
-    push[:, 0] = goal[:, 0] + 0.04 - (PUSH_CUBE.cube_half_size + 0.025)
+    push[:, 0] = goal[:, 0] + 0.04 - (TASKS["PushCube-v1"].cube_half_size + 0.025)
     push[:, 1] = goal[:, 1]
     target = torch.where(aligned[:, None], torch.where(low[:, None], push, behind), hover)
     # rise before moving sideways when not aligned and low
@@ -87,8 +87,8 @@ def pick_cube_policy(obs):
     goal and hold it there."""
     import torch
 
-    tcp, cube, goal = _fields(PICK_CUBE, obs)
-    grasped = obs[:, PICK_CUBE.obs_slices()["extra"]["is_grasped"]][:, 0] > 0.5
+    tcp, cube, goal = _fields("PickCube-v1", obs)
+    grasped = obs[:, TASKS["PickCube-v1"].obs_slices()["extra"]["is_grasped"]][:, 0] > 0.5
     dxy = (cube[:, :2] - tcp[:, :2]).norm(dim=1)
     above = cube.clone()
     above[:, 2] = cube[:, 2] + 0.06
@@ -107,4 +107,4 @@ def pick_cube_policy(obs):
 
 def policy_for(env_id: str):
     """The scripted policy of a task (for ``control_mode="pd_ee_delta_pos"``)."""
-    return {PUSH_CUBE.env_id: push_cube_policy, PICK_CUBE.env_id: pick_cube_policy}[env_id]
+    return {"PushCube-v1": push_cube_policy, "PickCube-v1": pick_cube_policy}[env_id]

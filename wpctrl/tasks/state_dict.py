@@ -3,11 +3,12 @@ layout, so ``newton_env.set_state_dict(maniskill_env.get_state_dict())`` puts th
 state, and back.
 
 ``{"actors": {name: (N, 13)}, "articulations": {"panda": (N, 31)}}``: an actor's ``[p (3), q wxyz (4), linear
-velocity (3), angular velocity (3)]`` (world frame; the cube's centre of mass is its centre), the Panda's
-``[root pose (7), root velocity (6), qpos (9), qvel (9)]``. The table (kinematic on PhysX) and the robot's root are
-fixed on Newton: a state whose table pose or robot root differs from the scene's is refused. The goal marker
-(kinematic, no collision) is the per-env goal. A ManiSkill state dict's ``"controller"`` entry (controller state of
-``use_target`` modes) is restored with ``ctrl.set_state``.
+velocity (3), angular velocity (3)]`` (world frame, the actor's frame origin), the Panda's ``[root pose (7), root
+velocity (6), qpos (9), qvel (9)]``. The actors are the table and the task's declared ones, in that order. The table
+(kinematic on PhysX) and the robot's root are fixed on Newton: a state whose table pose or robot root differs from
+the scene's is refused. A goal marker (kinematic, no collision) is a per-env pose. A state dict of another task (an
+actor missing or one the task does not have) is refused, naming the actor. A ManiSkill state dict's
+``"controller"`` entry (controller state of ``use_target`` modes) is restored with ``ctrl.set_state``.
 """
 
 from __future__ import annotations
@@ -37,39 +38,38 @@ class StateDictMixin:
     first)."""
 
     def _views(self):
-        torch = self._torch
+        """Zero-copy torch views: joint coordinates (N, nq), DOFs (N, nqd), marker positions (N, M, 3) and
+        orientations (N, M, 4, wxyz)."""
         sc = self.scene
-        n = self.num_envs
+        n, m = self.num_envs, len(self.task_spec.markers)
         q = wp.to_torch(self.state.joint_q).view(n, sc.coords_per_env)
         qd = wp.to_torch(self.state.joint_qd).view(n, sc.dofs_per_env)
-        goal = wp.to_torch(self.goal_pos).view(n, 3)
-        gq = wp.to_torch(self.goal_quat)
-        del torch
-        return q, qd, goal, gq
+        return q, qd, wp.to_torch(self.marker_pos)[:, :m], wp.to_torch(self.marker_quat)[:, :m]
 
     @property
     def actor_names(self) -> list[str]:
         """ManiSkill's non-static actors of the task, in its state-dict order."""
-        return [TABLE.name, "cube", self.task_spec.goal_name]
+        return [TABLE.name] + [a.name for a in self.task_spec.actors]
 
     def get_state_dict(self) -> dict:
         """The current state in ManiSkill's layout (new torch tensors on the env's device)."""
         torch = self._torch
         sc = self.scene
         n = self.num_envs
-        q, qd, goal, gq = self._views()
-        c, cd, r, rd = sc.cube_coord0, sc.cube_dof0, sc.robot_coord0, sc.robot_dof0
-        cube = torch.cat([q[:, c : c + 3], q[:, c + 6 : c + 7], q[:, c + 3 : c + 6], qd[:, cd : cd + 6]], dim=1)
+        q, qd, mpos, mquat = self._views()
+        r, rd = sc.robot_coord0, sc.robot_dof0
         zeros6 = torch.zeros(n, 6, device=self.device)
-        table = torch.as_tensor(table_state(), device=self.device).expand(n, _ACTOR_DIM).clone()
+        actors = {TABLE.name: torch.as_tensor(table_state(), device=self.device).expand(n, _ACTOR_DIM).clone()}
+        for a in self.task_spec.bodies:
+            c, cd = sc.actor_coord0[a.name], sc.actor_dof0[a.name]
+            actors[a.name] = torch.cat([q[:, c : c + 3], q[:, c + 6 : c + 7], q[:, c + 3 : c + 6], qd[:, cd : cd + 6]],
+                                       dim=1)  # fmt: skip
+        for k, mk in enumerate(self.task_spec.markers):
+            actors[mk.name] = torch.cat([mpos[:, k], mquat[:, k], zeros6], dim=1)
         root = torch.as_tensor(np.asarray(PANDA_ROOT_POSE, np.float32), device=self.device).expand(n, 7)
         robot = torch.cat([root, zeros6, q[:, r : r + PANDA_DOF], qd[:, rd : rd + PANDA_DOF]], dim=1)
         out = {
-            "actors": {
-                TABLE.name: table,
-                "cube": cube.clone(),
-                self.task_spec.goal_name: torch.cat([goal, gq, zeros6], dim=1).clone(),
-            },
+            "actors": {name: actors[name] for name in self.actor_names},
             "articulations": {"panda": robot.clone()},
         }
         controller = self.ctrl.get_state()
@@ -93,20 +93,20 @@ class StateDictMixin:
         idx = torch.nonzero(wp.to_torch(mask), as_tuple=False).flatten()
         rows = int(idx.numel())
         entries = self._check_state_dict(state, rows)
-        q, qd, goal, gq = self._views()
+        q, qd, mpos, mquat = self._views()
         sc = self.scene
-        c, cd, r, rd = sc.cube_coord0, sc.cube_dof0, sc.robot_coord0, sc.robot_dof0
-        cube = entries["cube"]
-        q[idx, c : c + 3] = cube[:, 0:3]
-        q[idx, c + 3 : c + 6] = cube[:, 4:7]
-        q[idx, c + 6] = cube[:, 3]
-        qd[idx, cd : cd + 6] = cube[:, 7:13]
-        robot = entries["panda"]
+        for a in self.task_spec.bodies:
+            c, cd, pose = sc.actor_coord0[a.name], sc.actor_dof0[a.name], entries[a.name]
+            q[idx, c : c + 3] = pose[:, 0:3]
+            q[idx, c + 3 : c + 6] = pose[:, 4:7]
+            q[idx, c + 6] = pose[:, 3]
+            qd[idx, cd : cd + 6] = pose[:, 7:13]
+        for k, mk in enumerate(self.task_spec.markers):
+            mpos[idx, k] = entries[mk.name][:, 0:3]
+            mquat[idx, k] = entries[mk.name][:, 3:7]
+        r, rd, robot = sc.robot_coord0, sc.robot_dof0, entries["panda"]
         q[idx, r : r + PANDA_DOF] = robot[:, 13 : 13 + PANDA_DOF]
         qd[idx, rd : rd + PANDA_DOF] = robot[:, 13 + PANDA_DOF :]
-        g = entries[self.task_spec.goal_name]
-        goal[idx] = g[:, 0:3]
-        gq[idx] = g[:, 3:7]
         self._after_state_write(mask)
         if "controller" in state and state["controller"]:
             self._set_controller_state(state["controller"], idx)
@@ -134,11 +134,20 @@ class StateDictMixin:
             got = sorted(state) if isinstance(state, dict) else type(state).__name__
             raise ConfigError(f"set_state_dict: expected a dict with 'actors' and 'articulations', got {got}")
         need = [("actors", name, _ACTOR_DIM) for name in self.actor_names] + [("articulations", "panda", _ROBOT_DIM)]
+        task = self.task_spec.env_id
+        for group in ("actors", "articulations"):
+            ours = [name for g, name, _ in need if g == group]
+            theirs = sorted(state[group], key=str) if isinstance(state[group], dict) else []
+            extra = [name for name in theirs if name not in ours]
+            if extra:
+                raise ConfigError(f"set_state_dict: state[{group!r}][{extra[0]!r}] is not part of {task} (its "
+                                  f"{group}: {ours}); a state dict of another task?")  # fmt: skip
         out = {}
         for group, name, dim in need:
             if not isinstance(state[group], dict) or name not in state[group]:
                 have = sorted(state[group]) if isinstance(state[group], dict) else type(state[group]).__name__
-                raise ConfigError(f"set_state_dict: state[{group!r}] has no {name!r} entry (has {have})")
+                raise ConfigError(f"set_state_dict: state[{group!r}] has no {name!r} entry, which {task} needs (has "
+                                  f"{have})")  # fmt: skip
             v = state[group][name]
             v = v.detach().to("cpu") if hasattr(v, "detach") else v
             a = np.asarray(v, dtype=np.float32)

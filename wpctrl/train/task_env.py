@@ -27,7 +27,7 @@ class TaskVecEnv(VecEnv):
     ManiSkill's flattened state vector.
 
     Args:
-        task: ``"PushCube-v1"`` or ``"PickCube-v1"``.
+        task: A task id of :data:`wpctrl.tasks.TASKS` (``"PushCube-v1"``, ``"PickCube-v1"``, ...).
         num_envs: Parallel envs.
         device: Warp / torch device.
         control_mode: A Panda control mode of ManiSkill (its PPO baseline uses ``pd_joint_delta_pos``).

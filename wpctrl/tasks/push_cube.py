@@ -1,0 +1,85 @@
+"""PushCube-v1 (``mani_skill/envs/tasks/tabletop/push_cube.py``, ``PushCubeEnv``): push a cube into a goal region
+0.2 m in front of it.
+
+Scene: a 4 cm cube (``actors.build_cube``, density 1000, the scene's default material) and the red-white target disc
+``goal_region`` (kinematic, no collision, turned +90 degrees about y). Episode: the cube flat on the table at
+xy ~ U[-0.1, 0.1]^2, no yaw; the goal at the cube's xy + (0.1 + goal_radius, 0), z = 1e-3. Success: the cube's xy
+within ``goal_radius`` of the goal's and the cube below half size + 5 mm. Dense reward (max 4): reach the push point
+behind the cube, then, once within 1 cm of it, place (xy to the goal) and keep the cube on the table.
+"""
+
+from __future__ import annotations
+
+import math
+
+import warp as wp
+
+from .definitions import Actor, Box, Marker, ObsField
+from .funcs import Sim, actor_pos, goal_pos, marker_pos, obj_pose, set_actor_pose, set_marker_pos, tcp_pos, tcp_pose7
+from .registry import Task, register_task
+
+__all__ = ["PushCube"]
+
+CUBE_HALF_SIZE = 0.02
+"""``PushCubeEnv.cube_half_size`` [m]."""
+GOAL_RADIUS = 0.1
+"""``PushCubeEnv.goal_radius`` [m]: the target disc's radius and the success distance."""
+SPAWN_HALF = 0.1
+"""``_initialize_episode``: ``xyz[..., :2] = torch.rand((b, 2)) * 0.2 - 0.1`` [m]."""
+GOAL_OFFSET = 0.1 + GOAL_RADIUS
+"""``target_region_xyz = xyz + [0.1 + goal_radius, 0, 0]`` [m]."""
+GOAL_Z = 1.0e-3
+"""``target_region_xyz[..., 2] = 1e-3`` [m]."""
+CUBE, GOAL = 0, 0
+"""The cube's actor index, the goal's marker index."""
+
+
+@wp.func
+def push_cube_initialize(s: Sim, e: int, rng: wp.uint32):
+    x = (wp.randf(rng) * 2.0 - 1.0) * SPAWN_HALF
+    y = (wp.randf(rng) * 2.0 - 1.0) * SPAWN_HALF
+    set_actor_pose(s, e, CUBE, wp.vec3(x, y, CUBE_HALF_SIZE), wp.quat_identity())
+    set_marker_pos(s, e, GOAL, wp.vec3(x + GOAL_OFFSET, y, GOAL_Z))
+
+
+@wp.func
+def push_cube_evaluate(s: Sim, e: int):
+    cube_p = actor_pos(s, e, CUBE)
+    goal = marker_pos(s, e, GOAL)
+    dxy = wp.vec2(cube_p[0] - goal[0], cube_p[1] - goal[1])
+    # evaluate(): is_obj_placed = xy within goal_radius & obj z < cube_half_size + 5e-3 (still on the table)
+    s.info[e, 0] = wp.length(dxy) < GOAL_RADIUS and cube_p[2] < CUBE_HALF_SIZE + 5.0e-3
+
+
+@wp.func
+def push_cube_dense_reward(s: Sim, e: int) -> float:
+    cube_p = actor_pos(s, e, CUBE)
+    goal = marker_pos(s, e, GOAL)
+    # compute_dense_reward: the push point 5 mm behind the cube's -x face; "reached" within 1 cm of it
+    push_p = cube_p + wp.vec3(-CUBE_HALF_SIZE - 0.005, 0.0, 0.0)
+    d = wp.length(push_p - tcp_pos(s, e))
+    r = 1.0 - wp.tanh(5.0 * d)
+    if d < 0.01:
+        place = 1.0 - wp.tanh(5.0 * wp.length(wp.vec2(cube_p[0] - goal[0], cube_p[1] - goal[1])))
+        r = r + place + place * (1.0 - wp.tanh(5.0 * wp.abs(cube_p[2] - CUBE_HALF_SIZE)))
+    return r
+
+
+@register_task("PushCube-v1", max_episode_steps=50)
+class PushCube(Task):
+    cube_half_size = CUBE_HALF_SIZE
+    goal_radius = GOAL_RADIUS
+    actors = (
+        Actor("cube", (Box((CUBE_HALF_SIZE,) * 3),), build_height=CUBE_HALF_SIZE),
+        Marker("goal_region", (math.cos(math.pi / 4), 0.0, math.sin(math.pi / 4), 0.0)),  # euler2quat(0, pi/2, 0)
+    )
+    contact_actors = ("cube",)
+    obs_extra = (
+        ObsField("extra", "tcp_pose", 7, tcp_pose7),
+        ObsField("extra", "goal_pos", 3, goal_pos),
+        ObsField("extra", "obj_pose", 7, obj_pose),
+    )
+    max_reward = 4.0  # compute_dense_reward: reward[info["success"]] = 4; compute_normalized_dense_reward: / 4
+    initialize = push_cube_initialize
+    evaluate = push_cube_evaluate
+    dense_reward = push_cube_dense_reward

@@ -1,0 +1,161 @@
+"""The task registry and the base class a task module subclasses (host only: importing this pulls in no Warp).
+
+A task is one module (``push_cube.py``, ``pick_cube.py``): a :class:`Task` subclass decorated with
+:func:`register_task`, as ManiSkill's ``@register_env`` class. It declares its scene (``actors``: free bodies and goal
+markers, in ManiSkill's state-dict order), its observation (``obs_extra``: the fields after the Panda's qpos and
+qvel, in ManiSkill's order), ``evaluate()``'s keys and its reward's maximum, and names three device functions
+(``@wp.func``, written against :mod:`wpctrl.tasks.funcs`): ``initialize`` (``_initialize_episode``), ``evaluate``
+and ``dense_reward``. The shared kernels (:mod:`wpctrl.tasks.kernels`) are generated from these declarations.
+
+:data:`TASKS` lists the built-in tasks (:data:`wpctrl.tasks.names.TASK_MODULES`) and any registered since; it imports
+a task's module on first use.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Iterator, Mapping
+
+from ..config import ConfigError
+from .definitions import PANDA_DOF, Actor, Marker, ObsField
+from .names import TASK_MODULES
+
+__all__ = ["TASKS", "Task", "get_task", "register_task"]
+
+AGENT_FIELDS = (ObsField("agent", "qpos", PANDA_DOF), ObsField("agent", "qvel", PANDA_DOF))
+"""The Panda's part of every task's observation (``_get_obs_agent``): qpos, then qvel."""
+
+
+class Task:
+    """What a task declares (class attributes of the subclass; the registry holds one instance of it)."""
+
+    env_id: str = ""
+    """Set by :func:`register_task`."""
+    max_episode_steps: int = 0
+    """Set by :func:`register_task` (``@register_env(..., max_episode_steps=...)``)."""
+    actors: tuple[Actor | Marker, ...] = ()
+    """The task's actors besides the table, in ManiSkill's state-dict order."""
+    contact_actors: tuple[str, ...] = ()
+    """The actors whose contact forces on the Panda's fingers are measured (``agent.is_grasping(actor)``)."""
+    obs_extra: tuple[ObsField, ...] = ()
+    """``_get_obs_extra``'s fields, in its dict order, each with its device function."""
+    info_keys: tuple[str, ...] = ()
+    """``evaluate()``'s keys besides ``success`` (and ``elapsed_steps`` added by ``get_info``)."""
+    max_reward: float = 1.0
+    """``compute_normalized_dense_reward`` divides by it; a success step's dense reward is set to it."""
+    initialize = None
+    """``@wp.func (Sim, env, rng)``: place the actors and markers of env ``env`` for a new episode (the Panda is
+    already placed and every actor's velocity zeroed)."""
+    evaluate = None
+    """``@wp.func (Sim, env)``: write ``success`` and the ``info_keys`` flags into ``sim.info[env]``."""
+    dense_reward = None
+    """``@wp.func (Sim, env) -> float``: ``compute_dense_reward`` before success sets it to ``max_reward``."""
+
+    @property
+    def obs_fields(self) -> tuple[ObsField, ...]:
+        return AGENT_FIELDS + tuple(self.obs_extra)
+
+    @property
+    def obs_dim(self) -> int:
+        return sum(f.size for f in self.obs_fields)
+
+    def obs_slices(self) -> dict[str, dict[str, slice]]:
+        """``{group: {name: slice}}`` into the flattened observation."""
+        out: dict[str, dict[str, slice]] = {}
+        start = 0
+        for f in self.obs_fields:
+            out.setdefault(f.group, {})[f.name] = slice(start, start + f.size)
+            start += f.size
+        return out
+
+    @property
+    def bodies(self) -> tuple[Actor, ...]:
+        """The free bodies, in declared order (the device functions' actor indices)."""
+        return tuple(a for a in self.actors if isinstance(a, Actor))
+
+    @property
+    def markers(self) -> tuple[Marker, ...]:
+        return tuple(a for a in self.actors if isinstance(a, Marker))
+
+    @property
+    def goal_name(self) -> str | None:
+        """The first goal marker's state-dict name (None without one)."""
+        return self.markers[0].name if self.markers else None
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.env_id!r})"
+
+
+_REGISTERED: dict[str, Task] = {}
+
+
+def register_task(env_id: str, max_episode_steps: int):
+    """Class decorator: register a :class:`Task` subclass under ManiSkill's env id (``@register_env``'s twin)."""
+
+    def register(cls: type[Task]) -> type[Task]:
+        if not (isinstance(cls, type) and issubclass(cls, Task)):
+            raise ConfigError(f"register_task({env_id!r}): expected a Task subclass, got {cls!r}")
+        cls.env_id, cls.max_episode_steps = env_id, int(max_episode_steps)
+        _check(cls)
+        _REGISTERED[env_id] = cls()
+        return cls
+
+    return register
+
+
+def _check(cls: type[Task]) -> None:
+    names = [a.name for a in cls.actors]
+    where = f"task {cls.env_id}"
+    if len(set(names)) != len(names) or not all(isinstance(a, (Actor, Marker)) for a in cls.actors):
+        raise ConfigError(f"{where}: actors must be Actor / Marker entries with distinct names, got {names}")
+    bodies = {a.name for a in cls.actors if isinstance(a, Actor)}
+    for name in cls.contact_actors:
+        if name not in bodies:
+            raise ConfigError(f"{where}: contact actor {name!r} is not one of its bodies {sorted(bodies)}")
+    for hook in ("initialize", "evaluate", "dense_reward"):
+        if getattr(cls, hook) is None:
+            raise ConfigError(f"{where}: no {hook} device function")
+    for f in cls.obs_extra:
+        if f.func is None:
+            raise ConfigError(f"{where}: observation field {f.group}/{f.name} has no device function")
+
+
+class _Registry(Mapping):
+    """env id -> :class:`Task`: the built-in tasks (imported on first use) and those registered since."""
+
+    def _ids(self) -> list[str]:
+        return list(TASK_MODULES) + [k for k in _REGISTERED if k not in TASK_MODULES]
+
+    def __getitem__(self, env_id: str) -> Task:
+        if env_id not in _REGISTERED and env_id in TASK_MODULES:
+            importlib.import_module(f"{__package__}.{TASK_MODULES[env_id]}")
+        if env_id not in _REGISTERED:
+            raise KeyError(unknown_task(env_id))
+        return _REGISTERED[env_id]
+
+    def __contains__(self, env_id) -> bool:
+        return env_id in TASK_MODULES or env_id in _REGISTERED
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._ids())
+
+    def __len__(self) -> int:
+        return len(self._ids())
+
+    def __repr__(self) -> str:
+        return f"TASKS({self._ids()})"
+
+
+TASKS = _Registry()
+"""The tasks :func:`wpctrl.tasks.make` builds, by ManiSkill env id."""
+
+
+def unknown_task(env_id) -> str:
+    return f"unknown task id {env_id!r}; the known ones are {sorted(TASKS)}"
+
+
+def get_task(env_id: str) -> Task:
+    """The registered task of ``env_id``; an unknown id is refused with the list of known ones."""
+    if env_id not in TASKS:
+        raise ConfigError(unknown_task(env_id))
+    return TASKS[env_id]

@@ -157,10 +157,10 @@ class Recorder:
         print(f"wrote {self.path} ({self.frames} frames: env 0's first {n} episode{'s' * (n != 1)})", flush=True)
 
 
-def open_recorder(env, path, sim: str = "newton"):
-    """A :class:`Recorder` of ``env`` into ``path``, or None with a one-line note on stderr saying why the video is
-    skipped (another simulator, no renderer, no display, no writer)."""
-    why = "only --sim newton is recorded" if sim != "newton" else unavailable()
+def open_recorder(env, path):
+    """A :class:`Recorder` of ``env`` (a Newton task env) into ``path``, or None with a one-line note on stderr saying
+    why the video is skipped (no renderer, no display, no writer)."""
+    why = unavailable()
     if why is None:
         try:
             return Recorder(env, path)

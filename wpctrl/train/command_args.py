@@ -26,6 +26,7 @@ __all__ = [
     "flag",
     "given_flags",
     "missing_train_extra",
+    "record_refusal",
     "refuse",
     "refuse_unused",
     "unused_option",
@@ -38,6 +39,10 @@ MANISKILL_UNUSED = ("device", "envs", "substeps")
 """``wpctrl evaluate --sim maniskill``: the options of the Newton env only ``--sim newton`` builds."""
 MANISKILL_UNRECORDED = ("video",)
 """``wpctrl evaluate --sim maniskill``: the video, which only ``--sim newton`` records."""
+NEWTON_UNUSED = ("record",)
+"""``wpctrl evaluate --sim newton``: the episode file for ``wpctrl replay``, which only ``--sim maniskill`` writes."""
+RECORD_SUFFIXES = (".json", ".json.gz")
+"""The names ``wpctrl evaluate --record`` takes (``.gz``: gzip-compressed)."""
 
 TRAIN_EXTRA = ("torch", "rsl_rl")
 """What ``wpctrl train`` imports (``export`` and ``evaluate`` need torch alone)."""
@@ -124,6 +129,8 @@ def evaluate_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default=None, help="write the result (with every episode on ManiSkill) as JSON here")
     p.add_argument("--video", default=None, metavar="FILE", help="newton: also write env 0's first episodes as a video "
                    "(FILE.mp4, .gif; MuJoCo's offscreen renderer; skipped, saying why, where none works)")  # fmt: skip
+    p.add_argument("--record", default=None, metavar="FILE", help="maniskill: also save the episodes for `wpctrl "
+                   "replay FILE` (FILE.json, or FILE.json.gz gzip-compressed), written once all have run")  # fmt: skip
     add_output_options(p, progress=True)
     return p
 
@@ -139,6 +146,18 @@ def check_export_args(args) -> str | None:
     return None
 
 
+def record_refusal(path) -> str | None:
+    """Why ``path`` cannot take an evaluation's recording (its name, its folder), or None."""
+    p = Path(path)
+    if not str(p).endswith(RECORD_SUFFIXES):
+        return f"expected a file name ending in {' or '.join(RECORD_SUFFIXES)}, got {str(p)!r}"
+    if p.is_dir():
+        return f"{str(p)!r} is a folder, expected a file name"
+    if not p.parent.is_dir():
+        return f"no folder {str(p.parent)!r} for {str(p)!r}"
+    return None
+
+
 def refuse(command: str, message: str):
     """Exit 2 with the one line ``wpctrl <command>: error: <message>`` on stderr."""
     print(f"wpctrl {command}: error: {message}", file=sys.stderr)
@@ -148,9 +167,13 @@ def refuse(command: str, message: str):
 def check_evaluate_args(p: argparse.ArgumentParser, args, argv) -> None:
     """``wpctrl evaluate``'s arguments (parsed from ``argv``), checked without torch, Warp or ManiSkill: exits 2 with
     one line for the first that cannot work (an option ``--sim maniskill`` does not use, ``--video`` included, the
-    policy file, the numbers, a device this machine cannot have; Warp confirms the device later)."""
+    policy file, the numbers, a device this machine cannot have, the ``--record`` file; Warp confirms the device
+    later)."""
+    given = given_flags(p, argv)
+    if args.sim == "newton":
+        refuse_unused(p, given, NEWTON_UNUSED, "only --sim maniskill is recorded for `wpctrl replay` (it replays "
+                      "ManiSkill's episodes on Newton)")  # fmt: skip
     if args.sim == "maniskill":
-        given = given_flags(p, argv)
         refuse_unused(p, given, MANISKILL_UNUSED, "not used with --sim maniskill (ManiSkill runs one env at a time "
                       "on its own CPU PhysX)")  # fmt: skip
         refuse_unused(p, given, MANISKILL_UNRECORDED, "only --sim newton is recorded (MuJoCo's renderer draws the "
@@ -164,6 +187,8 @@ def check_evaluate_args(p: argparse.ArgumentParser, args, argv) -> None:
         what = "a folder" if policy.is_dir() else "no file"
         refuse("evaluate", f"--policy: {what} {str(policy)!r} (export a run with `python -m wpctrl export RUN_DIR`, "
                            "which writes RUN_DIR/policy.ts)")  # fmt: skip
+    if args.record is not None and (why := record_refusal(args.record)):
+        refuse("evaluate", f"--record: {why}")
     if args.sim == "newton" and (why := device_refusal(args.device, "--device")):
         refuse("evaluate", why)
     if args.sim == "maniskill" and importlib.util.find_spec("mani_skill") is None:

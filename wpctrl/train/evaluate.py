@@ -8,6 +8,9 @@ policy (``wpctrl export``) on fresh episodes of either simulator, with the same 
 Every episode runs its 50 control steps (success does not end it, as ManiSkill's PPO evaluates); reported: the
 success rate (success at any step, ManiSkill's ``success_once``), the success rate at the last step
 (``success_at_end``), the mean return of the normalized dense reward and the mean first success step.
+
+``--record FILE`` (``--sim maniskill``) also saves the episodes in the format ``wpctrl replay`` reads
+(:mod:`.record`), so that they replay open-loop on Newton.
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ from pathlib import Path
 
 import torch
 
-from .command_args import check_evaluate_args, evaluate_parser
+from .command_args import check_evaluate_args, evaluate_parser, record_refusal
 
 __all__ = ["PolicyError", "evaluate", "evaluate_maniskill", "load_policy", "main"]
 
@@ -70,9 +73,11 @@ def load_policy(path, task: str | None = None, device="cpu"):
     return module, dict(meta, task=task)
 
 
-def evaluate_maniskill(policy, task: str, control_mode: str, episodes: int, seed: int = 0, progress=None) -> dict:
+def evaluate_maniskill(policy, task: str, control_mode: str, episodes: int, seed: int = 0, progress=None,
+                       recorder=None) -> dict:  # fmt: skip
     """``policy`` on ``episodes`` episodes of the real ManiSkill (PhysX CPU, one env); metrics as
-    :func:`wpctrl.train.policy_eval.evaluate_policy`, plus per-episode records."""
+    :func:`wpctrl.train.policy_eval.evaluate_policy`, plus per-episode records. ``recorder``: a
+    :class:`.record.EpisodeRecorder` that is shown every episode and writes its file once all have run."""
     from wpctrl import console
     from wpctrl.tasks.maniskill_side import make_maniskill
 
@@ -83,22 +88,34 @@ def evaluate_maniskill(policy, task: str, control_mode: str, episodes: int, seed
     steps = int(env.spec.max_episode_steps or 50)
     t = time.perf_counter()
     records = []
+    if recorder is not None:
+        recorder.start(env, task, control_mode, steps)
     with torch.inference_mode():
         for i in range(episodes):
-            obs, _ = env.reset(seed=seed + i)
+            obs, info = env.reset(seed=seed + i)
+            if recorder is not None:
+                recorder.reset(seed + i, obs, info)
             ret, first, success = 0.0, None, False
             for k in range(steps):
-                obs, reward, _, _, info = env.step(policy(obs.to(torch.float32)).to("cpu"))
+                action = policy(obs.to(torch.float32)).to("cpu")
+                obs, reward, terminated, truncated, info = env.step(action)
+                if recorder is not None:
+                    recorder.step(action, obs, reward, terminated, truncated, info)
                 ret += float(reward[0])
                 success = bool(info["success"][0])
                 if success and first is None:
                     first = k + 1
             records.append({"seed": seed + i, "success_once": first is not None, "success_at_end": success,
                             "return": ret, "first_success_step": first})  # fmt: skip
+            if recorder is not None:
+                recorder.finish_episode()
             if progress:
                 progress(i + 1, records)
     env.close()
-    return _summary(records, time.perf_counter() - t)
+    result = _summary(records, time.perf_counter() - t)
+    if recorder is not None:
+        result["record"] = str(recorder.write())
+    return result
 
 
 def _summary(records: list, seconds: float) -> dict:
@@ -138,16 +155,22 @@ class _CountEpisodes:
 
 def evaluate(policy, sim: str = "newton", episodes: int = 100, seed: int = 0, task: str | None = None,
              device="cpu", envs: int | None = None, substeps: int | None = None, video=None,
-             progress: bool = True, verbose: bool = False) -> dict:  # fmt: skip
+             progress: bool = True, verbose: bool = False, record=None) -> dict:  # fmt: skip
     """The exported policy in file ``policy`` on ``episodes`` fresh episodes of ``sim`` (``"newton"``: wpctrl's
     task env on ``device``, ``envs`` at a time (default: min(episodes, 256)), ``substeps`` defaulting to the
     policy's training value; ``"maniskill"``: the real ManiSkill, one env on its CPU PhysX); what ``wpctrl
     evaluate`` reports. ``video``: also film env 0's first episodes into this file (Newton only: a ValueError with
-    ``sim="maniskill"``). Raises :class:`PolicyError` for a policy that cannot drive ``task``."""
+    ``sim="maniskill"``). ``record``: also save the ManiSkill episodes in ``wpctrl replay``'s format into this file
+    (``.json`` or ``.json.gz``; ManiSkill only: a ValueError with ``sim="newton"``). Raises :class:`PolicyError` for a
+    policy that cannot drive ``task``."""
     from .. import console
 
     if video and sim != "newton":
         raise ValueError(f"video: only sim='newton' is recorded, got sim={sim!r}")
+    if record and sim != "maniskill":
+        raise ValueError(f"record: only sim='maniskill' is saved for replay, got sim={sim!r}")
+    if record and (why := record_refusal(record)):
+        raise ValueError(f"record: {why}")
 
     device = device if sim == "newton" else "cpu"
     model, meta = load_policy(policy, task, device)
@@ -163,7 +186,10 @@ def evaluate(policy, sim: str = "newton", episodes: int = 100, seed: int = 0, ta
                 ok = sum(r["success_once"] for r in records)
                 print(f"  {i:4d} episodes: {ok} successful", flush=True)
 
-        result = evaluate_maniskill(model, task, control_mode, episodes, seed, report)
+        from .record import EpisodeRecorder
+
+        recorder = EpisodeRecorder(record, policy, meta) if record else None
+        result = evaluate_maniskill(model, task, control_mode, episodes, seed, report, recorder)
     else:
         import wpctrl.tasks as T
 
@@ -205,13 +231,16 @@ def main(argv=None) -> int:
             return 2
     try:
         result = evaluate(args.policy, args.sim, args.episodes, args.seed, args.task, args.device, args.envs,
-                          args.substeps, args.video, args.progress, args.verbose)  # fmt: skip
+                          args.substeps, args.video, args.progress, args.verbose, args.record)  # fmt: skip
     except PolicyError as e:
         print(f"wpctrl evaluate: error: {e}", file=sys.stderr)
         return 2
     print(f"{result['task']} on {args.sim}: success {100 * result['success_rate']:.1f} % (at the end "
           f"{100 * result['success_at_end_rate']:.1f} %) over {result['episodes']} episodes, mean return "
           f"{result['mean_episode_reward']:.2f}")  # fmt: skip
+    if args.record:
+        print(f"wrote {args.record} ({result['episodes']} episodes; `python -m wpctrl replay {args.record}` replays "
+              "them on Newton)")  # fmt: skip
     if args.out:
         Path(args.out).write_text(json.dumps(result, indent=1))
         print(f"wrote {args.out}")

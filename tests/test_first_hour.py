@@ -123,14 +123,14 @@ def test_replay_names_what_it_expected_of_a_file_that_is_no_recording(tmp_path):
 
     (tmp_path / "bad.json.gz").write_bytes(b"\x1f\x8b not gzip")
     data = json.loads((DATA / "PushCube-v1__pd_ee_delta_pos.json").read_text())
-    data["header"]["task"] = "StackCube-v1"
+    data["header"]["task"] = "PlugCharger-v1"
     (tmp_path / "stack.json.gz").write_bytes(gzip.compress(json.dumps(data).encode()))
     readme = Path(__file__).resolve().parents[1] / "README.md"
     expected = "expected ManiSkill's episode JSON (an object with 'header' and 'episodes'), plain or gzip-compressed"
     for name, message in (
         (str(readme), f"{str(readme)!r} is not a recording (not JSON text); {expected}"),
         ("bad.json.gz", f"'bad.json.gz' is not a recording (not a readable gzip file); {expected}"),
-        ("stack.json.gz", "'stack.json.gz': task 'StackCube-v1' is not one wpctrl builds"),
+        ("stack.json.gz", "'stack.json.gz': task 'PlugCharger-v1' is not one wpctrl builds"),
     ):
         rc, out, err, heavy = _cli("replay", name, cwd=tmp_path)
         assert (rc, out, heavy) == (2, "", []), (name, rc, out, err, heavy)

@@ -117,7 +117,7 @@ def _all_modes(mode):
 
 
 BAD = {
-    "other task": (dict(meta=_set("env_id", "StackCube-v1")), "env_info.env_id 'StackCube-v1'.*PushCube-v1"),
+    "other task": (dict(meta=_set("env_id", "PlugCharger-v1")), "env_info.env_id 'PlugCharger-v1'.*PushCube-v1"),
     "no env_info": (dict(meta=lambda m: m.update(env_info=None)), "'env_info' expected an object"),
     "other robot": (dict(meta=_set("env_kwargs.robot_uids", "fetch")), "env_kwargs.robot_uids expected 'panda'"),
     "other control mode": (dict(meta=_all_modes("pd_base_vel")), "control_mode 'pd_base_vel' is not one"),
@@ -170,30 +170,51 @@ def test_missing_half_of_the_pair_and_refusal_before_warp(short, tmp_path):
     with pytest.raises(FileNotFoundError, match="lone.json"):
         T.load_episodes(lone)
     assert main([str(lone)]) == 2
-    bad = _edit(short[0], tmp_path / "bad", meta=_set("env_id", "StackCube-v1"))
+    bad = _edit(short[0], tmp_path / "bad", meta=_set("env_id", "PlugCharger-v1"))
     code = (f"import sys; from wpctrl.tasks.replay import main; rc = main([{str(bad)!r}]); "
             "heavy = [m for m in ('warp', 'newton', 'torch') if m in sys.modules]; "
             "assert rc == 2 and not heavy, (rc, heavy)")  # fmt: skip
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert run.returncode == 0, run.stderr
-    assert "env_info.env_id 'StackCube-v1'" in run.stderr
+    assert "env_info.env_id 'PlugCharger-v1'" in run.stderr
 
 
-def test_episodes_of_different_lengths_split_into_recordings(short):
-    """ManiSkill's files often hold episodes of different lengths (an episode ends at success): the replay steps a
-    file's episodes together, so ``by_length`` splits them into one recording per length, order kept, and
-    ``load_episodes`` refuses the mixed file saying so."""
+def test_episodes_of_different_lengths_load_together_and_split_by_length(short):
+    """ManiSkill's files often hold episodes of different lengths (an episode ends at success): ``load_episodes``
+    takes the mixed file (the replay steps them together, each read to its own end: tests/test_demo_replay.py), and
+    ``by_length`` still splits it into one recording per length, order kept, for a replay per group."""
     data = read_trajectory(short[0])
     longer = json.loads(json.dumps(data["episodes"][0]))
     longer["actions"].append(longer["actions"][-1])
+    longer["cube_pose"].append(longer["cube_pose"][-1])
     mixed = {**data, "episodes": [data["episodes"][0], longer, data["episodes"][1]]}
-    with pytest.raises(wpctrl.ConfigError, match=r"same number of actions, got \[3, 4\].*by_length"):
-        T.load_episodes(mixed)
+    assert T.load_episodes(mixed) is mixed
     parts = by_length(mixed)
     assert [[len(ep["actions"]) for ep in p["episodes"]] for p in parts] == [[3, 3], [4]]
     assert parts[0]["episodes"] == data["episodes"] and parts[1]["header"] == data["header"]
     assert by_length(data) == [data]
     assert all(T.load_episodes(p) is p for p in parts)
+    longer["actions"].append(longer["actions"][-1])  # now 5 actions, 5 poses
+    with pytest.raises(wpctrl.ConfigError, match=r"episode 1 has 5 actions and 5 poses of 'cube'"):
+        T.load_episodes(mixed)
+
+
+def test_state_actors_and_main_objects_come_from_the_light_names():
+    """The trajectory reader's per-task actors are :data:`wpctrl.tasks.names.TASK_ACTORS`' (a new task is one line
+    there); every built task is listed, its main object is one of its state actors, and the actors of the built tasks
+    are their declared ones (the table first)."""
+    from wpctrl.tasks import maniskill_trajectory as mt
+    from wpctrl.tasks.names import TASK_ACTORS, TASK_IDS, main_object
+
+    assert mt.STATE_ACTORS == {task: a.state for task, a in TASK_ACTORS.items()}
+    for task, actors in TASK_ACTORS.items():
+        assert actors.main in actors.state and actors.state[0] == "table-workspace", task
+        assert main_object(task) == actors.main
+    assert main_object("Unlisted-v1") == mt.MAIN_OBJECT == "cube"
+    for task in ("PushCube-v1", "PickCube-v1", "PullCube-v1"):
+        assert task in TASK_IDS
+        declared = ("table-workspace",) + tuple(a.name for a in T.TASKS[task].actors)
+        assert TASK_ACTORS[task].state == declared, task
 
 
 @pytest.mark.slow  # the real ManiSkill's scripted episodes, then Newton builds and replays (about a minute)

@@ -65,7 +65,7 @@ def _random_state(env, rng, n=N) -> dict:
 @pytest.mark.parametrize(
     "kwargs, field",
     [
-        (dict(env_id="StackCube-v1"), "env_id"),
+        (dict(env_id="PlugCharger-v1"), "env_id"),
         (dict(control_mode="pd_ee_pose_quat"), "control_mode"),
         (dict(obs_mode="rgbd"), "obs_mode"),
         (dict(reward_mode="shaped"), "reward_mode"),
@@ -300,7 +300,8 @@ def test_pick_dense_reward_while_the_cube_is_held():
         if env.evaluate()["is_grasped"].all():
             break
     info = {k: v.numpy() for k, v in env.evaluate().items()}
-    assert info["is_grasped"].all() and not info["success"].any()
+    # every env holds its cube; those whose goal is not yet reached check the place term's partial value
+    assert info["is_grasped"].all() and not info["success"].all()
     state = env.get_state_dict()
     cube_p = state["actors"]["cube"][:, :3].numpy().astype(np.float64)
     goal_p = state["actors"]["goal_site"][:, :3].numpy().astype(np.float64)
@@ -428,7 +429,7 @@ def test_reset_draws_follow_maniskills_distributions(pick_env, push_env):
 
 @pytest.mark.parametrize(
     "kwargs, message",
-    [({"seed": [1, 2, 3, 4]}, "per-env seed lists"), ({"seed": 1.5}, "seed expected an int"),
+    [({"seed": [1, 2, 3]}, "a list of num_envs = 4 ints"), ({"seed": 1.5}, "seed expected an int"),
      ({"seed": True}, "seed expected an int"), ({"options": {"env_idx": [0, 4]}}, r"indices must be in \[0, 4\)"),
      ({"options": {"env_idx": [-1]}}, r"indices must be in \[0, 4\)"),
      ({"options": {"env_idx": np.array([0.0, 1.0])}}, "integers"),

@@ -51,6 +51,24 @@ def test_replay_refuses_bad_files(tmp_path):
         T.replay(broken)
 
 
+def test_the_main_object_is_the_headers_and_must_be_recorded():
+    """The replay follows ``header.main_object`` (else the task's: the cube), read from ``actor_poses`` (else
+    ``cube_pose``); a main object the start state lacks, or poses that are not one per step, are refused by name."""
+    data = _episodes("PushCube-v1__pd_joint_delta_pos.json")
+    assert T.load_episodes(data) is data
+    data["header"]["main_object"] = "peg"
+    with pytest.raises(wpctrl.ConfigError, match=r"episode 0: the main object 'peg' is not an actor"):
+        T.load_episodes(data)
+    data["header"]["main_object"] = "cube"
+    ep = data["episodes"][0]
+    ep["actor_poses"] = {"cube": ep.pop("cube_pose")[:-1]}
+    with pytest.raises(wpctrl.ConfigError, match=r"episode 0 has 50 actions and 50 poses of 'cube'"):
+        T.load_episodes(data)
+    ep["actor_poses"] = {}
+    with pytest.raises(wpctrl.ConfigError, match=r"neither 'actor_poses'\['cube'\] nor 'cube_pose'"):
+        T.load_episodes(data)
+
+
 def test_replay_agreement_counts_maniskills_successes_only():
     """success_agreement is over ManiSkill's successful episodes; outcome_agreement over all. A recorded success
     replayed as is, and the same start with the arm left still, recorded as ManiSkill's failure: both agree (2 of 2

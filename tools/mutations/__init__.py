@@ -31,6 +31,9 @@ AREAS = (
     "second_controller",
     "first_hour",
     "task_envs",
+    "lift_peg_upright",
+    "stack_cube",
+    "pull_cube",
 )
 """The areas, in the order the runner takes them."""
 

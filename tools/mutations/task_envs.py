@@ -6,9 +6,9 @@ MUTATIONS = [
     M(
         "tasks_reset_same_draw_every_env",
         "wpctrl/tasks/kernels.py",
-        "    rng = wp.rand_init(seed[0], e + n * reset_count[e])\n",
-        "    rng = wp.rand_init(seed[0], n * reset_count[e])\n",
-        "every env of a reset draws the same episode (the RNG's offset forgets the env)",
+        "        rng = wp.rand_init(seed[e], reset_count[e])  # env e's draws",
+        "        rng = wp.rand_init(seed[0], reset_count[e])  # env e's draws",
+        "every env draws env 0's episode (the RNG forgets the env's own seed)",
         ("tests/test_tasks_envs.py::test_every_env_of_a_reset_draws_its_own_episode_from_maniskills_distribution",),
     ),
     M(

@@ -57,6 +57,7 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
         controller_semantics: str,
         asset_dir: str | None,
         graph: bool | None,
+        max_episode_steps: int | None = None,
     ):
         import torch
 
@@ -71,7 +72,8 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
         self.auto_reset = bool(auto_reset)
         self.ignore_terminations = bool(ignore_terminations)
         self.controller_semantics = controller_semantics
-        self.max_episode_steps = task.max_episode_steps
+        self.max_episode_steps = int(max_episode_steps or task.max_episode_steps)
+        """The time limit in control steps: the task's registered one unless ``make(max_episode_steps=...)``."""
         self.sim_freq, self.control_freq = 100, 20
         self.num_envs = n = int(num_envs)
         self._torch = torch
@@ -110,7 +112,8 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
         quats = [mk.quat for mk in task.markers] + [(1.0, 0.0, 0.0, 0.0)] * (m - len(task.markers))
         self.marker_quat = wp.array(np.tile(np.asarray(quats, np.float32), (n, 1, 1)), dtype=wp.vec4, device=dev)
         self.rest_qpos = wp.array(np.asarray(PANDA_REST_QPOS, np.float32), dtype=wp.float32, device=dev)
-        self.seed_buf = wp.array([int(seed)], dtype=wp.int32, device=dev)
+        self.seed_buf = wp.array(episode_seeds(seed, n), dtype=wp.int32, device=dev)
+        """(num_envs,) each env's episode seed (:meth:`reset`)."""
         self.reset_count = z(wp.int32, n)
         self.elapsed = z(wp.int32, n)
         self.final_elapsed = z(wp.int32, n)
@@ -295,19 +298,33 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
         return out
 
     def reset(self, *, seed=None, options: dict | None = None):
-        """Start new episodes: every env, or ``options["env_idx"]``'s (a partial reset). ``seed``: an int seeds the
-        draws of every env from now on (env e's episodes differ from env e'"s); returns ``obs, info`` of all envs.
-        Other ``options`` keys are refused (:data:`RESET_OPTIONS` lists those it takes)."""
+        """Start new episodes: every env, or ``options["env_idx"]``'s (a partial reset); returns ``obs, info`` of all
+        envs. Other ``options`` keys are refused (:data:`RESET_OPTIONS` lists those it takes).
+
+        ``seed`` gives every env an episode seed, as ManiSkill's vectorised envs take it: a list of ``num_envs`` ints
+        (env e's seed ``seed[e]``; with ``env_idx`` only the reset envs take theirs), or one int ``s``, which
+        ManiSkill expands to ``[s, *np.random.RandomState(s).randint(2**31, size=num_envs - 1)]``
+        (:func:`episode_seeds`). Env e's initial state is drawn by Warp's RNG from its own seed alone (and the
+        count of its episodes since that seed): an env seeded ``s`` starts the same episode whichever env it is and
+        whatever the other envs' seeds are, as a ManiSkill env seeded ``s`` does. The draws are not ManiSkill's
+        numbers (its ``torch.rand`` stream is not reproduced), only its distribution (``tests/test_tasks_envs.py``).
+        Without a seed, each env draws its next episode from its seed's stream."""
         from ._validate import env_mask, reset_options, seed_value
 
         options = reset_options(options, RESET_OPTIONS)
-        seed = None if seed is None else seed_value(seed)
         mask = self._all
         if options.get("env_idx") is not None:
             mask = env_mask(options["env_idx"], self.num_envs, self.wp_device)
         if seed is not None:
-            self.seed_buf.fill_(seed)
-            self.reset_count.zero_()
+            if _is_sequence(seed):
+                chosen = mask.numpy()
+                seeds = np.where(chosen, per_env_seeds(seed, self.num_envs), self.seed_buf.numpy())
+                counts = np.where(chosen, 0, self.reset_count.numpy())
+                self.seed_buf.assign(seeds.astype(np.int32))
+                self.reset_count.assign(counts.astype(np.int32))
+            else:
+                self.seed_buf.assign(episode_seeds(seed_value(seed), self.num_envs))
+                self.reset_count.zero_()
         self._reset_envs(mask)
         return self._format_obs(self._t["obs"].clone()), self._info(final=False)
 
@@ -340,6 +357,35 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
 
     def close(self) -> None:
         self.graph = None
+
+
+def episode_seeds(seed: int, num_envs: int) -> np.ndarray:
+    """One reset seed as ``num_envs`` episode seeds, as ManiSkill expands it (``BaseEnv._set_episode_rng``,
+    ``mani_skill/envs/sapien_env.py``): env 0 takes ``seed``, envs 1.. ``np.random.RandomState(seed).randint(2**31,
+    size=num_envs - 1)``."""
+    rest = np.random.RandomState(int(seed)).randint(2**31, size=num_envs - 1) if num_envs > 1 else []
+    return np.asarray([int(seed), *rest], np.int32)
+
+
+def _is_sequence(seed) -> bool:
+    return isinstance(seed, (list, tuple, np.ndarray)) or hasattr(seed, "detach")
+
+
+def per_env_seeds(seed, num_envs: int) -> np.ndarray:
+    """``reset``'s list of per-env seeds as (num_envs,) int32 (each taken modulo 2**31, as one int seed is); anything
+    but ``num_envs`` integers is refused naming ``seed``."""
+    from ..config import ConfigError
+
+    a = seed.detach().cpu().numpy() if hasattr(seed, "detach") else np.asarray(seed, dtype=object)
+    if a.ndim != 1 or len(a) != num_envs:
+        raise ConfigError(f"reset: seed expected one int or a list of num_envs = {num_envs} ints (one per env), got "
+                          f"{'shape ' + str(a.shape) if a.ndim != 1 else f'a list of {len(a)}'}")  # fmt: skip
+    out = []
+    for i, v in enumerate(a.tolist()):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
+            raise ConfigError(f"reset: seed[{i}] expected an int, got {v!r}")
+        out.append(int(v) % (2**31))
+    return np.asarray(out, np.int32)
 
 
 @wp.kernel

@@ -29,6 +29,7 @@ def make(
     asset_dir: str | None = None,
     graph: bool | None = None,
     verbose: bool = False,
+    max_episode_steps: int | None = None,
 ):
     """A ManiSkill task on Newton (:class:`~wpctrl.tasks.env.TaskEnv`), ``num_envs`` copies on ``device``.
 
@@ -42,7 +43,8 @@ def make(
         obs_mode: ``"state"`` (ManiSkill's flattened state vector) or ``"state_dict"`` (the nested dict).
         reward_mode: ``"normalized_dense"`` (ManiSkill's default), ``"dense"``, ``"sparse"`` (success) or ``"none"``.
         sim_backend: ``"mujoco"`` (Newton's MuJoCo-Warp solver).
-        seed: Seed of the episode draws (:meth:`~wpctrl.tasks.env.TaskEnv.reset` takes a new one).
+        seed: Seed of the episode draws, expanded to one seed per env as ManiSkill does
+            (:meth:`~wpctrl.tasks.env.TaskEnv.reset` takes a new one, or a list of one per env).
         auto_reset: Reset finished envs inside ``step`` (``ManiSkillVectorEnv``'s switch).
         ignore_terminations: Episodes end only at the time limit (success does not terminate).
         physics: Contact, friction and joint-limit settings (:class:`TaskPhysics`).
@@ -51,6 +53,9 @@ def make(
             least-squares step, as ManiSkill's GPU sim). Joint modes are the same on both.
         asset_dir: A copy of ``mani_skill/assets`` to read the Panda from (default: the installed mani-skill).
         graph: Capture the step in a graph and replay it (default: True, on CUDA and the CPU).
+        max_episode_steps: The episodes' time limit in control steps (default: the task's registered one, e.g. 50
+            for PushCube-v1), as ``gym.make(env_id, max_episode_steps=N)`` overrides it for ManiSkill's envs:
+            ``truncated`` turns True at step N. A positive int.
         verbose: Let Warp print what it does while the env is built: its start-up banner and a
             ``Module ... load on device ...`` line per kernel module. By default (``False``) ``make`` prints nothing:
             for the duration of the call it raises ``warp.config.log_level`` to ``warp.LOG_WARNING`` (and puts your
@@ -78,6 +83,10 @@ def make(
                           f"{controller_semantics!r}")  # fmt: skip
     if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
         raise ConfigError(f"make: num_envs expected a positive int, got {num_envs!r}")
+    if max_episode_steps is not None and (isinstance(max_episode_steps, bool) or not isinstance(max_episode_steps, int)
+                                          or max_episode_steps < 1):  # fmt: skip
+        raise ConfigError(f"make: max_episode_steps expected a positive int (or None: the task's "
+                          f"{TASKS[env_id].max_episode_steps}), got {max_episode_steps!r}")  # fmt: skip
     if physics is None:
         physics = TaskPhysics()
     elif not isinstance(physics, TaskPhysics):
@@ -94,6 +103,7 @@ def make(
 
     with quiet_warp(verbose):  # the banner, the CUDA-driver line and the module-load lines: only when asked for
         device = check_device(device, "make: device")
-        options = (bool(auto_reset), bool(ignore_terminations), physics, controller_semantics, asset_dir, graph)
+        options = (bool(auto_reset), bool(ignore_terminations), physics, controller_semantics, asset_dir, graph,
+                   max_episode_steps)  # fmt: skip
         return TaskEnv(TASKS[env_id], num_envs, device, control_mode, obs_mode, reward_mode, seed_value(seed),
                        *options)  # fmt: skip

@@ -102,6 +102,27 @@ def obj_pose(s: Sim, e: int) -> vec7:
 
 
 @wp.func
+def actor_lin_vel(s: Sim, e: int, i: int) -> wp.vec3:
+    """``actor.linear_velocity``: actor i's linear velocity (world frame)."""
+    c = s.actor_qd0[i] + e * s.nqd
+    return wp.vec3(s.joint_qd[c], s.joint_qd[c + 1], s.joint_qd[c + 2])
+
+
+@wp.func
+def actor_ang_vel(s: Sim, e: int, i: int) -> wp.vec3:
+    """``actor.angular_velocity``: actor i's angular velocity (world frame)."""
+    c = s.actor_qd0[i] + e * s.nqd
+    return wp.vec3(s.joint_qd[c + 3], s.joint_qd[c + 4], s.joint_qd[c + 5])
+
+
+@wp.func
+def actor_static(s: Sim, e: int, i: int, lin_thresh: float, ang_thresh: float) -> bool:
+    """``Actor.is_static(lin_thresh, ang_thresh)``: ||linear velocity|| <= lin_thresh [m/s] and ||angular velocity||
+    <= ang_thresh [rad/s] (``mani_skill/utils/structs/actor.py``)."""
+    return wp.length(actor_lin_vel(s, e, i)) <= lin_thresh and wp.length(actor_ang_vel(s, e, i)) <= ang_thresh
+
+
+@wp.func
 def set_actor_pose(s: Sim, e: int, i: int, p: wp.vec3, q: wp.quat):
     """Place actor i of env e (its velocities are left as they are: the reset zeroes them before ``initialize``)."""
     c = s.actor_q0[i] + e * s.nq

@@ -64,8 +64,7 @@ def _build(task) -> tuple:
         e = wp.tid()
         if not mask[e]:
             return
-        n = mask.shape[0]
-        rng = wp.rand_init(seed[0], e + n * reset_count[e])
+        rng = wp.rand_init(seed[e], reset_count[e])  # env e's draws: a function of its own seed and episode count
         reset_count[e] = reset_count[e] + 1
         q0 = s.robot_q0 + e * s.nq
         qd0 = s.robot_qd0 + e * s.nqd

@@ -13,11 +13,11 @@ ManiSkill writes a recording as a pair of files of one base name (``RecordEpisod
 
 :func:`read_trajectory` turns the pair into the episode structure :func:`wpctrl.tasks.replay.load_episodes` returns
 for the project's JSON recordings: ``init_state_dict`` (``env_states`` at t = 0), ``actions``, ``info["success"]``
-per step (t = 0 .. T; ManiSkill does not record the reset's, so t = 0 is False) and ``cube_pose`` (the cube's pose,
-from ``env_states``, per step). Everything is checked on the host before Warp or Newton loads, and refused with a
-:class:`~wpctrl.ConfigError` naming the field: a task or control mode wpctrl does not build, a ``.json`` and ``.h5``
-that disagree, a truncated or corrupt ``.h5``, states without the task's actors. h5py (a dependency of mani-skill) is
-imported only when a ``.h5`` is read.
+per step (t = 0 .. T; ManiSkill does not record the reset's, so t = 0 is False) and ``cube_pose`` (the pose of the
+task's main object, :func:`wpctrl.tasks.names.main_object`, from ``env_states``, per step). Everything is checked on
+the host before Warp or Newton loads, and refused with a :class:`~wpctrl.ConfigError` naming the field: a task or
+control mode wpctrl does not build, a ``.json`` and ``.h5`` that disagree, a truncated or corrupt ``.h5``, states
+without the task's actors. h5py (a dependency of mani-skill) is imported only when a ``.h5`` is read.
 """
 
 from __future__ import annotations
@@ -30,19 +30,17 @@ from pathlib import Path
 import numpy as np
 
 from ..config import ConfigError
-from .names import CONTROL_MODES, TASK_IDS
+from .names import CONTROL_MODES, TASK_ACTORS, TASK_IDS, main_object
 
 __all__ = ["MAIN_OBJECT", "STATE_ACTORS", "by_length", "is_trajectory", "is_trajectory_metadata", "read_trajectory"]
 
 MAIN_OBJECT = "cube"
-"""The actor whose pose the replay compares (both tasks move one cube)."""
+"""The actor a replay follows when a task names none (:func:`wpctrl.tasks.names.main_object`)."""
 
-STATE_ACTORS: dict[str, tuple[str, ...]] = {
-    "PushCube-v1": ("table-workspace", "cube", "goal_region"),
-    "PickCube-v1": ("table-workspace", "cube", "goal_site"),
-}
-"""The actors of each task's ManiSkill state dict (besides the ``panda`` articulation): a trajectory's
-``env_states`` must hold them all, since the replay loads them as the initial state."""
+STATE_ACTORS: dict[str, tuple[str, ...]] = {task: actors.state for task, actors in TASK_ACTORS.items()}
+"""The actors of each task's ManiSkill state dict (besides the ``panda`` articulation), from
+:data:`wpctrl.tasks.names.TASK_ACTORS`: a trajectory's ``env_states`` must hold them all, since the replay loads them
+as the initial state."""
 
 _ACTOR_DIM = 13  # p (3), q wxyz (4), linear velocity (3), angular velocity (3)
 _ROBOT = ("panda", 31)  # root pose (7), root velocity (6), qpos (9), qvel (9)
@@ -164,13 +162,14 @@ def _episode(traj, ep: dict, i: int, task: str, where: str) -> dict:
     need = [("actors", a, _ACTOR_DIM) for a in STATE_ACTORS[task]]
     init: dict[str, dict[str, list]] = {"actors": {}, "articulations": {}}
     poses = None
+    main = main_object(task)
     for group, key, dim in [*need, ("articulations", *_ROBOT)]:
         if group not in states:
             raise ConfigError(f"replay: {where}{name}/env_states/{group} is missing (the {task} state has "
                               f"{[k for _, k, _ in need]} and 'panda')")  # fmt: skip
         a = _array(states[group], key, where, (steps + 1, dim))
         init[group][key] = a[0].tolist()
-        if key == MAIN_OBJECT:
+        if key == main:
             poses = a[:, :7]
     out = {
         "seed": _seed(ep, i),
@@ -251,7 +250,7 @@ def read_trajectory(path, metadata: dict | None = None) -> dict:
         "control_mode": mode,
         "env_kwargs": env_info.get("env_kwargs") or {},
         "max_episode_steps": env_info.get("max_episode_steps"),
-        "main_object": MAIN_OBJECT,
+        "main_object": main_object(task),
         "source": {"format": "maniskill_trajectory", "json": str(meta_path), "h5": str(h5_path)},
     }
     return {"header": header, "episodes": episodes}

@@ -5,10 +5,58 @@ tasks are built from (:data:`wpctrl.tasks.TASKS`, :func:`wpctrl.robots.panda_con
 
 from __future__ import annotations
 
-__all__ = ["CONTROL_MODES", "DEFAULT_CONTROL_MODE", "OBS_MODES", "TASK_IDS", "TASK_MODULES"]
+from typing import NamedTuple
 
-TASK_MODULES: dict[str, str] = {"PushCube-v1": "push_cube", "PickCube-v1": "pick_cube"}
-"""The built-in tasks: ManiSkill env id -> its module under ``wpctrl/tasks/`` (imported when the task is first used)."""
+__all__ = [
+    "CONTROL_MODES",
+    "DEFAULT_CONTROL_MODE",
+    "OBS_MODES",
+    "TASK_ACTORS",
+    "TASK_IDS",
+    "TASK_MODULES",
+    "TaskActors",
+    "main_object",
+]
+
+TASK_MODULES: dict[str, str] = {
+    "PushCube-v1": "push_cube",
+    "PickCube-v1": "pick_cube",
+    "PullCube-v1": "pull_cube",
+    "StackCube-v1": "stack_cube",
+    "LiftPegUpright-v1": "lift_peg_upright",
+}
+"""The built-in tasks: ManiSkill env id -> its module under ``wpctrl/tasks/`` (imported when the task is first used).
+One line per task."""
+
+
+class TaskActors(NamedTuple):
+    """What a recording of a task holds besides the Panda, for the replay's checks before anything is built."""
+
+    main: str
+    """The actor a replay follows (the recordings' ``header.main_object``: the object the task moves)."""
+    state: tuple[str, ...]
+    """The actors of ManiSkill's state dict, in its order (the table first)."""
+
+
+TASK_ACTORS: dict[str, TaskActors] = {
+    "PushCube-v1": TaskActors("cube", ("table-workspace", "cube", "goal_region")),
+    "PickCube-v1": TaskActors("cube", ("table-workspace", "cube", "goal_site")),
+    "PullCube-v1": TaskActors("cube", ("table-workspace", "cube", "goal_region")),
+    "StackCube-v1": TaskActors("cubeA", ("table-workspace", "cubeA", "cubeB")),
+    "LiftPegUpright-v1": TaskActors("peg", ("table-workspace", "peg")),
+    "PegInsertionSide-v1": TaskActors("peg", ("table-workspace", "peg", "box_with_hole")),
+    "PlaceSphere-v1": TaskActors("sphere", ("table-workspace", "sphere", "bin")),
+}
+"""ManiSkill task id -> its recorded actors (:class:`TaskActors`), one line per task, as ManiSkill 3.0.1's state dicts
+name them (its ``get_state_dict()`` after a reset). A task may be listed before wpctrl builds it: :data:`TASK_IDS`
+says which ones it builds."""
+
+
+def main_object(env_id: str) -> str:
+    """The actor a replay of ``env_id``'s recordings follows (``"cube"`` for a task not in :data:`TASK_ACTORS`)."""
+    entry = TASK_ACTORS.get(env_id)
+    return entry.main if entry is not None else "cube"
+
 
 TASK_IDS: tuple[str, ...] = tuple(TASK_MODULES)
 """The ManiSkill tasks :func:`wpctrl.tasks.make` builds."""

@@ -36,7 +36,8 @@ class Task:
     actors: tuple[Actor | Marker, ...] = ()
     """The task's actors besides the table, in ManiSkill's state-dict order."""
     contact_actors: tuple[str, ...] = ()
-    """The actors whose contact forces on the Panda's fingers are measured (``agent.is_grasping(actor)``)."""
+    """The actors whose contact forces on the Panda's fingers are measured (``agent.is_grasping(actor)``), in their
+    declared order: contact column j (``funcs.is_grasping(sim, env, j)``) is the j-th of them."""
     obs_extra: tuple[ObsField, ...] = ()
     """``_get_obs_extra``'s fields, in its dict order, each with its device function."""
     info_keys: tuple[str, ...] = ()
@@ -112,6 +113,9 @@ def _check(cls: type[Task]) -> None:
     for name in cls.contact_actors:
         if name not in bodies:
             raise ConfigError(f"{where}: contact actor {name!r} is not one of its bodies {sorted(bodies)}")
+    order = [a.name for a in cls.actors if isinstance(a, Actor) and a.name in cls.contact_actors]
+    if list(cls.contact_actors) != order:  # the contact sensor's columns follow the bodies' order in each world
+        raise ConfigError(f"{where}: contact_actors must be distinct and in the actors' declared order: {order}")
     for hook in ("initialize", "evaluate", "dense_reward"):
         if getattr(cls, hook) is None:
             raise ConfigError(f"{where}: no {hook} device function")

@@ -1,11 +1,14 @@
 """Open-loop replay of ManiSkill's recorded episodes on Newton: every episode's initial state dict is loaded into
-its own env, its actions are replayed step by step (all episodes of a file at once, one env each), and success and
-the cube's position are compared with ManiSkill's at every step.
+its own env (reset with the episode's seed first), its actions are replayed step by step (all episodes of a file at
+once, one env each; episodes of different lengths step together and each is read up to its own last step), and
+success and the main object's position are compared with ManiSkill's at every step.
 
 The episode format is ManiSkill's recording of the tasks (a JSON file, plain or gzip-compressed ``.json.gz``, with
-``header`` (``task``, ``control_mode``) and ``episodes``: ``init_state_dict``, ``actions``, ``info["success"]`` and
-``cube_pose`` per step, ...). ``python -m wpctrl replay FILE.json`` runs it from the command line: every file is
-read and checked before Warp, Newton or torch is imported, so a wrong file is refused at once.
+``header`` (``task``, ``control_mode``, optionally ``main_object``) and ``episodes``: ``seed``, ``init_state_dict``,
+``actions``, ``info["success"]`` and the main object's pose per step, ``actor_poses[main_object]`` or ``cube_pose``,
+...). The main object is the header's ``main_object``, else the task's (:func:`wpctrl.tasks.names.main_object`:
+the cube of the cube tasks). ``python -m wpctrl replay FILE.json`` runs it from the command line: every file is read
+and checked before Warp, Newton or torch is imported, so a wrong file is refused at once.
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ import numpy as np
 
 from ..config import ConfigError
 from . import maniskill_trajectory as trajectory
-from .names import CONTROL_MODES, TASK_IDS
+from .names import CONTROL_MODES, TASK_IDS, main_object
 
 __all__ = ["EpisodeResult", "ReplayReport", "load_episodes", "main", "replay"]
 
@@ -37,7 +40,8 @@ class EpisodeResult:
     success: list[bool]
     """Newton's, after each step."""
     cube_error: list[float]
-    """||cube position on Newton - ManiSkill's|| after each step [m]."""
+    """||main object's position on Newton - ManiSkill's|| after each step [m] (the cube of the cube tasks; the
+    report's ``main_object``)."""
     success_at_end_recorded: bool
     success_at_end: bool
     is_grasped_recorded: list[bool] | None = None
@@ -60,6 +64,8 @@ class ReplayReport:
     task: str
     control_mode: str
     episodes: list[EpisodeResult] = field(default_factory=list)
+    main_object: str = "cube"
+    """The actor whose position ``cube_error`` follows."""
 
     @property
     def success_agreement(self) -> float:
@@ -80,6 +86,7 @@ class ReplayReport:
         return {
             "task": self.task,
             "control_mode": self.control_mode,
+            "main_object": self.main_object,
             "episodes": len(self.episodes),
             "success_agreement": self.success_agreement,
             "outcome_agreement": self.outcome_agreement,
@@ -98,13 +105,14 @@ class ReplayReport:
             lines.append(
                 f"  seed {e.seed:4d}: success at end {e.success_at_end!s:5} "
                 f"(ManiSkill {e.success_at_end_recorded!s:5}), "
-                f"first success step {first} ({first_rec}), cube error final {100 * e.final_cube_error:.2f} cm, "
+                f"first success step {first} ({first_rec}), {self.main_object} error final "
+                f"{100 * e.final_cube_error:.2f} cm, "
                 f"max {100 * max(e.cube_error):.2f} cm"
             )
         s = self.summary()
         lines.append(
             f"  successful ManiSkill episodes that succeed on Newton: {100 * s['success_agreement']:.0f} %; "
-            f"same outcome: {100 * s['outcome_agreement']:.0f} %; median final cube error "
+            f"same outcome: {100 * s['outcome_agreement']:.0f} %; median final {self.main_object} error "
             f"{100 * s['median_final_cube_error_m']:.2f} cm"
         )
         return "\n".join(lines)
@@ -138,8 +146,8 @@ def _read(path: Path) -> dict:
 def load_episodes(source) -> dict:
     """A recorded episode file (path: JSON or ``.json.gz``, or ManiSkill's trajectory file, ``.h5`` with its
     ``.json``: see :mod:`wpctrl.tasks.maniskill_trajectory`) or its loaded dict, checked for what the replay reads:
-    ManiSkill's format, a task and control mode :func:`wpctrl.tasks.make` builds, equal episode lengths. Host only
-    (no Warp, Newton or torch)."""
+    ManiSkill's format, a task and control mode :func:`wpctrl.tasks.make` builds, every episode's actions and its
+    main object's poses (one more than the actions). Host only (no Warp, Newton or torch)."""
     return _checked(*_load(source))
 
 
@@ -172,25 +180,60 @@ def _checked(data, where: str) -> dict:
                           f"{list(CONTROL_MODES)}")  # fmt: skip
     if not data["episodes"]:
         raise ConfigError(f"replay: {where}the file holds no episodes")
+    main = _main_object(data["header"])
     for i, ep in enumerate(data["episodes"]):
-        for key in ("init_state_dict", "actions", "info", "cube_pose"):
+        for key in ("init_state_dict", "actions", "info"):
             if key not in ep:
                 raise ConfigError(f"replay: {where}episode {i} has no {key!r}")
-    lengths = {len(ep["actions"]) for ep in data["episodes"]}
-    if len(lengths) != 1:
-        raise ConfigError(f"replay: {where}the episodes must have the same number of actions, got {sorted(lengths)} "
-                          f"(maniskill_trajectory.by_length splits them; `wpctrl replay` does)")  # fmt: skip
+        if not ep["actions"]:
+            raise ConfigError(f"replay: {where}episode {i} has no actions")
+        actors = ep["init_state_dict"].get("actors") if isinstance(ep["init_state_dict"], dict) else None
+        if not isinstance(actors, dict) or main not in actors:
+            have = sorted(actors) if isinstance(actors, dict) else actors
+            raise ConfigError(f"replay: {where}episode {i}: the main object {main!r} is not an actor of its "
+                              f"init_state_dict ({have!r})")  # fmt: skip
+        poses = _main_poses(ep, main)
+        if poses is None:
+            raise ConfigError(f"replay: {where}episode {i} has neither 'actor_poses'[{main!r}] nor 'cube_pose' (the "
+                              f"main object's pose per step)")  # fmt: skip
+        if len(poses) != len(ep["actions"]) + 1:
+            raise ConfigError(f"replay: {where}episode {i} has {len(ep['actions'])} actions and {len(poses)} poses of "
+                              f"{main!r} (expected one more: t = 0 .. T)")  # fmt: skip
     return data
+
+
+def _main_object(header: dict) -> str:
+    """The actor a replay follows: the header's ``main_object``, else the task's."""
+    return header.get("main_object") or main_object(header["task"])
+
+
+def _main_poses(ep: dict, main: str):
+    """The main object's recorded poses (t = 0 .. T): ``actor_poses[main]``, else ``cube_pose``."""
+    poses = ep.get("actor_poses") or {}
+    return poses[main] if main in poses else ep.get("cube_pose")
+
+
+def _max_steps(task: str, longest: int) -> int:
+    """The env's ``max_episode_steps`` for a replay: the task's, or the longest episode where that is longer (the
+    motion-planning demos run past the registered limit, as ManiSkill's ``gym.make(..., max_episode_steps=N)``)."""
+    from .registry import TASKS
+
+    return max(int(TASKS[task].max_episode_steps), int(longest))
 
 
 def replay(source, device="cpu", physics=None, asset_dir: str | None = None, env=None, verbose: bool = False,
            progress=None) -> ReplayReport:  # fmt: skip
     """Replay every episode of ``source`` (a path or a loaded dict) open-loop on Newton, one env per episode.
 
-    ``env``: an env of :func:`wpctrl.tasks.make` to reuse (its task, control mode and number of envs must match);
-    otherwise one is built with ``auto_reset=False`` and ``ignore_terminations=True`` (the recorded episodes keep
-    stepping after success), ``verbose`` passed to ``make``. ``progress``: an object with ``update(n)`` (a tqdm bar,
-    say), advanced by one after every step of the episodes (they all step together).
+    Each env is reset with its episode's ``seed`` (a list of seeds, one per env) before the recorded state is loaded,
+    so a task whose scene comes from the seed is rebuilt as ManiSkill's was. Episodes of different lengths step
+    together: an episode that has ended repeats its last action, and its results are read up to its own last step.
+
+    ``env``: an env of :func:`wpctrl.tasks.make` to reuse (its task, control mode and number of envs must match; with
+    ``auto_reset`` its ``max_episode_steps`` must cover the longest episode); otherwise one is built with
+    ``auto_reset=False``, ``ignore_terminations=True`` (the recorded episodes keep stepping after success) and
+    ``max_episode_steps`` at least the longest episode's length, ``verbose`` passed to ``make``. ``progress``: an
+    object with ``update(n)`` (a tqdm bar, say), advanced by one after every step of the episodes.
     """
     import torch
 
@@ -199,48 +242,59 @@ def replay(source, device="cpu", physics=None, asset_dir: str | None = None, env
     data = load_episodes(source)
     header, episodes = data["header"], data["episodes"]
     n = len(episodes)
+    main = _main_object(header)
+    lengths = [len(ep["actions"]) for ep in episodes]
+    steps = max(lengths)
     if env is None:
         env = make(header["task"], num_envs=n, device=device, control_mode=header["control_mode"],
                    auto_reset=False, ignore_terminations=True, physics=physics, asset_dir=asset_dir,
-                   verbose=verbose)  # fmt: skip
+                   verbose=verbose, max_episode_steps=_max_steps(header["task"], steps))  # fmt: skip
     elif (env.task_spec.env_id, env.control_mode, env.num_envs) != (header["task"], header["control_mode"], n):
         raise ConfigError(f"replay: env is {env.task_spec.env_id} / {env.control_mode} / {env.num_envs} envs, the file "
                           f"{header['task']} / {header['control_mode']} / {n} episodes")  # fmt: skip
+    elif env.auto_reset and env.max_episode_steps < steps:
+        raise ConfigError(f"replay: env resets its episodes after {env.max_episode_steps} steps, the longest episode "
+                          f"has {steps} actions (make it with max_episode_steps={steps} or "
+                          f"auto_reset=False)")  # fmt: skip
     state = {}
     for group in ("actors", "articulations"):
         names = episodes[0]["init_state_dict"][group].keys()
         state[group] = {k: torch.tensor([ep["init_state_dict"][group][k] for ep in episodes]) for k in names}
-    env.reset()
+    seeds = [int(ep.get("seed", i)) for i, ep in enumerate(episodes)]
+    env.reset(seed=seeds)
     env.set_state_dict(state)
-    actions = np.asarray([ep["actions"] for ep in episodes], np.float32)  # (n, T, A)
-    recorded_cube = np.asarray([[p[:3] for p in ep["cube_pose"]] for ep in episodes])  # (n, T + 1, 3)
-    success = np.zeros((n, actions.shape[1]), bool)
-    grasped = np.zeros((n, actions.shape[1]), bool)
-    error = np.zeros((n, actions.shape[1]))
-    for t in range(actions.shape[1]):
+    # (n, T, A): an episode shorter than the longest repeats its last action (read only up to its own end)
+    actions = np.asarray([ep["actions"] + ep["actions"][-1:] * (steps - len(ep["actions"])) for ep in episodes],
+                         np.float32)  # fmt: skip
+    recorded = [np.asarray(_main_poses(ep, main), np.float64)[:, :3] for ep in episodes]  # (T_i + 1, 3) each
+    success = np.zeros((n, steps), bool)
+    grasped = np.zeros((n, steps), bool)
+    position = np.zeros((n, steps, 3))
+    for t in range(steps):
         _, _, _, _, info = env.step(torch.from_numpy(actions[:, t]))
         success[:, t] = info["success"].cpu().numpy()
         if "is_grasped" in info:
             grasped[:, t] = info["is_grasped"].cpu().numpy()
-        q = env.get_state_dict()["actors"]["cube"][:, :3].cpu().numpy()
-        error[:, t] = np.linalg.norm(q - recorded_cube[:, t + 1], axis=1)
+        position[:, t] = env.get_state_dict()["actors"][main][:, :3].cpu().numpy()
         if progress is not None:
             progress.update(1)
-    report = ReplayReport(task=header["task"], control_mode=header["control_mode"])
+    report = ReplayReport(task=header["task"], control_mode=header["control_mode"], main_object=main)
     for i, ep in enumerate(episodes):
+        k = lengths[i]
         rec = [bool(s) for s in ep["info"]["success"][1:]]
+        error = np.linalg.norm(position[i, :k] - recorded[i][1:], axis=1)
         report.episodes.append(
             EpisodeResult(
-                seed=int(ep.get("seed", i)),
+                seed=seeds[i],
                 success_recorded=rec,
-                success=success[i].tolist(),
-                cube_error=error[i].tolist(),
+                success=success[i, :k].tolist(),
+                cube_error=error.tolist(),
                 success_at_end_recorded=bool(ep.get("success_at_end", rec[-1])),
-                success_at_end=bool(success[i, -1]),
+                success_at_end=bool(success[i, k - 1]),
                 is_grasped_recorded=[bool(g) for g in ep["info"]["is_grasped"][1:]]
                 if "is_grasped" in ep["info"]
                 else None,
-                is_grasped=grasped[i].tolist() if "is_grasped" in ep["info"] else None,
+                is_grasped=grasped[i, :k].tolist() if "is_grasped" in ep["info"] else None,
             )
         )
     return report
@@ -251,8 +305,9 @@ def _parser() -> argparse.ArgumentParser:
 
     p = argparse.ArgumentParser(
         prog="wpctrl replay",
-        description="Replay ManiSkill's recorded PushCube-v1 / PickCube-v1 episodes open-loop on Newton and compare "
-        "success and the cube's trajectory with ManiSkill's.",
+        description="Replay ManiSkill's recorded episodes (its recordings, trajectory files and motion-planning demos "
+        f"of {' / '.join(TASK_IDS)}) open-loop on Newton and compare success and the main object's trajectory with "
+        "ManiSkill's.",
     )
     p.add_argument("episodes", nargs="+", help="episode files (ManiSkill's recording format: JSON, or .json.gz; or "
                    "ManiSkill's trajectory files: X.h5 with its X.json)")  # fmt: skip
@@ -276,9 +331,9 @@ def main(argv=None) -> int:
         return _refuse(why)
     try:  # every file read and checked before anything heavy is imported
         recordings = []
-        for path in args.episodes:  # a file's episodes of different lengths: one recording per length
+        for path in args.episodes:  # a file's episodes of different lengths step together, each read to its end
             data, where = _load(path)
-            recordings += [(path, _checked(part, where)) for part in trajectory.by_length(data)]
+            recordings.append((path, _checked(data, where)))
     except (ConfigError, FileNotFoundError) as e:
         return _refuse(str(e))
     cli_output(args.verbose)
@@ -291,14 +346,14 @@ def main(argv=None) -> int:
     reports = []
     for path, data in recordings:
         header, n = data["header"], len(data["episodes"])
+        steps = max(len(ep["actions"]) for ep in data["episodes"])
         with compile_notice(f"Warp kernels for {header['task']} on {args.device}"):
             from .factory import make
 
             env = make(header["task"], num_envs=n, device=args.device, control_mode=header["control_mode"],
                        auto_reset=False, ignore_terminations=True, asset_dir=args.asset_dir,
-                       verbose=args.verbose)  # fmt: skip
-        bar = progress(len(data["episodes"][0]["actions"]), f"{Path(path).name} ({n} episodes)", "step",
-                       args.progress)  # fmt: skip
+                       verbose=args.verbose, max_episode_steps=_max_steps(header["task"], steps))  # fmt: skip
+        bar = progress(steps, f"{Path(path).name} ({n} episodes)", "step", args.progress)
         try:
             report = replay(data, env=env, progress=bar)
         except ConfigError as e:

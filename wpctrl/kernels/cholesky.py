@@ -1,12 +1,12 @@
-"""The Cholesky solves of the kernels: symmetric positive definite systems of a size fixed at compile time.
+"""The one Cholesky of the kernels: symmetric positive definite systems of a size fixed at compile time.
 
-Private module. :func:`spd_solve` compiles the solve of the EE kernels' small systems (``J J^T + λ I``, ``J^T J + λ I``:
-:mod:`.ee_math`) for a size and scalar type. :func:`cholesky_funcs` compiles the float64 factorisation of an
-articulation's n x n joint-space inertia, and the controlled rows' block of its inverse, for the fused kernels
-(:mod:`.inertia_unrolled`, :mod:`.coupled_drive`, :mod:`wpctrl.impedance.warp_kernels`): sizes and the rows' DOFs are
-compile-time constants, every loop unrolled, so the matrices stay in registers on CUDA. Its pivots are floored as in
-Newton's ``JointSpaceResponse`` and come from a refined float32 reciprocal square root: no IEEE float64 division or
-square root, whose slow-path branches serialise a one-thread-per-env kernel.
+Private module. :func:`factorisation` compiles ``M = L L^T`` and its solve for a size and scalar type, every loop
+unrolled so the matrices stay in registers on CUDA, with one of two pivot rules. The EE kernels' small systems
+(``J J^T + λ I``, ``J^T J + λ I``: :mod:`.ee_math`, through :func:`spd_solve`) take IEEE square roots and
+divisions in float32. The articulation's n x n joint-space inertia and the controlled rows' block of its inverse
+(:func:`cholesky_funcs`, for :mod:`.inertia_unrolled`, :mod:`.coupled_drive`, :mod:`wpctrl.impedance.warp_kernels`)
+take float64 pivots floored as in Newton's ``JointSpaceResponse``, from a refined float32 reciprocal square root: no
+IEEE float64 division or square root, whose slow-path branches serialise a one-thread-per-env kernel.
 """
 
 import warp as wp
@@ -27,49 +27,100 @@ def _rsqrt(x: wp.float64):
 
 
 _cache: dict[tuple, tuple] = {}
+_factor_cache: dict[tuple, tuple] = {}
 _solve_cache: dict[tuple, wp.Function] = {}
 
 
+def factorisation(n: int, dtype=wp.float64, ieee: bool = False) -> tuple:
+    """``(factor, solve)``, the one Cholesky of the kernels, for an n x n symmetric positive definite matrix of
+    ``dtype``, every loop unrolled:
+
+    - ``factor(M)``: ``M = L L^T`` (L in M's lower triangle, in place; the upper one is left as it was); returns L and
+      the pivots' reciprocals;
+    - ``solve(L, inv, x)``: ``(L L^T)^-1 x``.
+
+    Two pivot rules: ``ieee`` (the EE solves, float32): ``sqrt(max(s, 1e-30))`` and divisions by the pivot; else
+    (the joint-space inertia, float64 only): pivots floored at float32's epsilon relative to the diagonal, as Newton's
+    ``JointSpaceResponse`` floors them, and multiplications by a refined reciprocal square root.
+    """
+    key = (n, dtype, ieee)
+    if key in _factor_cache:
+        return _factor_cache[key]
+    if not ieee and dtype is not wp.float64:
+        raise TypeError("the refined reciprocal square root pivots are float64 only")
+    N = n
+    Mat = wp.types.matrix(shape=(n, n), dtype=dtype)
+    Vec = wp.types.vector(length=n, dtype=dtype)
+    floor = dtype(1.0e-30)
+    eps32 = dtype(_FLOAT32_EPS)
+    one = dtype(1.0)
+
+    @wp.func
+    def factor(M: Mat):
+        inv = Vec()
+        for jc in range(wp.static(N)):
+            s = M[jc, jc]
+            for k in range(wp.static(jc)):
+                s -= M[jc, k] * M[jc, k]
+            if wp.static(ieee):
+                M[jc, jc] = wp.sqrt(wp.max(s, floor))
+                inv[jc] = one / M[jc, jc]
+            else:
+                s = wp.max(s, eps32 * wp.max(wp.abs(M[jc, jc]), one))
+                y = _rsqrt(s)
+                M[jc, jc] = s * y
+                inv[jc] = y
+            for i in range(wp.static(jc + 1), wp.static(N)):
+                t = M[i, jc]
+                for k in range(wp.static(jc)):
+                    t -= M[i, k] * M[jc, k]
+                if wp.static(ieee):
+                    M[i, jc] = t / M[jc, jc]
+                else:
+                    M[i, jc] = t * inv[jc]
+        return M, inv
+
+    @wp.func
+    def solve(L: Mat, inv: Vec, x: Vec):
+        y = Vec()
+        for i in range(wp.static(N)):
+            t = x[i]
+            for k in range(wp.static(i)):
+                t -= L[i, k] * y[k]
+            if wp.static(ieee):
+                y[i] = t / L[i, i]
+            else:
+                y[i] = t * inv[i]
+        z = Vec()
+        for ii in range(wp.static(N)):
+            i = wp.static(N - 1 - ii)
+            t = y[i]
+            for k in range(wp.static(i + 1), wp.static(N)):
+                t -= L[k, i] * z[k]
+            if wp.static(ieee):
+                z[i] = t / L[i, i]
+            else:
+                z[i] = t * inv[i]
+        return z
+
+    _factor_cache[key] = (factor, solve)
+    return factor, solve
+
+
 def spd_solve(n: int, dtype=wp.float32) -> wp.Function:
-    """``solve(a, b)``: x with ``a x = b`` for a symmetric positive definite n x n ``a`` of ``dtype`` (``L L^T``
-    in IEEE square roots and divisions, pivots floored at 1e-30)."""
+    """``solve(a, b)``: x with ``a x = b`` for a symmetric positive definite n x n ``a`` of ``dtype``
+    (:func:`factorisation` with IEEE pivots)."""
     key = (n, dtype)
     if key in _solve_cache:
         return _solve_cache[key]
-    N = n
+    factor, solve_l = factorisation(n, dtype, ieee=True)
     Mat = wp.types.matrix(shape=(n, n), dtype=dtype)
     Vec = wp.types.vector(length=n, dtype=dtype)
 
     @wp.func
     def solve(a: Mat, b: Vec):
-        lo = Mat()
-        for i in range(N):
-            for j in range(N):
-                if j <= i:
-                    s = a[i, j]
-                    for k in range(N):
-                        if k < j:
-                            s -= lo[i, k] * lo[j, k]
-                    if i == j:
-                        lo[i, i] = wp.sqrt(wp.max(s, dtype(1.0e-30)))
-                    else:
-                        lo[i, j] = s / lo[j, j]
-        y = Vec()
-        for i in range(N):
-            s = b[i]
-            for k in range(N):
-                if k < i:
-                    s -= lo[i, k] * y[k]
-            y[i] = s / lo[i, i]
-        x = Vec()
-        for ii in range(N):
-            i = N - 1 - ii
-            s = y[i]
-            for k in range(N):
-                if k > i:
-                    s -= lo[k, i] * x[k]
-            x[i] = s / lo[i, i]
-        return x
+        lo, inv = factor(a)
+        return solve_l(lo, inv, b)
 
     _solve_cache[key] = solve
     return solve
@@ -78,8 +129,7 @@ def spd_solve(n: int, dtype=wp.float32) -> wp.Function:
 def cholesky_funcs(n: int, row_dof: tuple) -> tuple:
     """``(factor, solve, inverse_block, inverse_diag)`` for n DOFs and the controlled rows at the DOFs ``row_dof``:
 
-    - ``factor(M)``: ``M = L L^T`` (lower triangle, in place); returns L and the pivots' reciprocals;
-    - ``solve(L, inv, x)``: ``(L L^T)^-1 x``;
+    - ``factor(M)``, ``solve(L, inv, x)``: :func:`factorisation` in float64;
     - ``inverse_block(H)``: ``A = S H^-1 S^T`` (rows x rows), H's lower triangle read;
     - ``inverse_diag(H)``: the same with only its diagonal filled.
     """
@@ -89,45 +139,9 @@ def cholesky_funcs(n: int, row_dof: tuple) -> tuple:
         return _cache[key]
     N, NR = n, len(ROWD)
     MatN = wp.types.matrix(shape=(n, n), dtype=wp.float64)
-    VecN = wp.types.vector(length=n, dtype=wp.float64)
     MatRN = wp.types.matrix(shape=(NR, n), dtype=wp.float64)
     MatR = wp.types.matrix(shape=(NR, NR), dtype=wp.float64)
-    eps32 = wp.float64(_FLOAT32_EPS)
-
-    @wp.func
-    def factor(M: MatN):
-        inv = VecN()
-        for jc in range(wp.static(N)):
-            s = M[jc, jc]
-            for k in range(wp.static(jc)):
-                s -= M[jc, k] * M[jc, k]
-            s = wp.max(s, eps32 * wp.max(wp.abs(M[jc, jc]), wp.float64(1.0)))
-            y = _rsqrt(s)
-            M[jc, jc] = s * y
-            inv[jc] = y
-            for i in range(wp.static(jc + 1), wp.static(N)):
-                t = M[i, jc]
-                for k in range(wp.static(jc)):
-                    t -= M[i, k] * M[jc, k]
-                M[i, jc] = t * inv[jc]
-        return M, inv
-
-    @wp.func
-    def solve(L: MatN, inv: VecN, x: VecN):
-        y = VecN()
-        for i in range(wp.static(N)):
-            t = x[i]
-            for k in range(wp.static(i)):
-                t -= L[i, k] * y[k]
-            y[i] = t * inv[i]
-        z = VecN()
-        for ii in range(wp.static(N)):
-            i = wp.static(N - 1 - ii)
-            t = y[i]
-            for k in range(wp.static(i + 1), wp.static(N)):
-                t -= L[k, i] * z[k]
-            z[i] = t * inv[i]
-        return z
+    factor, solve = factorisation(n, wp.float64)
 
     @wp.func
     def rows_y(H: MatN):

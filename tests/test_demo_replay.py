@@ -142,8 +142,23 @@ def assert_demo_replays(path: Path):
     return report
 
 
+# With the default physics the fingers hold LiftPegUpright's peg against a twist PhysX lets it turn under (measured in
+# tests/test_task_lift_peg_upright.py and docs/tasks.md): its demos miss the goals until the contact model changes.
+_DEFAULT_PHYSICS_MISSES = {"LiftPegUpright-v1": "the fingers resist the peg's twist (0.56 N·m against PhysX's 0.33)"}
+_DEMO_PARAMS = [
+    pytest.param(
+        p,
+        id=p.name.split("__")[0],
+        marks=[pytest.mark.xfail(strict=True, reason=_DEFAULT_PHYSICS_MISSES[p.name.split("__")[0]])]
+        if p.name.split("__")[0] in _DEFAULT_PHYSICS_MISSES
+        else [],
+    )
+    for p in DEMO_FILES
+]
+
+
 @pytest.mark.slow  # each file builds an env and replays 60-200 steps (15-60 s on a 2-core CPU)
-@pytest.mark.parametrize("path", DEMO_FILES, ids=[p.name.split("__")[0] for p in DEMO_FILES])
+@pytest.mark.parametrize("path", _DEMO_PARAMS)
 def test_maniskills_motion_planning_demos_replay_to_their_outcome(path):
     """Every demo file of a registered task: ManiSkill's successes kept (>= 90 %), the main object's final position
     within 1 cm (2 cm for a peg) of PhysX's in the median; a task wpctrl does not build yet is skipped by name."""

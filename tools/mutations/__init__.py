@@ -34,6 +34,7 @@ AREAS = (
     "lift_peg_upright",
     "stack_cube",
     "pull_cube",
+    "layout",
 )
 """The areas, in the order the runner takes them."""
 

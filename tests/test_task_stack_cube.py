@@ -24,11 +24,11 @@ import pytest
 torch = pytest.importorskip("torch")
 scipy_stats = pytest.importorskip("scipy.stats")
 
-import warp as wp  # noqa: E402
 
 import wpctrl  # noqa: E402
 import wpctrl.tasks as T  # noqa: E402
 from wpctrl.tasks.definitions import PANDA_REST_QPOS  # noqa: E402
+from task_probes import finger_axes, write_finger_forces  # noqa: E402
 
 ENV_ID = "StackCube-v1"
 DEMOS = Path("/work/shared/tasks/StackCube-v1__pd_joint_pos.json.gz")
@@ -103,26 +103,6 @@ def ref_obs(state, tcp_pose):
 
 
 # -- Newton-side helpers -------------------------------------------------------------------------------------------
-
-
-def finger_axes(env) -> np.ndarray:
-    """(N, 2, 3) the fingers' opening directions: +y of the left finger, -y of the right one (world frame)."""
-    from scipy.spatial.transform import Rotation
-
-    sc = env.scene
-    body_q = env.state.body_q.numpy().reshape(env.num_envs, sc.bodies_per_env, 7)
-    out = np.zeros((env.num_envs, 2, 3))
-    for f, sign in ((0, 1.0), (1, -1.0)):
-        out[:, f] = sign * Rotation.from_quat(body_q[:, sc.finger_bodies0[f], 3:7]).apply([0.0, 1.0, 0.0])
-    return out
-
-
-def write_finger_forces(env, forces: np.ndarray) -> None:
-    """Put (N, 2, 3) contact forces from cube A on the fingers into the sensor's matrix (column 0: cube A)."""
-    fm = env._sensor.force_matrix
-    values = fm.numpy()
-    values[:, 0] = forces.reshape(2 * env.num_envs, 3)
-    fm.assign(wp.array(values, dtype=wp.vec3, device=fm.device))
 
 
 def tcp_pose(env) -> np.ndarray:  # checked against ManiSkill's in the side-by-side test

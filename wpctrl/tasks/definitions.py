@@ -90,8 +90,10 @@ class Capsule:
 
 @dataclass(frozen=True)
 class Actor:
-    """A free rigid body of a task (ManiSkill's ``build_dynamic`` actor): its state-dict name, its collision shapes
-    in its own frame, their density and PhysX static friction (None: the scene default, 0.3)."""
+    """A rigid body of a task (ManiSkill's ``build_dynamic`` actor, or ``build_kinematic`` with ``kinematic``): its
+    state-dict name, its collision shapes in its own frame, their density and PhysX static friction (None: the scene
+    default, 0.3). A task whose shapes depend on the episode (:meth:`~wpctrl.tasks.registry.Task.episode_shapes`)
+    declares the shapes it is built with here, the same count and kinds."""
 
     name: str
     shapes: tuple[Box | Capsule, ...]
@@ -99,6 +101,10 @@ class Actor:
     static_friction: float | None = None
     build_height: float = 0.0
     """z [m] the body is built at (the episode initialisation places it; at rest on the table reads best)."""
+    kinematic: bool = False
+    """ManiSkill's ``build_kinematic`` actor: it collides but never moves on its own (no mass, no gravity, pushed by
+    nothing); the episode initialisation or a state dict places it. On Newton a massless kinematic root body, which
+    MuJoCo-Warp drives as a mocap body; its state-dict velocities are zero."""
 
 
 @dataclass(frozen=True)

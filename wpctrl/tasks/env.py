@@ -16,8 +16,9 @@ import newton
 import numpy as np
 import warp as wp
 
-from .definitions import PANDA_REST_QPOS, ROBOT_INIT_QPOS_NOISE
+from .definitions import ROBOT_INIT_QPOS_NOISE
 from .funcs import Sim
+from .geometry import GEOMETRY_FLAGS, apply_episode_geometry
 from .kernels import episode_kernel, task_kernels
 from .physics import TaskPhysics
 from .registry import Task
@@ -27,7 +28,7 @@ from .state_dict import StateDictMixin
 __all__ = ["RESET_OPTIONS", "REWARD_MODES", "TaskEnv"]
 
 REWARD_MODES = ("normalized_dense", "dense", "sparse", "none")
-RESET_OPTIONS = ("env_idx",)
+RESET_OPTIONS = ("env_idx", "reconfigure")
 """The keys :meth:`TaskEnv.reset` takes in ``options``."""
 _REWARD_CODE = {"dense": 0, "normalized_dense": 1, "sparse": 2, "none": 3}
 
@@ -58,6 +59,7 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
         asset_dir: str | None,
         graph: bool | None,
         max_episode_steps: int | None = None,
+        reconfiguration_freq: int | None = None,
     ):
         import torch
 
@@ -86,6 +88,14 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
 
         self.scene = sc = build_scene(task, n, dev, physics, asset_dir)
         self.model = model = sc.model
+        seeds = episode_seeds(seed, n)
+        self.reconfiguration_freq = int(task.reconfiguration_freq(n) if reconfiguration_freq is None
+                                        else reconfiguration_freq)  # fmt: skip
+        """Every how many :meth:`reset` calls the scene is drawn again (ManiSkill's ``reconfiguration_freq``)."""
+        self._reconfig_counter = max(self.reconfiguration_freq - 1, 0)  # the build drew the first scene
+        self.episode_params = task.draw_episode_params(seeds)
+        """(num_envs, len(task.episode_params)) the numbers each env's scene was drawn with (host copy)."""
+        apply_episode_geometry(sc, task, self.episode_params)
         mode = panda_control_modes()[control_mode]
         if controller_semantics == "physx_cpu":  # SAPIEN's CLIK, as ManiSkill's EE controllers on its CPU sim
             for cfg in mode.values():
@@ -111,8 +121,9 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
         self.marker_pos = z(wp.vec3, n, m)
         quats = [mk.quat for mk in task.markers] + [(1.0, 0.0, 0.0, 0.0)] * (m - len(task.markers))
         self.marker_quat = wp.array(np.tile(np.asarray(quats, np.float32), (n, 1, 1)), dtype=wp.vec4, device=dev)
-        self.rest_qpos = wp.array(np.asarray(PANDA_REST_QPOS, np.float32), dtype=wp.float32, device=dev)
-        self.seed_buf = wp.array(episode_seeds(seed, n), dtype=wp.int32, device=dev)
+        self.rest_qpos = wp.array(np.asarray(task.rest_qpos, np.float32), dtype=wp.float32, device=dev)
+        self.param_buf = wp.array(_param_rows(self.episode_params), dtype=wp.float32, device=dev)
+        self.seed_buf = wp.array(seeds, dtype=wp.int32, device=dev)
         """(num_envs,) each env's episode seed (:meth:`reset`)."""
         self.reset_count = z(wp.int32, n)
         self.elapsed = z(wp.int32, n)
@@ -181,7 +192,7 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
         S.actor_q0, S.actor_qd0, S.actor_body0 = index(sc.actor_coord0), index(sc.actor_dof0), index(sc.actor_body0)
         S.joint_q, S.joint_qd, S.body_q = self.state.joint_q, self.state.joint_qd, self.state.body_q
         S.finger_force, S.marker_pos, S.marker_quat = finger_force, self.marker_pos, self.marker_quat
-        S.info = self.info_buf
+        S.info, S.param = self.info_buf, self.param_buf
         return S
 
     def _torch_views(self) -> dict:
@@ -308,13 +319,26 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
         count of its episodes since that seed): an env seeded ``s`` starts the same episode whichever env it is and
         whatever the other envs' seeds are, as a ManiSkill env seeded ``s`` does. The draws are not ManiSkill's
         numbers (its ``torch.rand`` stream is not reproduced), only its distribution (``tests/test_tasks_envs.py``).
-        Without a seed, each env draws its next episode from its seed's stream."""
+        Without a seed, each env draws its next episode from its seed's stream.
+
+        ``options["reconfigure"]`` (or every ``reconfiguration_freq``-th reset, ManiSkill's default for the task: for
+        PegInsertionSide-v1 every reset of a single env) draws every env's scene again from its episode seed, as
+        ManiSkill's ``_load_scene`` does (a task whose geometry comes from the seed: ``Task.episode_params``); a partial
+        reset cannot reconfigure."""
         from ._validate import env_mask, reset_options, seed_value
 
         options = reset_options(options, RESET_OPTIONS)
         mask = self._all
+        reconfigure = bool(options.get("reconfigure", False)) or (
+            self._reconfig_counter == 0 and self.reconfiguration_freq != 0
+        )
         if options.get("env_idx") is not None:
             mask = env_mask(options["env_idx"], self.num_envs, self.wp_device)
+            if reconfigure and not mask.numpy().all():
+                from ..config import ConfigError
+
+                raise ConfigError("reset: options['reconfigure'] draws every env's scene again and cannot go with a "
+                                  "partial reset (options['env_idx'] selects some envs only), as in ManiSkill")  # fmt: skip
         if seed is not None:
             if _is_sequence(seed):
                 chosen = mask.numpy()
@@ -325,8 +349,26 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
             else:
                 self.seed_buf.assign(episode_seeds(seed_value(seed), self.num_envs))
                 self.reset_count.zero_()
+        if reconfigure:
+            self._reconfigure(fresh=seed is None)
+        if self.reconfiguration_freq != 0:  # ManiSkill's counter: freq after a reconfiguration, then one less per reset
+            self._reconfig_counter = (self.reconfiguration_freq if reconfigure else self._reconfig_counter) - 1
         self._reset_envs(mask)
         return self._format_obs(self._t["obs"].clone()), self._info(final=False)
+
+    def _reconfigure(self, fresh: bool) -> None:
+        """Draw every env's scene again from its episode seed (``fresh``: first give each env a new seed drawn from
+        its current one, as ManiSkill draws one from its main RNG when reconfiguring without a seed), resize the
+        worlds' shapes and tell the solver. Auto resets inside :meth:`step` never reconfigure (nor do ManiSkill's)."""
+        if fresh:
+            old = self.seed_buf.numpy().astype(np.int64) + self.reset_count.numpy()
+            self.seed_buf.assign(np.array([np.random.RandomState(s % 2**31).randint(2**31) for s in old], np.int32))
+            self.reset_count.zero_()
+        params = self.task_spec.draw_episode_params(self.seed_buf.numpy())
+        if apply_episode_geometry(self.scene, self.task_spec, params):
+            self.solver.notify_model_changed(GEOMETRY_FLAGS)
+        self.episode_params = params
+        self.param_buf.assign(_param_rows(params))
 
     def step(self, action):
         """One control step of every env (finished envs are reset inside it when ``auto_reset``)."""
@@ -365,6 +407,12 @@ def episode_seeds(seed: int, num_envs: int) -> np.ndarray:
     size=num_envs - 1)``."""
     rest = np.random.RandomState(int(seed)).randint(2**31, size=num_envs - 1) if num_envs > 1 else []
     return np.asarray([int(seed), *rest], np.int32)
+
+
+def _param_rows(params: np.ndarray) -> np.ndarray:
+    """The episode parameters as the device's (num_envs, >= 1) float32 rows (a zero column for a task without any)."""
+    p = np.asarray(params, np.float32)
+    return p if p.shape[1] else np.zeros((p.shape[0], 1), np.float32)
 
 
 def _is_sequence(seed) -> bool:

@@ -30,6 +30,7 @@ def make(
     graph: bool | None = None,
     verbose: bool = False,
     max_episode_steps: int | None = None,
+    reconfiguration_freq: int | None = None,
 ):
     """A ManiSkill task on Newton (:class:`~wpctrl.tasks.env.TaskEnv`), ``num_envs`` copies on ``device``.
 
@@ -56,6 +57,9 @@ def make(
         max_episode_steps: The episodes' time limit in control steps (default: the task's registered one, e.g. 50
             for PushCube-v1), as ``gym.make(env_id, max_episode_steps=N)`` overrides it for ManiSkill's envs:
             ``truncated`` turns True at step N. A positive int.
+        reconfiguration_freq: Every how many :meth:`~wpctrl.tasks.env.TaskEnv.reset` calls the scene is drawn again
+            from the episode seeds (ManiSkill's argument; None: the task's default, as ManiSkill's: 1 for
+            PegInsertionSide-v1 with one env, else 0, never). Only tasks whose geometry comes from the seed change.
         verbose: Let Warp print what it does while the env is built: its start-up banner and a
             ``Module ... load on device ...`` line per kernel module. By default (``False``) ``make`` prints nothing:
             for the duration of the call it raises ``warp.config.log_level`` to ``warp.LOG_WARNING`` (and puts your
@@ -87,6 +91,10 @@ def make(
                                           or max_episode_steps < 1):  # fmt: skip
         raise ConfigError(f"make: max_episode_steps expected a positive int (or None: the task's "
                           f"{TASKS[env_id].max_episode_steps}), got {max_episode_steps!r}")  # fmt: skip
+    if reconfiguration_freq is not None and (isinstance(reconfiguration_freq, bool)
+                                             or not isinstance(reconfiguration_freq, int) or reconfiguration_freq < 0):
+        raise ConfigError(f"make: reconfiguration_freq expected an int >= 0 (or None: the task's default), got "
+                          f"{reconfiguration_freq!r}")  # fmt: skip
     if physics is None:
         physics = TaskPhysics()
     elif not isinstance(physics, TaskPhysics):
@@ -104,6 +112,6 @@ def make(
     with quiet_warp(verbose):  # the banner, the CUDA-driver line and the module-load lines: only when asked for
         device = check_device(device, "make: device")
         options = (bool(auto_reset), bool(ignore_terminations), physics, controller_semantics, asset_dir, graph,
-                   max_episode_steps)  # fmt: skip
+                   max_episode_steps, reconfiguration_freq)  # fmt: skip
         return TaskEnv(TASKS[env_id], num_envs, device, control_mode, obs_mode, reward_mode, seed_value(seed),
                        *options)  # fmt: skip

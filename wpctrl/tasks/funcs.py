@@ -64,6 +64,8 @@ class Sim:
     """(num_envs, markers) their orientations, wxyz."""
     info: wp.array2d[wp.bool]
     """(num_envs, 1 + len(info_keys)): ``evaluate()``'s flags, ``success`` first, then the task's ``info_keys``."""
+    param: wp.array2d[float]
+    """(num_envs, len(episode_params)) the numbers each env's scene was drawn with (a column of zeros without any)."""
 
 
 @wp.func
@@ -205,23 +207,36 @@ def arm_speed(s: Sim, e: int) -> float:
 
 
 @wp.func
-def _finger_grasps(force: wp.vec3, direction: wp.vec3) -> bool:
+def _finger_grasps(force: wp.vec3, direction: wp.vec3, cos_max_angle: float) -> bool:
     """One finger of ``Panda.is_grasping``: ||f|| >= min force and angle(direction, f) <= max angle."""
     f = wp.length(force)
     if f < wp.static(GRASP_MIN_FORCE):
         return False
-    return wp.dot(direction, force) >= wp.static(_GRASP_COS) * f * wp.length(direction)
+    return wp.dot(direction, force) >= cos_max_angle * f * wp.length(direction)
+
+
+@wp.func
+def is_grasping_within(s: Sim, e: int, j: int, cos_max_angle: float) -> bool:
+    """``Panda.is_grasping(actor, max_angle=a)`` for contact actor j, ``cos_max_angle = cos(a)``: both fingers push it
+    with at least the minimum force, within ``a`` of their opening directions (+y of the left finger, -y of the right
+    one)."""
+    lf = wp.transform_get_rotation(s.body_q[s.lfinger_body0 + e * s.nb])
+    rf = wp.transform_get_rotation(s.body_q[s.rfinger_body0 + e * s.nb])
+    lflag = _finger_grasps(s.finger_force[2 * e, j], wp.quat_rotate(lf, wp.vec3(0.0, 1.0, 0.0)), cos_max_angle)
+    rflag = _finger_grasps(s.finger_force[2 * e + 1, j], -wp.quat_rotate(rf, wp.vec3(0.0, 1.0, 0.0)), cos_max_angle)
+    return lflag and rflag
 
 
 @wp.func
 def is_grasping(s: Sim, e: int, j: int) -> bool:
-    """``Panda.is_grasping(actor)`` for contact actor j: both fingers push it along their opening directions (+y of
-    the left finger, -y of the right one)."""
-    lf = wp.transform_get_rotation(s.body_q[s.lfinger_body0 + e * s.nb])
-    rf = wp.transform_get_rotation(s.body_q[s.rfinger_body0 + e * s.nb])
-    lflag = _finger_grasps(s.finger_force[2 * e, j], wp.quat_rotate(lf, wp.vec3(0.0, 1.0, 0.0)))
-    rflag = _finger_grasps(s.finger_force[2 * e + 1, j], -wp.quat_rotate(rf, wp.vec3(0.0, 1.0, 0.0)))
-    return lflag and rflag
+    """``Panda.is_grasping(actor)`` for contact actor j, at its default ``max_angle`` (85 degrees)."""
+    return is_grasping_within(s, e, j, wp.static(_GRASP_COS))
+
+
+@wp.func
+def param(s: Sim, e: int, k: int) -> float:
+    """Env e's k-th episode parameter (the task's ``episode_params[k]``)."""
+    return s.param[e, k]
 
 
 @wp.func

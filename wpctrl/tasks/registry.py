@@ -16,8 +16,10 @@ from __future__ import annotations
 import importlib
 from collections.abc import Iterator, Mapping
 
+import numpy as np
+
 from ..config import ConfigError
-from .definitions import PANDA_DOF, Actor, Marker, ObsField
+from .definitions import PANDA_DOF, PANDA_REST_QPOS, Actor, Box, Marker, ObsField
 from .names import TASK_MODULES
 
 __all__ = ["TASKS", "Task", "get_task", "register_task"]
@@ -51,6 +53,29 @@ class Task:
     """``@wp.func (Sim, env)``: write ``success`` and the ``info_keys`` flags into ``sim.info[env]``."""
     dense_reward = None
     """``@wp.func (Sim, env) -> float``: ``compute_dense_reward`` before success sets it to ``max_reward``."""
+    rest_qpos: tuple[float, ...] = PANDA_REST_QPOS
+    """The Panda's qpos before the initialisation noise (``TableSceneBuilder.initialize``'s, unless the task's
+    ``_initialize_episode`` sets its own)."""
+
+    # -- a scene drawn from the seed (ManiSkill's ``_load_scene`` with ``_batched_episode_rng``) ----------------------
+    episode_params: tuple[str, ...] = ()
+    """Names of the per-env numbers a task draws when its scene is (re)configured, ManiSkill's ``_load_scene`` draws
+    from ``_batched_episode_rng``; the device functions read them with ``funcs.param(sim, env, k)``."""
+
+    def draw_episode_params(self, seeds: np.ndarray) -> np.ndarray:
+        """(num_envs, len(episode_params)) float64: each env's numbers, drawn from its own episode seed as ManiSkill's
+        ``_batched_episode_rng`` (one ``np.random.RandomState(seed)`` per env) draws them."""
+        return np.zeros((len(seeds), len(self.episode_params)))
+
+    def episode_shapes(self, params: np.ndarray) -> dict[str, tuple[Box, ...]]:
+        """The collision shapes of the actors whose geometry follows one env's ``params`` (by actor name; the same
+        count and kinds as the declared ones). Empty: every env keeps the declared shapes."""
+        return {}
+
+    def reconfiguration_freq(self, num_envs: int) -> int:
+        """ManiSkill's default ``reconfiguration_freq`` for ``num_envs``: every how many ``reset()`` calls the scene is
+        drawn again (0: only when asked, ``options={"reconfigure": True}``)."""
+        return 0
 
     @property
     def obs_fields(self) -> tuple[ObsField, ...]:
@@ -116,6 +141,8 @@ def _check(cls: type[Task]) -> None:
     order = [a.name for a in cls.actors if isinstance(a, Actor) and a.name in cls.contact_actors]
     if list(cls.contact_actors) != order:  # the contact sensor's columns follow the bodies' order in each world
         raise ConfigError(f"{where}: contact_actors must be distinct and in the actors' declared order: {order}")
+    if len(cls.rest_qpos) != PANDA_DOF:
+        raise ConfigError(f"{where}: rest_qpos expected {PANDA_DOF} values (the Panda's qpos), got {len(cls.rest_qpos)}")
     for hook in ("initialize", "evaluate", "dense_reward"):
         if getattr(cls, hook) is None:
             raise ConfigError(f"{where}: no {hook} device function")

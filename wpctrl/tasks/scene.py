@@ -86,6 +86,9 @@ class Scene:
     actor_dof0: dict[str, int]
     """Env 0's free joint of each task actor: 6 DOFs (linear, angular velocity, world frame)."""
     actor_body0: dict[str, int]
+    actor_shapes0: dict[str, tuple[int, ...]]
+    """Env 0's collision shapes of each task actor, in its declared order."""
+    shapes_per_env: int
     tcp_body0: int
     finger_bodies0: tuple[int, int]
     shape_mu: dict[str, float]
@@ -133,8 +136,11 @@ def build_scene(task: Task, num_envs: int, device, physics: TaskPhysics, asset_d
                       hz=TABLE.half_size[2], cfg=static, label=TABLE.name)  # fmt: skip
     env.add_shape_plane(-1, xform=wp.transform(wp.vec3(0.0, 0.0, -TABLE.height), wp.quat_identity()),
                         width=0.0, length=0.0, cfg=static, label="ground")  # fmt: skip
+    shapes0 = {}
     for actor in task.bodies:
+        first = env.shape_count
         _add_actor(env, actor, mu.get(actor.name, mu["default"]))
+        shapes0[actor.name] = tuple(range(first, env.shape_count))
     n_shapes = env.shape_count
 
     builder = newton.ModelBuilder()
@@ -160,6 +166,8 @@ def build_scene(task: Task, num_envs: int, device, physics: TaskPhysics, asset_d
         actor_coord0={name: int(jq[j]) for name, j in free.items()},
         actor_dof0={name: int(jqd[j]) for name, j in free.items()},
         actor_body0={a.name: labels.index(a.name) for a in task.bodies},
+        actor_shapes0=shapes0,
+        shapes_per_env=n_shapes,
         tcp_body0=labels.index(TCP_LINK),
         finger_bodies0=(labels.index(FINGER_LINKS[0]), labels.index(FINGER_LINKS[1])),
         shape_mu=mu,
@@ -169,10 +177,12 @@ def build_scene(task: Task, num_envs: int, device, physics: TaskPhysics, asset_d
 
 
 def _add_actor(env: newton.ModelBuilder, actor: Actor, mu: float) -> None:
-    """One free body with the actor's collision shapes (its mass and inertia from their density)."""
+    """One free body with the actor's collision shapes (its mass and inertia from their density); a kinematic actor
+    is massless and flagged kinematic (MuJoCo-Warp drives it as a mocap body, posed from its free joint)."""
     body = env.add_body(xform=wp.transform(wp.vec3(0.0, 0.0, actor.build_height), wp.quat_identity()),
-                        label=actor.name)  # fmt: skip
-    cfg = newton.ModelBuilder.ShapeConfig(mu=mu, restitution=0.0, density=actor.density)
+                        label=actor.name, is_kinematic=actor.kinematic)  # fmt: skip
+    density = 0.0 if actor.kinematic else actor.density
+    cfg = newton.ModelBuilder.ShapeConfig(mu=mu, restitution=0.0, density=density)
     for shape in actor.shapes:
         q = shape.quat
         xform = wp.transform(wp.vec3(*shape.offset), wp.quat(q[1], q[2], q[3], q[0]))

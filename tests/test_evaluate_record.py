@@ -159,10 +159,12 @@ def test_wpctrl_replay_runs_the_recording_on_newton(recorded, tmp_path, capsys):
         assert got["seed"] == ep["seed"] and got["success_recorded"] == ep["info"]["success"][1:]
         assert len(got["cube_error"]) == 50 and all(np.isfinite(got["cube_error"]))
     # a recording of another task than the env the replay was given
-    env = make(TASK, num_envs=2, control_mode=MODE, auto_reset=False, ignore_terminations=True)
+    env = make(TASK, num_envs=3, control_mode=MODE, auto_reset=False, ignore_terminations=True)
     other = {**recorded["data"], "header": {**recorded["data"]["header"], "task": "PushCube-v1"}}
-    with pytest.raises(ConfigError, match=f"env is {TASK} / {MODE} / 2 envs, the file PushCube-v1 / {MODE}"):
+    with pytest.raises(ConfigError, match=r"init_state_dict\.actors\['goal_site'\] is not part of PushCube-v1"):
         replay(other, env=env)
+    with pytest.raises(ConfigError, match=f"env is {TASK} / {MODE} / 3 envs, the file {TASK} / {MODE} / 2 episodes"):
+        replay(recorded["data"], env=env)
     env.close()
 
 

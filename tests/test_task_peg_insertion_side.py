@@ -20,8 +20,9 @@ torch = pytest.importorskip("torch")
 scipy_stats = pytest.importorskip("scipy.stats")
 Rotation = pytest.importorskip("scipy.spatial.transform").Rotation
 
-import wpctrl.tasks as T  # noqa: E402
 from task_probes import finger_axes, write_finger_forces  # noqa: E402
+
+import wpctrl.tasks as T  # noqa: E402
 from wpctrl.config import ConfigError  # noqa: E402
 from wpctrl.tasks import peg_insertion_side as P  # noqa: E402
 
@@ -39,7 +40,8 @@ def _demos() -> dict:
 
 def _state(ep: dict, k: int | None = None) -> dict:
     """The episode's initial state dict, or (``k``) the recorded state after k steps (peg, qpos, qvel)."""
-    st = {g: {n: torch.tensor([v], dtype=torch.float32) for n, v in d.items()} for g, d in ep["init_state_dict"].items()}
+    init = ep["init_state_dict"]
+    st = {g: {n: torch.tensor([v], dtype=torch.float32) for n, v in d.items()} for g, d in init.items()}
     if k is not None:
         st["actors"]["peg"][0, :7] = torch.tensor(ep["actor_poses"]["peg"][k])
         st["actors"]["peg"][0, 7:] = 0.0

@@ -25,10 +25,11 @@ torch = pytest.importorskip("torch")
 scipy_stats = pytest.importorskip("scipy.stats")
 
 
+from task_probes import finger_axes, write_finger_forces  # noqa: E402
+
 import wpctrl  # noqa: E402
 import wpctrl.tasks as T  # noqa: E402
 from wpctrl.tasks.definitions import PANDA_REST_QPOS  # noqa: E402
-from task_probes import finger_axes, write_finger_forces  # noqa: E402
 
 ENV_ID = "StackCube-v1"
 DEMOS = Path("/work/shared/tasks/StackCube-v1__pd_joint_pos.json.gz")

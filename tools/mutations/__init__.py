@@ -35,6 +35,7 @@ AREAS = (
     "stack_cube",
     "pull_cube",
     "layout",
+    "peg_insertion_side",
 )
 """The areas, in the order the runner takes them."""
 

@@ -1,13 +1,33 @@
-"""Host-side checks of what a user hands the tasks' envs (actions, env selections, seeds), before any launch."""
+"""Host-side checks of what a user hands the tasks' envs (actions, env selections, seeds, state dicts), before any
+launch. Nothing here imports Warp, Newton or torch at import time: the replay checks its files' state dicts with
+:func:`state_dict_arrays` before anything heavy loads."""
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
+
 import numpy as np
-import warp as wp
 
 from ..config import ConfigError
 
-__all__ = ["action_tensor", "env_mask", "reset_options", "seed_value"]
+__all__ = [
+    "STATE_ACTOR_WIDTH",
+    "STATE_ROBOT",
+    "STATE_ROBOT_WIDTH",
+    "action_tensor",
+    "env_mask",
+    "reset_options",
+    "seed_value",
+    "state_dict_arrays",
+    "state_field",
+]
+
+STATE_ACTOR_WIDTH = 13
+"""An actor's entry of ManiSkill's state dict: p (3), q wxyz (4), linear velocity (3), angular velocity (3)."""
+STATE_ROBOT = "panda"
+"""The one articulation of the tasks' state dicts."""
+STATE_ROBOT_WIDTH = 31
+"""The Panda's entry: root pose (7), root velocity (6), qpos (9), qvel (9)."""
 
 
 def action_tensor(action, num_envs: int, action_dim: int, device):
@@ -28,8 +48,11 @@ def action_tensor(action, num_envs: int, action_dim: int, device):
     return t.to(device=device, dtype=torch.float32)
 
 
-def env_mask(env_idx, num_envs: int, device) -> wp.array:
-    """A device bool mask of ``env_idx``: env indices (int, sequence, numpy or torch) or a bool mask of num_envs."""
+def env_mask(env_idx, num_envs: int, device):
+    """A device bool mask (``wp.array``) of ``env_idx``: env indices (int, sequence, numpy or torch) or a bool mask
+    of num_envs."""
+    import warp as wp
+
     a = env_idx.detach().cpu().numpy() if hasattr(env_idx, "detach") else np.asarray(env_idx)
     if a.dtype == np.bool_:
         if a.shape != (num_envs,):
@@ -67,3 +90,72 @@ def reset_options(options, known: tuple[str, ...]) -> dict:
     if unknown:
         raise ConfigError(f"reset: unknown options key(s) {unknown}; expected keys from {list(known)}")
     return options
+
+
+def state_field(root: str, dotted: bool = False) -> Callable[..., str]:
+    """How the refusals of :func:`state_dict_arrays` name a field: ``field(group)`` and ``field(group, name)``, as
+    Python indexing (``state['actors']['cube']``: a dict the caller holds) or, ``dotted``, as a path into a file
+    (``episodes[0].init_state_dict.actors['cube']``)."""
+
+    def field(group: str, name: str | None = None) -> str:
+        head = f"{root}.{group}" if dotted else f"{root}[{group!r}]"
+        return head if name is None else f"{head}[{name!r}]"
+
+    return field
+
+
+def state_dict_arrays(state, actors: Sequence[str] | None, task: str, who: str, root: str = "state",
+                      dotted: bool = False, rows: int | None = None,
+                      robot_width: int = STATE_ROBOT_WIDTH) -> dict[str, np.ndarray]:  # fmt: skip
+    """The entries of a state dict in ManiSkill's layout (``{"actors": {name: (.., 13)}, "articulations": {"panda":
+    (.., 31)}}``) as float32 numpy arrays by name, checked for what a task's env loads: exactly the task's ``actors``
+    (``None``: any names; an actor of another task or one missing is refused, naming it), the ``panda``
+    articulation, numbers of the right shape, finite. ``rows``: the number of envs set, each entry ``(rows, D)`` or
+    ``(D,)`` for all (returned as ``(rows, D)``); ``None``: one env's entry, ``(D,)`` (a recording's
+    ``init_state_dict``). The refusals (:class:`~wpctrl.ConfigError`) start with ``who``, name the field from
+    ``root`` (:func:`state_field`), the expected and the received value, and ``task``. Host only."""
+    field = state_field(root, dotted)
+    if not isinstance(state, dict) or "actors" not in state or "articulations" not in state:
+        got = sorted(state, key=str) if isinstance(state, dict) else type(state).__name__
+        raise ConfigError(f"{who}{root} expected a dict with 'actors' and 'articulations', got {got}")
+    wanted = {"actors": None if actors is None else list(actors), "articulations": [STATE_ROBOT]}
+    for group in ("actors", "articulations"):
+        if not isinstance(state[group], dict):
+            raise ConfigError(f"{who}{field(group)} expected a dict of {group} by name, got "
+                              f"{type(state[group]).__name__}")  # fmt: skip
+        ours = wanted[group]
+        theirs = sorted(state[group], key=str)
+        extra = [name for name in theirs if ours is not None and name not in ours]
+        if extra:
+            raise ConfigError(f"{who}{field(group, extra[0])} is not part of {task} (its {group}: {ours}, got "
+                              f"{theirs}); a state dict of another task?")  # fmt: skip
+        for name in [] if ours is None else ours:
+            if name not in state[group]:
+                raise ConfigError(f"{who}{field(group)} has no {name!r} entry, which {task} needs (expected {ours}, "
+                                  f"got {theirs})")  # fmt: skip
+    names = sorted(state["actors"], key=str) if actors is None else wanted["actors"]
+    need = [("actors", name, STATE_ACTOR_WIDTH) for name in names]
+    out = {}
+    for group, name, width in [*need, ("articulations", STATE_ROBOT, robot_width)]:
+        v = state[group][name]
+        v = v.detach().to("cpu") if hasattr(v, "detach") else v
+        try:
+            a = np.asarray(v)
+        except (ValueError, TypeError):  # a ragged list
+            a = None
+        if a is None or a.dtype.kind not in "iuf":
+            got = type(v).__name__ if a is None else f"dtype {a.dtype}"
+            raise ConfigError(f"{who}{field(group, name)} expected an array of numbers, got {got}")
+        if rows is None and a.shape != (width,):
+            raise ConfigError(f"{who}{field(group, name)} expected shape ({width},), got {a.shape}")
+        if rows is not None:
+            if a.ndim == 1 and a.shape == (width,):
+                a = np.broadcast_to(a, (rows, width))
+            if a.shape != (rows, width):
+                raise ConfigError(f"{who}{field(group, name)} expected shape ({rows}, {width}) ({rows} envs set, "
+                                  f"{width} values each) or ({width},), got {tuple(np.shape(v))}")  # fmt: skip
+        a = a.astype(np.float32)
+        if not np.isfinite(a).all():
+            raise ConfigError(f"{who}{field(group, name)} holds non-finite values (expected finite numbers)")
+        out[name] = a
+    return out

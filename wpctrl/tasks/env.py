@@ -337,8 +337,8 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
             if reconfigure and not mask.numpy().all():
                 from ..config import ConfigError
 
-                raise ConfigError("reset: options['reconfigure'] draws every env's scene again and cannot go with a "
-                                  "partial reset (options['env_idx'] selects some envs only), as in ManiSkill")  # fmt: skip
+                raise ConfigError("reset: options['reconfigure'] draws every env's scene again and cannot go with "
+                                  "a partial reset (options['env_idx'] selects some envs only), as in ManiSkill")
         if seed is not None:
             if _is_sequence(seed):
                 chosen = mask.numpy()

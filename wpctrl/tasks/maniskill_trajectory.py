@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ..config import ConfigError
+from ._validate import STATE_ACTOR_WIDTH, STATE_ROBOT, STATE_ROBOT_WIDTH
 from .names import CONTROL_MODES, TASK_ACTORS, TASK_IDS, main_object
 
 __all__ = ["MAIN_OBJECT", "STATE_ACTORS", "by_length", "is_trajectory", "is_trajectory_metadata", "read_trajectory"]
@@ -42,8 +43,7 @@ STATE_ACTORS: dict[str, tuple[str, ...]] = {task: actors.state for task, actors 
 :data:`wpctrl.tasks.names.TASK_ACTORS`: a trajectory's ``env_states`` must hold them all, since the replay loads them
 as the initial state."""
 
-_ACTOR_DIM = 13  # p (3), q wxyz (4), linear velocity (3), angular velocity (3)
-_ROBOT = ("panda", 31)  # root pose (7), root velocity (6), qpos (9), qvel (9)
+_ROBOT = (STATE_ROBOT, STATE_ROBOT_WIDTH)
 
 
 def is_trajectory_metadata(data) -> bool:
@@ -159,7 +159,7 @@ def _episode(traj, ep: dict, i: int, task: str, where: str) -> dict:
         raise ConfigError(f"replay: {where}{name}/env_states is missing: the replay starts from the recorded "
                           f"states (record with RecordEpisode(record_env_state=True))")  # fmt: skip
     states = traj["env_states"]
-    need = [("actors", a, _ACTOR_DIM) for a in STATE_ACTORS[task]]
+    need = [("actors", a, STATE_ACTOR_WIDTH) for a in STATE_ACTORS[task]]
     init: dict[str, dict[str, list]] = {"actors": {}, "articulations": {}}
     poses = None
     main = main_object(task)

@@ -142,7 +142,8 @@ def _check(cls: type[Task]) -> None:
     if list(cls.contact_actors) != order:  # the contact sensor's columns follow the bodies' order in each world
         raise ConfigError(f"{where}: contact_actors must be distinct and in the actors' declared order: {order}")
     if len(cls.rest_qpos) != PANDA_DOF:
-        raise ConfigError(f"{where}: rest_qpos expected {PANDA_DOF} values (the Panda's qpos), got {len(cls.rest_qpos)}")
+        raise ConfigError(f"{where}: rest_qpos expected {PANDA_DOF} values (the Panda's qpos), got "
+                          f"{len(cls.rest_qpos)}")
     for hook in ("initialize", "evaluate", "dense_reward"):
         if getattr(cls, hook) is None:
             raise ConfigError(f"{where}: no {hook} device function")

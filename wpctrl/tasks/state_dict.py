@@ -17,11 +17,11 @@ import numpy as np
 import warp as wp
 
 from ..config import ConfigError
+from ._validate import STATE_ACTOR_WIDTH as _ACTOR_DIM
 from .definitions import PANDA_DOF, PANDA_ROOT_POSE, TABLE
 
 __all__ = ["StateDictMixin"]
 
-_ACTOR_DIM = 13
 _ROBOT_DIM = 13 + 2 * PANDA_DOF
 _TOL = 1e-5
 
@@ -92,7 +92,7 @@ class StateDictMixin:
         mask = self._all if env_idx is None else env_mask(env_idx, self.num_envs, self.wp_device)
         idx = torch.nonzero(wp.to_torch(mask), as_tuple=False).flatten()
         rows = int(idx.numel())
-        entries = self._check_state_dict(state, rows)
+        entries, controller = self._check_state_dict(state, rows, idx)
         q, qd, mpos, mquat = self._views()
         sc = self.scene
         for a in self.task_spec.bodies:
@@ -108,65 +108,74 @@ class StateDictMixin:
         q[idx, r : r + PANDA_DOF] = robot[:, 13 : 13 + PANDA_DOF]
         qd[idx, rd : rd + PANDA_DOF] = robot[:, 13 + PANDA_DOF :]
         self._after_state_write(mask)
-        if "controller" in state and state["controller"]:
-            self._set_controller_state(state["controller"], idx)
+        if controller:
+            self.ctrl.set_state(controller)
 
-    def _set_controller_state(self, controller: dict, idx) -> None:
+    def _check_state_dict(self, state, rows: int, idx) -> tuple[dict, dict]:
+        """Every entry the scene needs, as float32 (rows, D) torch tensors on the env's device, and the controller
+        state to restore (``{uid: {key: full (num_envs, D) tensor}}``, empty without a ``"controller"`` entry), after
+        checking keys, shapes, finiteness and the fixed parts (table, robot root): nothing is written before."""
+        from ._validate import state_dict_arrays
+
+        torch = self._torch
+        out = state_dict_arrays(state, self.actor_names, self.task_spec.env_id, "set_state_dict: ", rows=rows,
+                                robot_width=_ROBOT_DIM)  # fmt: skip
+        table = table_state()
+        if np.abs(out[TABLE.name][:, :7] - table[:7]).max(initial=0.0) > _TOL:
+            bad = int(np.abs(out[TABLE.name][:, :7] - table[:7]).max(axis=1).argmax())
+            raise ConfigError(f"set_state_dict: state['actors'][{TABLE.name!r}] has the pose "
+                              f"{out[TABLE.name][bad, :7].tolist()} (row {bad}); the table is fixed on Newton at "
+                              f"{table[:7].tolist()}")  # fmt: skip
+        root = np.asarray(PANDA_ROOT_POSE, np.float32)
+        if np.abs(out["panda"][:, :7] - root).max(initial=0.0) > _TOL:
+            bad = int(np.abs(out["panda"][:, :7] - root).max(axis=1).argmax())
+            raise ConfigError(f"set_state_dict: state['articulations']['panda'] has the root pose "
+                              f"{out['panda'][bad, :7].tolist()} (row {bad}); the Panda's root is fixed at "
+                              f"{root.tolist()}")  # fmt: skip
+        entries = {k: torch.as_tensor(np.ascontiguousarray(a), device=self.device) for k, a in out.items()}
+        return entries, self._checked_controller_state(state.get("controller"), rows, idx)
+
+    def _checked_controller_state(self, controller, rows: int, idx) -> dict:
+        """A state dict's ``"controller"`` entry (``{uid: {key: (rows, D) or (D,)}}``, ManiSkill's
+        ``agent.get_controller_state()``) merged into the controller's current state of every env, checked against
+        the mode's stateful controllers."""
+        if not controller:
+            return {}
         current = self.ctrl.get_state()
+        if not isinstance(controller, dict):
+            raise ConfigError(f"set_state_dict: state['controller'] expected a dict {{controller: {{key: values}}}}, "
+                              f"got {type(controller).__name__}")  # fmt: skip
         full = {}
         for uid, entry in controller.items():
             if uid not in current:
-                raise ConfigError(f"set_state_dict: controller state for {uid!r}, the mode's stateful controllers are "
-                                  f"{sorted(current)}")  # fmt: skip
+                raise ConfigError(f"set_state_dict: state['controller'][{uid!r}] is not a stateful controller of "
+                                  f"{self.control_mode} (expected one of {sorted(current)})")  # fmt: skip
+            if not isinstance(entry, dict):
+                raise ConfigError(f"set_state_dict: state['controller'][{uid!r}] expected a dict of "
+                                  f"{sorted(current[uid])}, got {type(entry).__name__}")  # fmt: skip
             full[uid] = {}
             for k, v in entry.items():
+                name = f"state['controller'][{uid!r}][{k!r}]"
+                if k not in current[uid]:
+                    raise ConfigError(f"set_state_dict: {name} is not part of the controller's state (expected "
+                                      f"{sorted(current[uid])})")  # fmt: skip
                 arr = wp.to_torch(current[uid][k]).clone()
-                arr[idx] = self._torch.as_tensor(np.asarray(v.cpu() if hasattr(v, "cpu") else v), dtype=arr.dtype,
-                                                 device=arr.device).reshape(len(idx), -1)  # fmt: skip
+                width = int(arr.shape[1])
+                v = v.detach().to("cpu") if hasattr(v, "detach") else v
+                try:
+                    a = np.asarray(v)
+                except (ValueError, TypeError):
+                    a = np.asarray(None)
+                if a.dtype.kind not in "iuf":
+                    raise ConfigError(f"set_state_dict: {name} expected an array of numbers, got {type(v).__name__}")
+                if a.shape == (width,):
+                    a = np.broadcast_to(a, (rows, width))
+                if a.shape != (rows, width):
+                    raise ConfigError(f"set_state_dict: {name} expected shape ({rows}, {width}) or ({width},), got "
+                                      f"{tuple(np.shape(v))}")  # fmt: skip
+                if not np.isfinite(a).all():
+                    raise ConfigError(f"set_state_dict: {name} holds non-finite values (expected finite numbers)")
+                arr[idx] = self._torch.as_tensor(np.ascontiguousarray(a, np.float32), dtype=arr.dtype,
+                                                 device=arr.device)  # fmt: skip
                 full[uid][k] = arr
-        self.ctrl.set_state(full)
-
-    def _check_state_dict(self, state, rows: int) -> dict:
-        """Every entry the scene needs, as float32 (rows, D) torch tensors on the env's device, after checking keys,
-        shapes, finiteness and the fixed parts (table, robot root)."""
-        torch = self._torch
-        if not isinstance(state, dict) or "actors" not in state or "articulations" not in state:
-            got = sorted(state) if isinstance(state, dict) else type(state).__name__
-            raise ConfigError(f"set_state_dict: expected a dict with 'actors' and 'articulations', got {got}")
-        need = [("actors", name, _ACTOR_DIM) for name in self.actor_names] + [("articulations", "panda", _ROBOT_DIM)]
-        task = self.task_spec.env_id
-        for group in ("actors", "articulations"):
-            ours = [name for g, name, _ in need if g == group]
-            theirs = sorted(state[group], key=str) if isinstance(state[group], dict) else []
-            extra = [name for name in theirs if name not in ours]
-            if extra:
-                raise ConfigError(f"set_state_dict: state[{group!r}][{extra[0]!r}] is not part of {task} (its "
-                                  f"{group}: {ours}); a state dict of another task?")  # fmt: skip
-        out = {}
-        for group, name, dim in need:
-            if not isinstance(state[group], dict) or name not in state[group]:
-                have = sorted(state[group]) if isinstance(state[group], dict) else type(state[group]).__name__
-                raise ConfigError(f"set_state_dict: state[{group!r}] has no {name!r} entry, which {task} needs (has "
-                                  f"{have})")  # fmt: skip
-            v = state[group][name]
-            v = v.detach().to("cpu") if hasattr(v, "detach") else v
-            a = np.asarray(v, dtype=np.float32)
-            if a.ndim == 1:
-                a = np.broadcast_to(a, (rows, a.shape[0]))
-            if a.shape != (rows, dim):
-                raise ConfigError(
-                    f"set_state_dict: state[{group!r}][{name!r}] expected shape ({rows}, {dim}), got "
-                    f"{tuple(np.shape(v))}"
-                )
-            if not np.isfinite(a).all():
-                raise ConfigError(f"set_state_dict: state[{group!r}][{name!r}] holds non-finite values")
-            out[name] = a
-        table = table_state()
-        if np.abs(out[TABLE.name][:, :7] - table[:7]).max(initial=0.0) > _TOL:
-            raise ConfigError(f"set_state_dict: the table is fixed on Newton at {table[:7].tolist()}, the state has "
-                              f"{out[TABLE.name][0, :7].tolist()}")  # fmt: skip
-        root = np.asarray(PANDA_ROOT_POSE, np.float32)
-        if np.abs(out["panda"][:, :7] - root).max(initial=0.0) > _TOL:
-            raise ConfigError(f"set_state_dict: the Panda's root is fixed at {root.tolist()}, the state has "
-                              f"{out['panda'][0, :7].tolist()}")  # fmt: skip
-        return {k: torch.as_tensor(np.ascontiguousarray(a), device=self.device) for k, a in out.items()}
+        return full

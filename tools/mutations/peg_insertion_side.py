@@ -1,0 +1,65 @@
+"""Mutations: PegInsertionSide-v1 (``wpctrl/tasks/peg_insertion_side.py``) and the scene drawn from the seed
+(``wpctrl/tasks/geometry.py``, the reconfiguration in ``wpctrl/tasks/env.py``)."""
+
+from .model import M
+
+_TESTS = ("tests/test_task_peg_insertion_side.py",)
+
+MUTATIONS = [
+    M(
+        "peg_insertion_depth",
+        "wpctrl/tasks/peg_insertion_side.py",
+        "h[0] >= INSERTED_X and",
+        "h[0] >= 2.0 * INSERTED_X and",
+        "PegInsertionSide's success accepts a head 3 cm short of the hole's centre",
+        _TESTS,
+    ),
+    M(
+        "peg_insertion_draw_order",
+        "wpctrl/tasks/peg_insertion_side.py",
+        "            length = rng.uniform(*LENGTH_RANGE)\n            radius = rng.uniform(*RADIUS_RANGE)\n",
+        "            radius = rng.uniform(*RADIUS_RANGE)\n            length = rng.uniform(*LENGTH_RANGE)\n",
+        "the peg's half width drawn before its half length (another stream than ManiSkill's)",
+        _TESTS,
+    ),
+    M(
+        "peg_insertion_hole_offset_sign",
+        "wpctrl/tasks/peg_insertion_side.py",
+        "Box((depth, thickness - hc[0], outer), (0.0, offset + hc[0], 0.0)),",
+        "Box((depth, thickness - hc[0], outer), (0.0, offset - hc[0], 0.0)),",
+        "one wall of the hole on the wrong side of its offset",
+        _TESTS,
+    ),
+    M(
+        "peg_insertion_grasp_angle",
+        "wpctrl/tasks/peg_insertion_side.py",
+        "grasped = is_grasping_within(s, e, PEG, wp.static(_GRASP_COS))",
+        "grasped = is_grasping(s, e, PEG)",
+        "the reward's grasp at ManiSkill's default 85 degrees instead of the task's 20",
+        _TESTS,
+    ),
+    M(
+        "peg_insertion_geometry_not_notified",
+        "wpctrl/tasks/env.py",
+        "            self.solver.notify_model_changed(GEOMETRY_FLAGS)\n",
+        "            pass\n",
+        "a reconfiguration resizes Newton's shapes but the solver keeps the old ones",
+        _TESTS,
+    ),
+    M(
+        "peg_insertion_peg_mass_kept",
+        "wpctrl/tasks/geometry.py",
+        "            mass[b], inv_mass[b], com[b] = m, 1.0 / m, c\n",
+        "            pass\n",
+        "the peg keeps the mass of the shapes it was built with",
+        _TESTS,
+    ),
+    M(
+        "peg_insertion_reconfigure_every_reset",
+        "wpctrl/tasks/env.py",
+        'reconfigure = bool(options.get("reconfigure", False)) or (',
+        'reconfigure = True or (',
+        "every reset draws the scene again, whatever reconfiguration_freq says",
+        _TESTS,
+    ),
+]

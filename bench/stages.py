@@ -345,6 +345,29 @@ def _train_sampling_rate(s: Session) -> list[Step]:
             _task_rate(s, "sync-free sampling", "--action-sampling", "sync-free", limit=120)]  # fmt: skip
 
 
+TRAIN_TASKS = "PullCube-v1,LiftPegUpright-v1,StackCube-v1"
+
+
+def _train_tasks(s: Session) -> list[Step]:
+    """Every task of ``tasks`` trained for ``time_limit`` s (``bench/training/train_tasks.py``): at the same time, one
+    process each (``parallel=1``), or one after another (``parallel=0``), after a one-iteration warm-up of each."""
+    tasks = s.param("tasks", TRAIN_TASKS)
+    time_limit = s.param("time_limit", 300.0)
+    parallel, warmup = s.param("parallel", 1), s.param("warmup", 1)
+    n = 1 if parallel else len(tasks.split(","))
+    limit = n * (time_limit + 150) + (420 if warmup else 0) + 60
+    args = ["--tasks", tasks, "--envs", str(_one_size(s, 4096)), "--substeps", str(s.param("substeps", 8)),
+            "--seed", str(s.param("seed", 0)), "--control-mode", s.param("control_mode", "pd_joint_delta_pos"),
+            "--time-limit", str(time_limit), "--eval-every-steps", str(s.param("eval_every_steps", 1_000_000)),
+            "--eval-every", str(s.param("eval_every", 0)), "--eval-envs", str(s.param("eval_envs", 512)),
+            "--parallel", str(parallel), "--warmup", str(warmup),
+            "--newton-episodes", str(s.param("newton_episodes", 0)),
+            "--maniskill-episodes", str(s.param("maniskill_episodes", 0))]  # fmt: skip
+    if s.param("commit", ""):
+        args += ["--commit", s.param("commit", "")]
+    return [_machine, bench("train_tasks", "bench.training.train_tasks", s, *args, limit=limit, env=_env_assets())]
+
+
 def _train_push_rate(s: Session) -> list[Step]:
     train_json = s.find("train-push", "train.json")
     extra = ("--train-json", str(train_json)) if train_json else ()
@@ -873,6 +896,34 @@ STAGES: list[Stage] = [
         _train_push_rate,
         needs=("assets",),
         modules=("bench/training/task_train_rate.py",),
+    ),
+    _S(
+        "train-tasks",
+        "training",
+        "PPO on several ManiSkill tasks (default PullCube, LiftPegUpright, StackCube; pd_joint_delta_pos, "
+        "4,096 envs each, ManiSkill's recipe per task), at the same time as separate processes (parallel=0: one "
+        "after another), each for time_limit s after a one-iteration warm-up, evaluated every eval_every_steps env "
+        "steps; a JSON per task (~6.5 min with the defaults; cold kernel cache +2.5 min)",
+        540,
+        "train_tasks_<task>.json, train_tasks.{json,md}, train_tasks_runs.tar.gz, <task>/",
+        _train_tasks,
+        needs=("assets",),
+        params={
+            "tasks": TRAIN_TASKS,
+            "time_limit": "300 (s per task, from its process's start)",
+            "eval_every_steps": "1000000",
+            "eval_every": "0 (iterations; overrides eval_every_steps)",
+            "eval_envs": "512",
+            "parallel": "1",
+            "warmup": "1",
+            "substeps": "8",
+            "seed": "0",
+            "control_mode": "pd_joint_delta_pos",
+            "newton_episodes": "0",
+            "maniskill_episodes": "0 (needs mani-skill on the machine)",
+            "commit": "the tree's commit where it has no .git",
+        },
+        modules=("bench/training/train_tasks.py",),
     ),
     # profiling
     _S(

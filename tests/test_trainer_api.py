@@ -11,6 +11,7 @@ import sys
 
 import pytest
 
+from wpctrl.tasks.names import TASK_MODULES
 from wpctrl.train import TrainConfig, TrainConfigError
 from wpctrl.train.command_args import given_flags, refuse_unused
 
@@ -44,7 +45,7 @@ def test_evaluation_and_export_modules_import_neither_rsl_rl_nor_the_trainer():
     [
         ({"envs": 0}, "TrainConfig.envs: expected a positive number, got 0"),
         ({"envs": "64"}, "TrainConfig.envs: expected an integer, got '64' (str)"),
-        ({"task": "PushCube"}, "TrainConfig.task: expected one of ['reach', 'PushCube-v1', 'PickCube-v1'], got"),
+        ({"task": "PushCube"}, f"TrainConfig.task: expected one of {['reach', *TASK_MODULES]}, got"),
         ({"epochs": 4}, "TrainConfig.epochs: only for the ManiSkill tasks"),
         ({"no_partial_reset": True}, "TrainConfig.no_partial_reset: only for the ManiSkill tasks"),
         ({"target_success": 0.9}, "TrainConfig.target_success: needs eval_every N"),
@@ -61,6 +62,36 @@ def test_train_config_names_the_field_that_cannot_work(kwargs, message):
     with pytest.raises(TrainConfigError) as e:
         Trainer(TrainConfig(**kwargs))
     assert message in str(e.value), str(e.value)
+
+
+def test_the_trained_tasks_are_the_registrys():
+    """``wpctrl train`` trains every task of the registry (its host-only names), and its command line offers them."""
+    from wpctrl.train.cli import parser
+    from wpctrl.train.train_config import MANISKILL_TASKS, TASKS
+
+    assert MANISKILL_TASKS == tuple(TASK_MODULES) and TASKS == ("reach", *TASK_MODULES)
+    (task,) = [a for a in parser()._actions if a.dest == "task"]
+    assert tuple(task.choices) == TASKS
+    assert all(name in parser().description for name in TASK_MODULES)
+
+
+def test_each_task_takes_maniskills_recipe_and_its_departures_are_data():
+    """One recipe for every task (ManiSkill's ppo_fast: 4 steps per env, 8 epochs of 32 mini-batches), StackCube-v1's
+    16 steps per env ManiSkill's own departure from it, read from TASK_RECIPES; a flag still wins."""
+    from wpctrl.train.ppo_config import TASK_RECIPES, task_recipe
+
+    for name in TASK_MODULES:
+        cfg = TrainConfig(task=name, device="cpu").resolved()
+        want = task_recipe(name)
+        assert (cfg.steps_per_env, cfg.epochs, cfg.minibatches) == (
+            want["steps_per_env"], want["epochs"], want["minibatches"])  # fmt: skip
+        assert want["steps_per_env"] == TASK_RECIPES.get(name, {}).get("steps_per_env", 4)
+    assert task_recipe("StackCube-v1")["steps_per_env"] == 16 and task_recipe("PullCube-v1")["steps_per_env"] == 4
+    assert TrainConfig(task="StackCube-v1", device="cpu", steps_per_env=2).resolved().steps_per_env == 2
+    assert set(TASK_RECIPES) <= set(TASK_MODULES)  # no recipe for a task the registry does not have
+    # the batch check uses the task's default: 2 envs x 16 steps = 32 samples fill StackCube's 32 mini-batches by 1
+    with pytest.raises(TrainConfigError, match="envs 2 x steps_per_env 16 = a batch of 32 samples"):
+        TrainConfig(task="StackCube-v1", device="cpu", envs=2).check()
 
 
 def test_train_config_mirrors_the_command_lines_options_and_defaults():

@@ -1,5 +1,5 @@
-"""How fast PPO collects on ManiSkill's PushCube-v1 / PickCube-v1, against the same envs stepped without a policy and
-the bare MuJoCo-Warp rollout of the same scene.
+"""How fast PPO collects on a ManiSkill task (any of ``wpctrl train``'s: PushCube-v1, PickCube-v1, PullCube-v1, ...),
+against the same envs stepped without a policy and the bare MuJoCo-Warp rollout of the same scene.
 
 Every part is the training env's own model, solver, controller and buffers (``wpctrl.train.task_env.TaskVecEnv``
 over ``wpctrl.tasks``), each captured in its own graph (CUDA; eager on the CPU) and replayed back to back; µs per
@@ -55,6 +55,8 @@ import warp as wp  # noqa: E402
 
 from bench.common import machine_info, md_table, meta_markdown, task_step_parts, write_results  # noqa: E402
 from bench.training.train_rate import _host_time, _time, collection_rate  # noqa: E402
+from wpctrl.train.ppo_config import task_recipe  # noqa: E402
+from wpctrl.train.train_config import MANISKILL_TASKS  # noqa: E402
 
 ROLLOUT = "MuJoCo-Warp rollout (5 x substeps solver steps)"
 CONTROLLER = "controller calls"
@@ -101,19 +103,22 @@ def _same_states(vec, collector, alg, sync, steps: int) -> dict:
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--task", default="PushCube-v1", choices=("PushCube-v1", "PickCube-v1"))
+    p.add_argument("--task", default="PushCube-v1", choices=MANISKILL_TASKS)
     p.add_argument("--envs", type=int, default=4096)
     p.add_argument("--substeps", type=int, default=None, help="MuJoCo-Warp steps per physics step (default: 16)")
     p.add_argument("--device", default="cuda:0" if wp.is_cuda_available() else "cpu")
     p.add_argument("--control-mode", default="pd_joint_delta_pos")
     p.add_argument("--action-sampling", default="sync-free", choices=("sync-free", "rsl-rl"))
-    p.add_argument("--steps-per-env", type=int, default=4, help="the rollout length of one PPO iteration")
+    p.add_argument("--steps-per-env", type=int, default=None, help="the rollout length of one PPO iteration "
+                   "(default: the task's recipe, 4; StackCube-v1 16)")  # fmt: skip
     p.add_argument("--replay-steps", type=int, default=48, help="steps of the same-states comparison")
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--min-s", type=float, default=0.25, help="minimum seconds per timing sample")
     p.add_argument("--train-json", type=Path, default=None, help="a training run's train.json: its collection rate")
     p.add_argument("--out", default="bench/results")
     args = p.parse_args(argv)
+    if args.steps_per_env is None:
+        args.steps_per_env = task_recipe(args.task)["steps_per_env"]
     import torch
     from rsl_rl.runners import OnPolicyRunner
     from tensordict import TensorDict
@@ -153,7 +158,7 @@ def main(argv=None) -> int:
     fns[ENV_STEP] = lambda: vec.step(hold)
 
     with contextlib.redirect_stdout(io.StringIO()):
-        alg = OnPolicyRunner(vec, maniskill_ppo_cfg(), log_dir=None, device=args.device).alg
+        alg = OnPolicyRunner(vec, maniskill_ppo_cfg(args.steps_per_env), log_dir=None, device=args.device).alg
     alg.train_mode()
     collector = Collector(vec, alg, args.action_sampling)
     sample = (lambda o: act(alg, o)) if args.action_sampling == "sync-free" else alg.act

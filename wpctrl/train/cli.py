@@ -1,5 +1,6 @@
 """``python -m wpctrl train``: the command line of :class:`~wpctrl.train.trainer.Trainer` (PPO through rsl-rl on
-the reach task or on ManiSkill's ``PushCube-v1`` / ``PickCube-v1``). Every option is the
+the reach task or on any ManiSkill task of :mod:`wpctrl.tasks`' registry: ``PushCube-v1``, ``PickCube-v1``,
+``PullCube-v1``, ...). Every option is the
 :class:`~wpctrl.train.train_config.TrainConfig` field of the same name; they are all checked, with the defaults that
 depend on the device resolved, before torch, rsl-rl or an env is loaded.
 """
@@ -15,7 +16,16 @@ from .command_args import command_parser, given_flags, missing_train_extra
 from .logger import LOGGERS
 from .reach_ppo import evaluate, train_cfg
 from .resume import ResumeError, apply_resume
-from .train_config import CONTROL_MODES, MANISKILL_TASKS, OBS_NORMALIZATIONS, PPO_UPDATES, SAMPLINGS, TASKS, TrainConfig
+from .train_config import (
+    CONTROL_MODES,
+    MANISKILL_TASKS,
+    OBS_NORMALIZATIONS,
+    PPO_UPDATES,
+    SAMPLINGS,
+    TASK_LIST,
+    TASKS,
+    TrainConfig,
+)
 
 __all__ = ["CONTROL_MODES", "MANISKILL_TASKS", "TASKS", "evaluate", "main", "parse", "parser", "train_cfg"]
 
@@ -34,11 +44,11 @@ def parser() -> argparse.ArgumentParser:
     p = command_parser(
         "train",
         "Train a PPO policy (rsl-rl) through wpctrl on a vectorised Newton task (MuJoCo-Warp physics): "
-        "the reach task, or ManiSkill's PushCube-v1 / PickCube-v1 (state observations, normalized dense reward, "
+        f"the reach task, or one of ManiSkill's tasks ({TASK_LIST}; state observations, normalized dense reward, "
         "ManiSkill's PPO baseline settings).",
         formatter_class=_Help,
     )
-    p.add_argument("--task", choices=TASKS, default="reach", help="the task")
+    p.add_argument("--task", choices=TASKS, default="reach", help="the task: reach, or a ManiSkill task (above)")
     p.add_argument(
         "--control-mode",
         default=None,
@@ -54,7 +64,10 @@ def parser() -> argparse.ArgumentParser:
         "the CPU)",
     )
     p.add_argument(
-        "--steps-per-env", type=int, default=None, help="rollout length per iteration (default: reach 24, tasks 4)"
+        "--steps-per-env",
+        type=int,
+        default=None,
+        help="rollout length per iteration (default: reach 24; the tasks ManiSkill's recipe: 4, StackCube-v1 16)",
     )
     p.add_argument("--epochs", type=int, default=None, help="ManiSkill tasks: PPO epochs per iteration (default: 8)")
     p.add_argument(
@@ -69,8 +82,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--no-partial-reset",
         action="store_true",
-        help="ManiSkill tasks: success does not end an episode (every episode runs its 50 steps); default: an episode "
-        "ends at success and that env alone restarts, as ManiSkill's PPO trains",
+        help="ManiSkill tasks: success does not end an episode (every episode runs its max_episode_steps: 50, "
+        "PegInsertionSide-v1 100); default: an episode ends at success and that env alone restarts, as ManiSkill's "
+        "PPO trains",
     )
     p.add_argument("--device", default=None, help="torch / Warp device (default: cuda:0 if there is one, else cpu)")
     p.add_argument("--seed", type=int, default=0, help="seeds torch and the envs' episode draws")

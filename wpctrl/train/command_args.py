@@ -100,7 +100,7 @@ def command_parser(command: str, description: str, **kwargs) -> argparse.Argumen
 def export_parser() -> argparse.ArgumentParser:
     p = command_parser(
         "export",
-        "Export the policy of a `wpctrl train --task PushCube-v1 | PickCube-v1` run as TorchScript "
+        f"Export the policy of a `wpctrl train --task {' | '.join(TASK_IDS)}` run as TorchScript "
         "(policy.ts, loadable with torch alone) and ONNX (policy.onnx, if the onnx package is importable): "
         "ManiSkill's flattened state observation -> deterministic action, observation normaliser included.",
     )
@@ -114,8 +114,8 @@ def export_parser() -> argparse.ArgumentParser:
 def evaluate_parser() -> argparse.ArgumentParser:
     p = command_parser(
         "evaluate",
-        "Evaluate an exported policy (policy.ts from `wpctrl export`) on fresh episodes of ManiSkill's "
-        "PushCube-v1 / PickCube-v1, in the real ManiSkill (PhysX CPU) or on Newton through wpctrl.",
+        "Evaluate an exported policy (policy.ts from `wpctrl export`) on fresh episodes of its ManiSkill task "
+        f"({', '.join(TASK_IDS)}), in the real ManiSkill (PhysX CPU) or on Newton through wpctrl.",
     )
     p.add_argument("--policy", required=True, help="the exported TorchScript policy (policy.ts)")
     p.add_argument("--task", default=None, choices=TASK_IDS, help="the task (default: the policy's own)")

@@ -1,4 +1,5 @@
-"""``python -m wpctrl export RUN_DIR``: the policy a ManiSkill-task run trained, as a self-contained TorchScript
+"""``python -m wpctrl export RUN_DIR``: the policy a ManiSkill-task run trained (any task of :mod:`wpctrl.tasks`'
+registry; its widths are the checkpoint's record), as a self-contained TorchScript
 module (``policy.ts``) and, where the ``onnx`` package is importable, an ONNX model (``policy.onnx``).
 
 Both map ManiSkill's flattened ``obs_mode="state"`` observation ``(batch, obs_dim)`` (float32) to the deterministic
@@ -21,6 +22,7 @@ from pathlib import Path
 
 import torch
 
+from ..tasks.names import TASK_IDS
 from .actor import ExportError, PolicyActor, build_actor
 from .command_args import export_parser
 
@@ -61,7 +63,7 @@ def load_actor(checkpoint: Path) -> tuple[PolicyActor, dict]:
     infos = data.get("infos") if isinstance(data, dict) else None
     if not isinstance(infos, dict) or infos.get("format") != "wpctrl-task-policy-1":
         raise ExportError(f"{checkpoint}: not a checkpoint of a ManiSkill-task run (no task record in its infos; "
-                          "export takes runs of `wpctrl train --task PushCube-v1 | PickCube-v1`)")  # fmt: skip
+                          f"export takes runs of `wpctrl train --task {' | '.join(TASK_IDS)}`)")  # fmt: skip
     actor = build_actor(infos.get("actor"), int(infos["obs_dim"]), int(infos["num_actions"]),
                         data.get("actor_state_dict"), checkpoint)  # fmt: skip
     return actor, infos
@@ -72,6 +74,7 @@ def _metadata(infos: dict) -> dict:
     return {
         "format": "wpctrl-exported-policy-1",
         **{k: infos[k] for k in keys},
+        **({"max_episode_steps": infos["max_episode_steps"]} if "max_episode_steps" in infos else {}),
         "input": "ManiSkill's flattened obs_mode='state' observation (batch, obs_dim), float32",
         "output": "deterministic action (batch, num_actions); ManiSkill's controller clips it to the action bounds",
     }

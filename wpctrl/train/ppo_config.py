@@ -1,6 +1,7 @@
 """rsl-rl's runner configuration: the one skeleton both PPO setups fill (the reach task's Isaac Lab settings in
 :func:`wpctrl.train.reach_ppo.train_cfg`, the ManiSkill tasks' baseline settings in
-:func:`wpctrl.train.task_ppo.maniskill_ppo_cfg`)."""
+:func:`wpctrl.train.task_ppo.maniskill_ppo_cfg`), and the ManiSkill tasks' recipe: one for every task, with the
+departures of a task from it as data (:data:`TASK_RECIPES`)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,31 @@ MANISKILL_STEPS_PER_ENV = 4
 MANISKILL_EPOCHS = 8
 MANISKILL_MINIBATCHES = 32
 """ManiSkill's PPO baseline: steps per env and iteration, epochs, mini-batches per epoch (:mod:`.task_ppo`)."""
+
+TASK_RECIPES: dict[str, dict] = {
+    "PushCube-v1": {"maniskill_env_steps": 5_000_000},
+    "PickCube-v1": {"maniskill_env_steps": 5_000_000},
+    "PullCube-v1": {"maniskill_env_steps": 5_000_000},
+    "LiftPegUpright-v1": {"maniskill_env_steps": 8_000_000},
+    "StackCube-v1": {"steps_per_env": 16, "maniskill_env_steps": 50_000_000},
+}
+"""Where a task's PPO recipe departs from the one above, as data: ManiSkill's own recipes for its fast PPO
+(``scripts/data_generation/rl.sh``: ``ppo_fast.py`` with 4,096 envs, 8 epochs of 32 mini-batches, gamma 0.8, lambda
+0.9 for every task here; 4 steps per env and iteration, StackCube-v1 16). ``maniskill_env_steps``: the env steps that
+recipe trains for (``--total_timesteps``), recorded for comparison; it sets nothing. A task not listed (a task
+registered later, PegInsertionSide-v1, for which ManiSkill publishes no fast recipe) trains with the defaults. The
+trainer reads a task's settings through :func:`task_recipe` alone."""
+
+RECIPE_KEYS = ("steps_per_env", "epochs", "minibatches", "maniskill_env_steps")
+
+
+def task_recipe(task: str) -> dict:
+    """``task``'s PPO settings: ``steps_per_env``, ``epochs``, ``minibatches`` (ManiSkill's defaults overridden by
+    :data:`TASK_RECIPES`) and ``maniskill_env_steps`` (None where ManiSkill's recipe names none)."""
+    recipe = {"steps_per_env": MANISKILL_STEPS_PER_ENV, "epochs": MANISKILL_EPOCHS,
+              "minibatches": MANISKILL_MINIBATCHES, "maniskill_env_steps": None}  # fmt: skip
+    recipe.update(TASK_RECIPES.get(task, {}))
+    return recipe
 
 
 def runner_cfg(*, seed: int, num_steps_per_env: int, algorithm: dict, mlp: dict, distribution: dict) -> dict:

@@ -27,7 +27,8 @@ class TaskVecEnv(VecEnv):
     ManiSkill's flattened state vector.
 
     Args:
-        task: A task id of :data:`wpctrl.tasks.TASKS` (``"PushCube-v1"``, ``"PickCube-v1"``, ...).
+        task: A task id of :data:`wpctrl.tasks.TASKS` (``"PushCube-v1"``, ``"StackCube-v1"``, ...): its observation
+            width, action space and ``max_episode_steps`` are the task's own.
         num_envs: Parallel envs.
         device: Warp / torch device.
         control_mode: A Panda control mode of ManiSkill (its PPO baseline uses ``pd_joint_delta_pos``).

@@ -1,13 +1,15 @@
-"""PPO (rsl-rl) on ManiSkill's ``PushCube-v1`` / ``PickCube-v1`` through wpctrl: ManiSkill's PPO baseline settings
-mapped onto rsl-rl, the rollout with ManiSkill's bootstrapping at episode ends, and evaluations of the deterministic
-policy on fresh episodes (``python -m wpctrl train --task PushCube-v1``; :class:`wpctrl.train.trainer.Trainer` runs
-the loop).
+"""PPO (rsl-rl) on ManiSkill's tasks through wpctrl (every task of :mod:`wpctrl.tasks`' registry: ``PushCube-v1``,
+``PickCube-v1``, ``PullCube-v1``, ``StackCube-v1``, ...): ManiSkill's PPO baseline settings mapped onto rsl-rl, the
+rollout with ManiSkill's bootstrapping at episode ends, and evaluations of the deterministic policy on fresh episodes
+(``python -m wpctrl train --task PushCube-v1``; :class:`wpctrl.train.trainer.Trainer` runs the loop). Nothing here
+depends on the task: its observation width, action space and episode length come from the task's env.
 
 ManiSkill's baseline (``examples/baselines/ppo/ppo_fast.py`` and its ``baselines.sh``: 4,096 envs, 4 steps per env
 and iteration, 8 epochs of 32 mini-batches, gamma 0.8, lambda 0.9, learning rate 3e-4, clip 0.2, no value clipping,
 no entropy bonus, gradient norm 0.5, advantages normalised per mini-batch, 3 x 256 tanh actor and critic with
 orthogonal initialisation, log-std parameter starting at 0) is :func:`maniskill_ppo_cfg`; docs/training.md lists
-what transfers to rsl-rl and what does not.
+what transfers to rsl-rl and what does not. A task whose ManiSkill recipe departs from it (StackCube-v1's 16 steps per
+env) says so in :data:`wpctrl.train.ppo_config.TASK_RECIPES`, which the configuration's defaults read.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from .policy_eval import evaluate_policy
 from .ppo_config import MANISKILL_EPOCHS as EPOCHS
 from .ppo_config import MANISKILL_MINIBATCHES as MINIBATCHES
 from .ppo_config import MANISKILL_STEPS_PER_ENV as STEPS_PER_ENV
-from .ppo_config import runner_cfg
+from .ppo_config import runner_cfg, task_recipe
 from .ppo_update import CapturedUpdate
 from .sampling import SAMPLINGS, act, sync_free
 from .task_env import TaskVecEnv
@@ -130,6 +132,7 @@ def checkpoint_infos(env: TaskVecEnv, cfg: dict) -> dict:
         "action_low": env.action_low.cpu().tolist(),
         "action_high": env.action_high.cpu().tolist(),
         "obs_fields": [[f.group, f.name, f.size] for f in spec.obs_fields],
+        "max_episode_steps": env.max_episode_length,
         "substeps": env.substeps,
         "partial_reset": env.partial_reset,
         "actor": cfg["actor"],
@@ -137,10 +140,10 @@ def checkpoint_infos(env: TaskVecEnv, cfg: dict) -> dict:
 
 
 class ManiSkillTraining:
-    """PushCube-v1 / PickCube-v1 as the trainer's loop drives them (``cfg``: a resolved
-    :class:`~wpctrl.train.train_config.TrainConfig`): a :class:`TaskVecEnv` to train on and a separate evaluation
-    env (every episode runs its 50 steps, on held-out seeds), ManiSkill's initialisation and Adam, the captured PPO
-    update where asked, and :class:`Collector`'s rollout."""
+    """A ManiSkill task (any of :data:`~wpctrl.train.train_config.MANISKILL_TASKS`) as the trainer's loop drives it
+    (``cfg``: a resolved :class:`~wpctrl.train.train_config.TrainConfig`): a :class:`TaskVecEnv` to train on and a
+    separate evaluation env (every episode runs the task's ``max_episode_steps``, on held-out seeds), ManiSkill's
+    initialisation and Adam, the captured PPO update where asked, and :class:`Collector`'s rollout."""
 
     success_label = "success rate (success at any step)"
     evaluates_untrained = True
@@ -211,7 +214,9 @@ class ManiSkillTraining:
     def summary(self) -> dict:
         c = self.cfg
         return {"eval_envs": c.eval_envs, "ppo_update": c.ppo_update, "action_sampling": c.action_sampling,
-                "substeps": self.env.substeps, "partial_reset": self.env.partial_reset}  # fmt: skip
+                "substeps": self.env.substeps, "partial_reset": self.env.partial_reset,
+                "max_episode_steps": self.env.max_episode_length, "obs_dim": self.env.num_obs,
+                "recipe": task_recipe(c.task)}  # fmt: skip
 
     def checkpoint_infos(self, ppo: dict) -> dict:
         return checkpoint_infos(self.env, ppo)

@@ -12,13 +12,16 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 
 from ..tasks.names import CONTROL_MODES as PANDA_MODES
+from ..tasks.names import TASK_MODULES
 from .command_args import flag, unused_option
 from .logger import LOGGERS, logger_error
-from .ppo_config import MANISKILL_MINIBATCHES, MANISKILL_STEPS_PER_ENV, batch_error
+from .ppo_config import batch_error, task_recipe
 
 __all__ = ["CONTROL_MODES", "MANISKILL_TASKS", "TASKS", "TASK_ONLY", "TrainConfig", "TrainConfigError", "flag"]
 
-MANISKILL_TASKS = ("PushCube-v1", "PickCube-v1")
+MANISKILL_TASKS: tuple[str, ...] = tuple(TASK_MODULES)
+"""The ManiSkill tasks ``wpctrl train`` trains: every task of the registry (:data:`wpctrl.tasks.names.TASK_MODULES`,
+host-only names: importing them loads no Warp)."""
 TASKS = ("reach",) + MANISKILL_TASKS
 CONTROL_MODES = ("pd_ee_delta_pos", "pd_joint_delta_pos")
 """The reach task's control modes (the ManiSkill tasks take every Panda mode of :data:`wpctrl.tasks.CONTROL_MODES`)."""
@@ -34,6 +37,9 @@ TASK_ONLY = ("epochs", "minibatches", "substeps", "eval_envs", "time_limit", "pp
              "action_sampling", "no_partial_reset")  # fmt: skip
 """The options only the ManiSkill tasks use (the reach task refuses them)."""
 
+TASK_LIST = ", ".join(MANISKILL_TASKS)
+"""The ManiSkill tasks as the help texts name them."""
+
 _POSITIVE = ("envs", "iterations", "steps_per_env", "eval_episodes", "eval_envs", "epochs", "minibatches", "substeps")
 _CHOICES = {"task": TASKS, "logger": LOGGERS, "ppo_update": PPO_UPDATES, "obs_normalization": OBS_NORMALIZATIONS,
             "action_sampling": SAMPLINGS}  # fmt: skip
@@ -45,7 +51,8 @@ class TrainConfigError(ValueError):
 
 @dataclass
 class TrainConfig:
-    """One training run: PPO (rsl-rl) on the reach task or on ManiSkill's PushCube-v1 / PickCube-v1.
+    """One training run: PPO (rsl-rl) on the reach task or on one of ManiSkill's tasks (:data:`MANISKILL_TASKS`:
+    every task of :mod:`wpctrl.tasks`' registry).
 
     Every field is the ``wpctrl train`` option of the same name (``steps_per_env`` is ``--steps-per-env``) with the
     same default; None means "the default for this task and device" (:meth:`resolved` fills them in). The fields the
@@ -60,12 +67,14 @@ class TrainConfig:
     iterations: int | None = None
     """PPO iterations (None: reach 200 on CUDA, the tasks 2000; 20 on the CPU); with ``resume``: iterations to add."""
     steps_per_env: int | None = None
-    """Rollout length per iteration (None: reach 24, tasks 4)."""
+    """Rollout length per iteration (None: reach 24; the tasks their recipe's, 4, StackCube-v1 16:
+    :data:`wpctrl.train.ppo_config.TASK_RECIPES`)."""
     epochs: int | None = None
     minibatches: int | None = None
     substeps: int | None = None
     no_partial_reset: bool = False
-    """Tasks: success does not end an episode (every episode runs its 50 steps)."""
+    """Tasks: success does not end an episode (every episode runs its ``max_episode_steps``: 50, PegInsertionSide-v1
+    100)."""
     device: str | None = None
     """torch / Warp device (None: ``cuda:0`` if there is one, else ``cpu``)."""
     seed: int = 0
@@ -163,8 +172,9 @@ class TrainConfig:
         envs = self.envs or (4096 if cuda else 64)
         if self.task in MANISKILL_TASKS:
             # ManiSkill's PPO normalises the advantages per mini-batch: 2 samples at least for a defined std
-            return batch_error(envs, self.steps_per_env or MANISKILL_STEPS_PER_ENV,
-                               self.minibatches or MANISKILL_MINIBATCHES, 2, name("minibatches"), name)  # fmt: skip
+            recipe = task_recipe(self.task)
+            return batch_error(envs, self.steps_per_env or recipe["steps_per_env"],
+                               self.minibatches or recipe["minibatches"], 2, name("minibatches"), name)  # fmt: skip
         # the reach task normalises them over the whole batch: every one of its mini-batches needs a sample
         return batch_error(envs, self.steps_per_env or REACH_STEPS_PER_ENV, REACH_MINIBATCHES, 1, None, name)
 
@@ -206,12 +216,15 @@ class TrainConfig:
         reach = self.task == "reach"
         envs = self.envs or (4096 if cuda else 64)
         task_values = {}
+        steps = self.steps_per_env or REACH_STEPS_PER_ENV
         if not reach:
+            recipe = task_recipe(self.task)
+            steps = self.steps_per_env or recipe["steps_per_env"]
             eval_envs = self.eval_envs or min(envs, 512)
             task_values = dict(
                 eval_envs=eval_envs,
-                epochs=self.epochs or 8,
-                minibatches=self.minibatches or MANISKILL_MINIBATCHES,
+                epochs=self.epochs or recipe["epochs"],
+                minibatches=self.minibatches or recipe["minibatches"],
                 ppo_update=self.ppo_update or ("captured" if cuda else "rsl-rl"),
                 obs_normalization=self.obs_normalization or "off",
                 action_sampling=self.action_sampling or "sync-free",
@@ -222,7 +235,7 @@ class TrainConfig:
             envs=envs,
             control_mode=self.control_mode or ("pd_ee_delta_pos" if reach else "pd_joint_delta_pos"),
             iterations=self.iterations or ((200 if reach else 2000) if cuda else 20),
-            steps_per_env=self.steps_per_env or (REACH_STEPS_PER_ENV if reach else MANISKILL_STEPS_PER_ENV),
+            steps_per_env=steps,
             eval_episodes=self.eval_episodes or (envs if reach else task_values["eval_envs"]),
             **task_values,
         )

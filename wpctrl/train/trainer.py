@@ -225,6 +225,7 @@ class Trainer:
             "stopped_by": stop or "iterations",
             "import_s": t0 - t_main,
             "setup_s": setup_s,
+            "train_start_s": t_start - t_main,
             "train_wall_s": train_s,
             "total_s": time.perf_counter() - t_main,
             "collection_env_steps_per_s_median": median(rates),

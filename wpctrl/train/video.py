@@ -1,8 +1,9 @@
 """Video of evaluation episodes (``python -m wpctrl evaluate --sim newton --video FILE``): env 0 of the Newton env,
 rendered after every control step by MuJoCo's offscreen renderer (``mujoco.Renderer``) from the MuJoCo model Newton's
-solver built (its ``mj_model``, the state copied from MuJoCo-Warp's world 0), through ManiSkill's human-render camera
-(eye ``(0.6, 0.7, 0.6)``, looking at ``(0, 0, 0.35)``), the goal drawn as a green sphere (the goal marker is a visual
-actor, not part of the physics model); written with imageio at the control rate (20 fps).
+solver built (its ``mj_model``, the state copied from MuJoCo-Warp's world 0), through the task's ManiSkill human-render
+camera (:func:`camera`: eye ``(0.6, 0.7, 0.6)`` looking at ``(0, 0, 0.35)`` for most tasks), the goal drawn as a green
+sphere where the task has a goal marker (a visual actor, not part of the physics model; StackCube-v1 and
+LiftPegUpright-v1 have none); written with imageio at the control rate (20 fps).
 
 Headless: without ``DISPLAY`` the renderer's OpenGL context is EGL (``MUJOCO_GL=egl``, unless set: ``osmesa`` also
 works where Mesa's OSMesa is installed); Mesa's software EGL driver renders without a GPU. Where no context can be
@@ -15,7 +16,7 @@ import math
 import os
 import sys
 
-__all__ = ["FPS", "MAX_EPISODES", "Recorder", "open_recorder", "unavailable"]
+__all__ = ["FPS", "MAX_EPISODES", "Recorder", "camera", "open_recorder", "unavailable"]
 
 FPS = 20
 """Frames per second: the tasks' control rate, so the video runs in real time."""
@@ -24,7 +25,15 @@ WIDTH, HEIGHT = 512, 384
 MAX_EPISODES = 4
 """Episodes of env 0 recorded (one per round of ``env.num_envs`` episodes): a video of a few seconds each."""
 CAMERA_EYE, CAMERA_TARGET = (0.6, 0.7, 0.6), (0.0, 0.0, 0.35)
-"""ManiSkill's human-render camera of PushCube-v1 / PickCube-v1."""
+"""ManiSkill's human-render camera (``_default_human_render_camera_configs``: ``look_at(eye, target)``) of
+PushCube-v1, PickCube-v1, PullCube-v1, StackCube-v1 and LiftPegUpright-v1."""
+CAMERAS = {"PegInsertionSide-v1": ((0.5, -0.5, 0.8), (0.05, -0.1, 0.4))}
+"""The tasks whose human-render camera is another one: task -> (eye, target)."""
+
+
+def camera(task: str) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """The eye and target of ``task``'s ManiSkill human-render camera."""
+    return CAMERAS.get(task, (CAMERA_EYE, CAMERA_TARGET))
 
 
 def _why(e: BaseException) -> str:
@@ -110,9 +119,10 @@ class Recorder:
         self._model.vis.headlight.diffuse[:] = 0.6
         self._renderer = mujoco.Renderer(self._model, HEIGHT, WIDTH)
         cam = self._camera = mujoco.MjvCamera()
-        d = [t - e for e, t in zip(CAMERA_EYE, CAMERA_TARGET)]
+        eye, target = camera(env.task_spec.env_id)
+        d = [t - e for e, t in zip(eye, target)]
         cam.distance = math.sqrt(sum(x * x for x in d))
-        cam.lookat[:] = CAMERA_TARGET
+        cam.lookat[:] = target
         cam.azimuth = math.degrees(math.atan2(d[1], d[0]))
         cam.elevation = math.degrees(math.asin(d[2] / cam.distance))
         self._writer = imageio.get_writer(str(path), fps=FPS)
@@ -125,8 +135,8 @@ class Recorder:
     def reset(self, *args, **kwargs):
         out = self._env.reset(*args, **kwargs)
         self.episodes += 1
-        spec = self._env.task_spec
-        self._goal = self._env.get_state_dict()["actors"][spec.goal_name][0, :3].tolist()
+        goal = self._env.task_spec.goal_name  # None: a task without a goal marker (nothing drawn)
+        self._goal = self._env.get_state_dict()["actors"][goal][0, :3].tolist() if goal else None
         return out
 
     def step(self, action):

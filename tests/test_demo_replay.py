@@ -142,9 +142,14 @@ def assert_demo_replays(path: Path):
     return report
 
 
-# With the default physics the fingers hold LiftPegUpright's peg against a twist PhysX lets it turn under (measured in
-# tests/test_task_lift_peg_upright.py and docs/tasks.md): its demos miss the goals until the contact model changes.
-_DEFAULT_PHYSICS_MISSES = {"LiftPegUpright-v1": "the fingers resist the peg's twist (0.56 N·m against PhysX's 0.33)"}
+# With the default physics Newton's fingers grip a peg otherwise than PhysX's (measured in docs/tasks.md and the tasks'
+# own tests): LiftPegUpright's peg is held against a twist PhysX lets it turn under, PegInsertionSide's slides and
+# turns in the grasp while carried. Their demos miss the goals until the contact model changes.
+_DEFAULT_PHYSICS_MISSES = {
+    "LiftPegUpright-v1": "the fingers resist the peg's twist (0.56 N·m against PhysX's 0.33)",
+    "PegInsertionSide-v1": "the peg slides and turns in the grasp while carried (PhysX holds it to 0.1 mm) and misses "
+    "the hole's 3 mm clearance",
+}
 _DEMO_PARAMS = [
     pytest.param(
         p,

@@ -12,7 +12,9 @@ vertical the peg's axis is, its centre's height to 0.12 m, and a fifth of reachi
 Physics: ManiSkill's demos turn the peg in the half-closed fingers (gripper action -0.6). With the default
 :class:`~wpctrl.tasks.TaskPhysics` (elliptic cone, impratio 10) the fingers resist that twist with ~0.56 N m where
 PhysX gives way at ~0.33 N m; ``TaskPhysics(cone="pyramidal", impratio=1.0)`` resists ~0.30 N m and replays the demos
-(``tests/test_task_lift_peg_upright.py``).
+(``tests/test_task_lift_peg_upright.py``). The pyramidal cone is not the default: its sliding friction depends on the
+direction (PhysX's does not), and it doubles the pushed cube's replay error on PushCube (``docs/tasks.md``,
+"LiftPegUpright-v1").
 """
 
 from __future__ import annotations

@@ -14,7 +14,12 @@ differ where a task touches them. What :class:`TaskPhysics` sets, and why:
 - **Contacts**: ``contact_solref`` (5 ms, critically damped) and ``contact_solimp`` (0.99-0.999) make contacts
   nearly rigid: with MuJoCo's defaults (20 ms, 0.9-0.95) the gripper's 30 N squeeze pushes the fingers centimetres
   into the 64 g cube and the grasp fails.
-- **Friction cone** elliptic with ``impratio`` 10: a lifted cube stays in the fingers as on PhysX.
+- **Friction cone** elliptic with ``impratio`` 10: a lifted cube stays in the fingers as on PhysX, and sliding friction
+  is the same in every direction, as PhysX's patch friction is (SAPIEN sets no other friction type): a cube launched
+  at 0.5 m/s slides 4.2 cm whichever way (PhysX 4.0 cm). MuJoCo's pyramidal cone is weaker off its axes (4.2 cm along
+  them, 6.0 cm at 45 degrees; a 22.5-degree launch veers to 35) and doubles a pushed cube's replay error. The
+  elliptic cone's price: a peg twisted in half-closed fingers is held with 0.56 N·m where PhysX gives way at 0.33
+  (LiftPegUpright's demos do not replay; ``docs/tasks.md``).
 - **Friction**: PhysX averages, MuJoCo takes the larger coefficient. With the scene's two materials (default 0.3,
   the Panda's finger pads 2.0), giving the finger shapes the average (1.15) reproduces every pair: finger-cube and
   finger-table 1.15, everything else 0.3 (:func:`mujoco_friction`).

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 
+from wpctrl.config import ConfigError
 from wpctrl.console import cuda_absent
 
 DATA = Path(__file__).parent / "data" / "tasks"
@@ -155,6 +156,11 @@ def test_the_light_names_are_the_tasks_own():
     from wpctrl.tasks.env import TaskEnv
 
     assert names.TASK_IDS == tuple(TASKS)
+    from wpctrl.tasks.scripted import POLICIES, policy_for
+
+    assert names.SCRIPTED_TASKS == tuple(POLICIES)  # what `wpctrl demo --task` offers is what it can solve
+    with pytest.raises(ConfigError, match="no scripted policy for 'StackCube-v1'; the tasks with one are"):
+        policy_for("StackCube-v1")
     assert names.CONTROL_MODES == tuple(m for m in panda_control_modes() if m.startswith("pd_")) == CONTROL_MODES
     assert names.CONTROL_MODES[0] == names.DEFAULT_CONTROL_MODE
     assert names.OBS_MODES == OBS_MODES

@@ -12,10 +12,10 @@ import sys
 COMMANDS = {
     "demo": ("wpctrl.demo", "run a ManiSkill control mode on Newton Pandas and report tracking (CPU or GPU)"),
     "train": ("wpctrl.train.cli", "train a PPO policy (rsl-rl) through wpctrl on a vectorised Newton task"),
-    "replay": ("wpctrl.tasks.replay", "replay ManiSkill's recorded PushCube / PickCube episodes on Newton"),
+    "replay": ("wpctrl.tasks.replay", "replay ManiSkill's recorded episodes of its table-top tasks on Newton"),
     "export": (
         "wpctrl.train.commands:export_main",
-        "export a trained PushCube / PickCube policy as TorchScript (and ONNX)",
+        "export a policy trained on a ManiSkill task as TorchScript (and ONNX)",
     ),
     "evaluate": (
         "wpctrl.train.commands:evaluate_main",

@@ -77,13 +77,26 @@ def versions() -> dict:
 
 
 def commit(given: str | None) -> dict:
-    """The tree's commit: git's where the checkout has it, else ``given`` (a copy of the tree without ``.git``, as a
-    device machine gets), else ``unknown``."""
+    """The tree's commit: ``given`` where the caller names it (a device machine's copy of the tree may carry a stale
+    ``.git``), else git's, else ``unknown``."""
+    if given:
+        return {"commit": given, "dirty": None, "commit_from": "--commit"}
     sha = _sh(["git", "rev-parse", "--short", "HEAD"])
     if sha:
         return {"commit": sha, "dirty": bool(_sh(["git", "status", "--porcelain", "wpctrl", "bench"])),
                 "commit_from": "git"}  # fmt: skip
-    return {"commit": given or "unknown", "dirty": None, "commit_from": "--commit" if given else None}
+    return {"commit": "unknown", "dirty": None, "commit_from": None}
+
+
+def _finite(value):
+    """``value`` with every NaN / infinity as None (JSON has none; a diverged run still leaves its record)."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    return value
 
 
 def check_tasks(text: str) -> list[str]:
@@ -145,7 +158,7 @@ def run_task(args, task: str, out: Path, concurrent: list[str]) -> dict:
         record["maniskill_eval"] = _maniskill_eval(trainer, args)
     record["process_s"] = time.perf_counter() - T0
     path = out / f"train_tasks_{task}.json"
-    path.write_text(json.dumps(record, indent=1))
+    path.write_text(json.dumps(_finite(record), indent=1))
     print(f"wrote {path}", flush=True)
     return record
 

@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 from ..console import add_output_options
-from ..tasks.names import TASK_IDS
+from ..tasks.names import SCRIPTED_TASKS
 
 
 def parser() -> argparse.ArgumentParser:
@@ -24,7 +24,7 @@ def parser() -> argparse.ArgumentParser:
         description="ManiSkill's PushCube-v1 / PickCube-v1 on Newton through wpctrl, solved by a scripted policy in "
         "pd_ee_delta_pos (needs ManiSkill's Panda asset: the [maniskill] extra, or WPCTRL_MANISKILL_ASSETS).",
     )
-    p.add_argument("--task", required=True, choices=TASK_IDS)
+    p.add_argument("--task", required=True, choices=SCRIPTED_TASKS)
     p.add_argument("--envs", type=int, default=16, help="parallel envs, one episode each (default 16)")
     p.add_argument("--device", default="cpu", help="cpu | cuda | cuda:N (default cpu)")
     p.add_argument("--seed", type=int, default=0, help="episode seed (default 0)")

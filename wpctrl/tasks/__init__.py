@@ -1,4 +1,5 @@
-"""ManiSkill's table-top tasks (``PushCube-v1``, ``PickCube-v1``) on Newton, with wpctrl as the control layer.
+"""ManiSkill's table-top tasks (``PushCube-v1``, ``PickCube-v1``, ``PullCube-v1``, ``StackCube-v1``,
+``LiftPegUpright-v1``, ``PegInsertionSide-v1``) on Newton, with wpctrl as the control layer.
 
 ``make(env_id, num_envs, ...)`` builds a vectorised env with the API of ManiSkill's GPU envs (``ManiSkillVectorEnv``):
 the same observations (``obs_mode="state"``: the flattened state vector, entries and order as ManiSkill's), rewards,

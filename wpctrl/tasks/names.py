@@ -11,6 +11,7 @@ __all__ = [
     "CONTROL_MODES",
     "DEFAULT_CONTROL_MODE",
     "OBS_MODES",
+    "SCRIPTED_TASKS",
     "TASK_ACTORS",
     "TASK_IDS",
     "TASK_MODULES",
@@ -61,6 +62,9 @@ def main_object(env_id: str) -> str:
 
 TASK_IDS: tuple[str, ...] = tuple(TASK_MODULES)
 """The ManiSkill tasks :func:`wpctrl.tasks.make` builds."""
+
+SCRIPTED_TASKS: tuple[str, ...] = ("PushCube-v1", "PickCube-v1")
+"""The tasks :mod:`wpctrl.tasks.scripted` solves with a scripted policy (``wpctrl demo --task``)."""
 
 CONTROL_MODES: tuple[str, ...] = (
     "pd_joint_delta_pos",

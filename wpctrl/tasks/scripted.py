@@ -105,6 +105,15 @@ def pick_cube_policy(obs):
     return torch.cat([arm, grip], dim=1)
 
 
+POLICIES = {"PushCube-v1": push_cube_policy, "PickCube-v1": pick_cube_policy}
+"""The scripted policies by task (:data:`wpctrl.tasks.names.SCRIPTED_TASKS` lists the same ids)."""
+
+
 def policy_for(env_id: str):
-    """The scripted policy of a task (for ``control_mode="pd_ee_delta_pos"``)."""
-    return {"PushCube-v1": push_cube_policy, "PickCube-v1": pick_cube_policy}[env_id]
+    """The scripted policy of a task (for ``control_mode="pd_ee_delta_pos"``); a task without one is refused, listing
+    those that have one."""
+    if env_id not in POLICIES:
+        from ..config import ConfigError
+
+        raise ConfigError(f"scripted: no scripted policy for {env_id!r}; the tasks with one are {list(POLICIES)}")
+    return POLICIES[env_id]

@@ -212,6 +212,33 @@ def test_recorded_states_give_the_recorded_observation_and_the_rederived_rewards
     assert checked["success"] >= 2 and checked["grasp-dependent"] >= 10, checked
 
 
+@pytest.mark.parametrize("axis, edge", [(0, "depth"), (1, "radius"), (2, "-radius")])
+def test_success_flips_at_the_edges_of_the_hole(axis, edge):
+    """A demo's inserted peg moved (in the hole's frame) so that its head sits 0.5 mm inside, then 0.5 mm outside, an
+    edge of ``has_peg_inserted``: 1.5 cm before the hole's centre along its axis, the hole's half width sideways."""
+    ep = _demos()["episodes"][0]
+    env = T.make(ENV_ID, num_envs=1, control_mode="pd_joint_pos", physics=FAST, auto_reset=False)
+    env.reset(seed=ep["seed"])
+    g = ep["episode_geometry"]
+    box7 = ep["init_state_dict"]["actors"]["box_with_hole"][:7]
+    k = len(ep["actions"])
+    assert ep["info"]["success"][k]
+    peg7 = np.asarray(ep["actor_poses"]["peg"][k], float)
+    head = ref_head_in_hole(peg7, box7, g)
+    limit = {"depth": -0.015, "radius": g["box_hole_radius"], "-radius": -g["box_hole_radius"]}[edge]
+    inward = 1.0 if axis == 0 else -np.sign(limit)
+    for offset, inside in ((0.0005, True), (-0.0005, False)):
+        target = head.copy()
+        target[axis] = limit + inward * offset
+        moved = peg7.copy()
+        moved[:3] += _rot(box7[3:]).apply(target - head)
+        assert ref_success(moved, box7, g) == inside
+        state = _state(ep, k)
+        state["actors"]["peg"][0, :7] = torch.tensor(moved, dtype=torch.float32)
+        env.set_state_dict(state)
+        assert bool(env.evaluate()["success"][0]) == inside, (axis, offset)
+
+
 _REPLAY_GAP = (
     "the peg slides in Newton's grasp: carried 3 s after the grasp it is ~1 cm further along its axis and turned "
     "~0.27 rad about the grasp axis relative to the TCP, where PhysX holds it to 0.1 mm; the head then misses the "

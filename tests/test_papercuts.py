@@ -45,7 +45,7 @@ def test_task_env_repr_names_the_task_and_reset_refuses_unknown_options(push_env
     assert env.elapsed_steps.tolist() == [2, 2]
     with pytest.raises(wpctrl.ConfigError) as e:
         env.reset(options={"env_ids": [0], "seed": 3})
-    assert "['env_ids', 'seed']" in str(e.value) and "['env_idx']" in str(e.value)
+    assert "['env_ids', 'seed']" in str(e.value) and "['env_idx', 'reconfigure']" in str(e.value)
     assert env.elapsed_steps.tolist() == [2, 2]  # refused before any reset
     with pytest.raises(wpctrl.ConfigError, match=r"options expected a dict"):
         env.reset(options=[0])

@@ -6,9 +6,11 @@ success and the main object's position are compared with ManiSkill's at every st
 The episode format is ManiSkill's recording of the tasks (a JSON file, plain or gzip-compressed ``.json.gz``, with
 ``header`` (``task``, ``control_mode``, optionally ``main_object``) and ``episodes``: ``seed``, ``init_state_dict``,
 ``actions``, ``info["success"]`` and the main object's pose per step, ``actor_poses[main_object]`` or ``cube_pose``,
-...). The main object is the header's ``main_object``, else the task's (:func:`wpctrl.tasks.names.main_object`:
-the cube of the cube tasks). ``python -m wpctrl replay FILE.json`` runs it from the command line: every file is read
-and checked (:func:`load_episodes`) before any env is built or any state written, so a wrong file is refused at once,
+...), ManiSkill's trajectory files (:mod:`wpctrl.tasks.maniskill_trajectory`) or policy-driven episodes as numpy
+arrays (``<Task>__<control_mode>__policy.npz``: :mod:`wpctrl.tasks.policy_episodes`). The main object is the
+header's ``main_object``, else the task's (:func:`wpctrl.tasks.names.main_object`: the cube of the cube tasks).
+``python -m wpctrl replay FILE.json`` runs it from the command line: every file is read and checked
+(:func:`load_episodes`) before any env is built or any state written, so a wrong file is refused at once,
 with a :class:`~wpctrl.ConfigError` naming the file, the field, what was expected and what came; only the last check,
 the action width against the control mode's controller configs, loads the robot's description (Newton), every other
 refusal comes before Warp, Newton or torch is imported.
@@ -29,9 +31,10 @@ import numpy as np
 
 from ..config import ConfigError
 from . import maniskill_trajectory as trajectory
+from . import policy_episodes
 from .names import CONTROL_MODES, TASK_ACTORS, TASK_IDS, main_object
 
-__all__ = ["EpisodeResult", "ReplayReport", "load_episodes", "main", "replay"]
+__all__ = ["FIRST_ACTIONS", "EpisodeResult", "ReplayReport", "load_episodes", "main", "replay"]
 
 
 @dataclass
@@ -55,6 +58,15 @@ class EpisodeResult:
     @property
     def agrees(self) -> bool:
         return self.success_at_end == self.success_at_end_recorded
+
+    @property
+    def success_once(self) -> bool:
+        """Newton's success at any step (ManiSkill's ``success_once``)."""
+        return any(self.success)
+
+    @property
+    def success_once_recorded(self) -> bool:
+        return any(self.success_recorded)
 
     @property
     def final_cube_error(self) -> float:
@@ -83,6 +95,12 @@ class ReplayReport:
         return float(np.mean([e.agrees for e in self.episodes])) if self.episodes else float("nan")
 
     @property
+    def once_agreement(self) -> float:
+        """Fraction of all episodes whose success at any step (``success_once``) is the same on both."""
+        same = [e.success_once == e.success_once_recorded for e in self.episodes]
+        return float(np.mean(same)) if same else float("nan")
+
+    @property
     def median_final_cube_error(self) -> float:
         return float(np.median([e.final_cube_error for e in self.episodes])) if self.episodes else float("nan")
 
@@ -94,6 +112,7 @@ class ReplayReport:
             "episodes": len(self.episodes),
             "success_agreement": self.success_agreement,
             "outcome_agreement": self.outcome_agreement,
+            "once_agreement": self.once_agreement,
             "median_final_cube_error_m": self.median_final_cube_error,
             "max_final_cube_error_m": max((e.final_cube_error for e in self.episodes), default=float("nan")),
         }
@@ -116,7 +135,8 @@ class ReplayReport:
         s = self.summary()
         lines.append(
             f"  successful ManiSkill episodes that succeed on Newton: {100 * s['success_agreement']:.0f} %; "
-            f"same outcome: {100 * s['outcome_agreement']:.0f} %; median final {self.main_object} error "
+            f"same outcome: {100 * s['outcome_agreement']:.0f} % (success once: {100 * s['once_agreement']:.0f} %); "
+            f"median final {self.main_object} error "
             f"{100 * s['median_final_cube_error_m']:.2f} cm"
         )
         return "\n".join(lines)
@@ -124,14 +144,17 @@ class ReplayReport:
 
 EXPECTED = (
     "ManiSkill's episode JSON (an object with 'header' and 'episodes'), plain or gzip-compressed (.json.gz), "
-    "or ManiSkill's trajectory file (X.h5 with its X.json)"
+    "or ManiSkill's trajectory file (X.h5 with its X.json), or policy episodes (<Task>__<control_mode>__policy.npz)"
 )
 """What a replay file must be, as the refusals say it."""
 
 
 def _read(path: Path) -> dict:
     """A recording's JSON, from a plain or a gzip-compressed file (told by its first bytes), or ManiSkill's
-    trajectory file (a ``.h5``, or the ``.json`` of one: it has ``env_info``) as the same episode structure."""
+    trajectory file (a ``.h5``, or the ``.json`` of one: it has ``env_info``) or policy episodes (a ``.npz``:
+    :mod:`wpctrl.tasks.policy_episodes`) as the same episode structure."""
+    if policy_episodes.is_policy_file(path):
+        return policy_episodes.read_policy_episodes(path)
     if trajectory.is_trajectory(path):
         return trajectory.read_trajectory(path)
     with path.open("rb") as f:
@@ -330,8 +353,13 @@ def _max_steps(task: str, longest: int) -> int:
     return max(int(TASKS[task].max_episode_steps), int(longest))
 
 
+FIRST_ACTIONS = ("policy", "recorded")
+"""How a closed-loop :func:`replay` (``policy=``) takes each episode's first action: the policy's answer to Newton's
+observation of the initial state, or the recorded one."""
+
+
 def replay(source, device="cpu", physics=None, asset_dir: str | None = None, env=None, verbose: bool = False,
-           progress=None) -> ReplayReport:  # fmt: skip
+           progress=None, policy=None, first_action: str = "policy") -> ReplayReport:  # fmt: skip
     """Replay every episode of ``source`` (a path or a loaded dict) open-loop on Newton, one env per episode.
 
     Each env is reset with its episode's ``seed`` (a list of seeds, one per env) before the recorded state is loaded,
@@ -343,11 +371,23 @@ def replay(source, device="cpu", physics=None, asset_dir: str | None = None, env
     ``auto_reset=False``, ``ignore_terminations=True`` (the recorded episodes keep stepping after success) and
     ``max_episode_steps`` at least the longest episode's length, ``verbose`` passed to ``make``. ``progress``: an
     object with ``update(n)`` (a tqdm bar, say), advanced by one after every step of the episodes.
+
+    ``policy``: run it closed-loop from the recorded initial states instead of replaying the actions: a callable
+    from ManiSkill's flattened state observation (a torch tensor on the env's device) to the action, e.g. an
+    exported ``policy.ts`` (:func:`wpctrl.train.evaluate.load_policy`); each episode runs as many steps as recorded,
+    and the report puts its success and main-object path next to the recorded run's (the same policy on ManiSkill,
+    for recordings of a policy). ``first_action="recorded"`` takes each episode's first action from the recording:
+    ManiSkill's observation right after a reset of its reused CPU env can hold contact flags of the previous
+    episode's last step (PickCube's ``is_grasped``), which no state dict carries.
     """
     import torch
 
     from .factory import make
 
+    if first_action not in FIRST_ACTIONS:
+        raise ConfigError(f"replay: first_action expected one of {list(FIRST_ACTIONS)}, got {first_action!r}")
+    if policy is not None and not callable(policy):
+        raise ConfigError(f"replay: policy expected a callable (observations -> actions), got {type(policy).__name__}")
     data = load_episodes(source)
     header, episodes = data["header"], data["episodes"]
     n = len(episodes)
@@ -379,8 +419,14 @@ def replay(source, device="cpu", physics=None, asset_dir: str | None = None, env
     success = np.zeros((n, steps), bool)
     grasped = np.zeros((n, steps), bool)
     position = np.zeros((n, steps, 3))
+    obs = env.get_obs() if policy is not None else None
     for t in range(steps):
-        _, _, _, _, info = env.step(torch.from_numpy(actions[:, t]))
+        if policy is None or (t == 0 and first_action == "recorded"):
+            action = torch.from_numpy(actions[:, t])
+        else:
+            with torch.inference_mode():
+                action = policy(obs.to(torch.float32))
+        obs, _, _, _, info = env.step(action)
         success[:, t] = info["success"].cpu().numpy()
         if "is_grasped" in info:
             grasped[:, t] = info["is_grasped"].cpu().numpy()
@@ -419,7 +465,8 @@ def _parser() -> argparse.ArgumentParser:
         "ManiSkill's.",
     )
     p.add_argument("episodes", nargs="+", help="episode files (ManiSkill's recording format: JSON, or .json.gz; or "
-                   "ManiSkill's trajectory files: X.h5 with its X.json)")  # fmt: skip
+                   "ManiSkill's trajectory files: X.h5 with its X.json; or policy episodes: "
+                   "<Task>__<control_mode>__policy.npz)")  # fmt: skip
     p.add_argument("--device", default="cpu", help="Warp device (default: cpu)")
     p.add_argument("--out", default=None, help="write the full report (every step of every episode) as JSON here")
     p.add_argument("--asset-dir", default=None, help="a copy of mani_skill/assets (default: the installed package)")

@@ -189,6 +189,10 @@ def test_a_valid_file_is_read_on_the_host_into_the_replays_format(tmp_path):
         np.testing.assert_array_equal(ep["init_state_dict"]["actors"]["table-workspace"], table_state())
         assert ep["info"]["success"] == [False] * 4
         assert np.asarray(ep["actions"]).shape == (3, 8) and np.asarray(ep["cube_pose"]).shape == (4, 7)
+    # the npz's success[t] is after step t: the replay's t + 1 (t = 0 is the reset, never a success here)
+    shifted = read_policy_episodes(_write(tmp_path, edit=_set("success", np.array([[0, 1, 0], [1, 1, 0]], bool))))
+    assert [ep["info"]["success"] for ep in shifted["episodes"]] == [[False, False, True, False],
+                                                                      [False, True, True, False]]
 
 
 @pytest.mark.parametrize("case", sorted(BAD_NAMES))

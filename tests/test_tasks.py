@@ -90,7 +90,9 @@ def test_make_refuses_bad_input_naming_the_field(kwargs, field):
      ("contact_solref", (0.0, 1.0)), ("contact_solref", (0.01,)), ("contact_solimp", (0.9, 0.8, 0.001)),
      ("contact_solimp", (0.9, 1.0, 0.001)), ("limit_solref", (0.02, -1.0)), ("limit_solimp", (0.9, 0.95, 0.0)),
      ("friction_combine", "min"), ("iterations", 0), ("ls_iterations", 0), ("contact_gap", -0.001),
-     ("contact_gap", float("inf")), ("contact_gap", "1cm"), ("contact_gap", True)],
+     ("contact_gap", float("inf")), ("contact_gap", "1cm"), ("contact_gap", True), ("finger_torsion", -0.01),
+     ("finger_torsion", 5e-5), ("finger_torsion", float("nan")), ("finger_torsion", float("inf")),
+     ("finger_torsion", "0.05"), ("finger_torsion", True)],
 )  # fmt: skip
 def test_task_physics_refuses_values_outside_their_range(field, value):
     with pytest.raises(wpctrl.ConfigError, match=f"TaskPhysics.{field}"):
@@ -100,7 +102,7 @@ def test_task_physics_refuses_values_outside_their_range(field, value):
 
 INSIDE = dict(substeps=1, integrator="implicit", cone="pyramidal", impratio=1.0, iterations=1, ls_iterations=1,
               contact_solref=(1e-4, 1e-3), contact_solimp=(0.5, 0.5, 1e-4), limit_solref=(1e-4, 1e-3),
-              limit_solimp=(0.5, 0.5, 1e-4), friction_combine="max", contact_gap=0.0)  # fmt: skip
+              limit_solimp=(0.5, 0.5, 1e-4), friction_combine="max", contact_gap=0.0, finger_torsion=1e-4)  # fmt: skip
 """Every TaskPhysics field at (or just inside) the edge of its range, none at its default."""
 
 
@@ -125,6 +127,55 @@ def test_task_physics_values_at_the_edge_reach_mujoco():
                                np.broadcast_to(INSIDE["limit_solimp"], (3, limited.sum(), 3)))  # fmt: skip
     # friction "max": the materials' own coefficients (finger pads 2.0, the rest 0.3), not PhysX's averages
     np.testing.assert_allclose(np.unique(mw.geom_friction.numpy()[..., 0]), [0.3, 2.0], rtol=1e-6)
+    # finger_torsion: condim 4 and the coefficient on the finger geoms only (test_finger_torsion_... below)
+    assert np.unique(mw.geom_condim.numpy()).tolist() == [3, 4]
+    np.testing.assert_array_equal(np.unique(mw.geom_friction.numpy()[..., 1]), np.float32([0.0, 1e-4]))
+
+
+def test_finger_torsion_gives_the_finger_geoms_condim_4_and_that_coefficient():
+    """TaskPhysics.finger_torsion > 0: in MuJoCo-Warp's model the geoms of the finger links (scene.FINGER_LINKS) have
+    condim 4 and exactly that torsional coefficient, in every world; every other geom keeps condim 3 and gets a
+    torsional coefficient of 0; sliding and rolling friction are the default build's everywhere. The default (0)
+    gives no geom condim 4."""
+    from wpctrl.tasks.scene import FINGER_LINKS
+
+    assert T.TaskPhysics().finger_torsion == 0.0
+    models = {}
+    for torsion in (0.0, 0.05):
+        env = T.make("PushCube-v1", num_envs=2, physics=T.TaskPhysics(substeps=2, finger_torsion=torsion), graph=False)
+        labels = [lb.rsplit("/", 1)[-1] for lb in env.model.body_label]
+        finger_shape = np.array([b >= 0 and labels[b] in FINGER_LINKS for b in env.model.shape_body.numpy()])
+        shape_of_geom = env.solver.mjc_geom_to_newton_shape.numpy()  # (world, geom) -> Newton shape
+        assert (shape_of_geom >= 0).all()
+        finger = finger_shape[shape_of_geom]
+        assert (finger == finger[0]).all() and 2 <= finger[0].sum() < finger.shape[1]  # both fingers, every world
+        mw = env.solver.mjw_model
+        models[torsion] = (finger[0], mw.geom_condim.numpy(), mw.geom_friction.numpy())
+    (finger, condim0, friction0), (finger1, condim, friction) = models[0.0], models[0.05]
+    np.testing.assert_array_equal(finger1, finger)
+    assert (condim0 == 3).all()
+    assert (condim[finger] == 4).all() and (condim[~finger] == 3).all()
+    assert (friction[..., finger, 1] == np.float32(0.05)).all()
+    assert (friction[..., ~finger, 1] == 0.0).all()
+    np.testing.assert_array_equal(friction[..., [0, 2]], friction0[..., [0, 2]])
+
+
+def test_a_contact_time_constant_under_two_mujoco_steps_acts_as_two_steps():
+    """MuJoCo raises a contact's solref time constant to two of its steps where it is shorter (its ``refsafe``): at 2
+    substeps (5 ms steps) a push with contact_solref 1.25 ms is bitwise the one with 10 ms; 20 ms pushes otherwise."""
+    from wpctrl.tasks.scripted import policy_for
+
+    runs = {}
+    for tau in (0.00125, 0.01, 0.02):
+        env = T.make("PushCube-v1", num_envs=1, control_mode="pd_ee_delta_pos", auto_reset=False,
+                     physics=T.TaskPhysics(substeps=2, contact_solref=(tau, 1.0)))  # fmt: skip
+        obs, _ = env.reset(seed=4)
+        policy = policy_for("PushCube-v1")
+        for _ in range(25):
+            obs, *_ = env.step(policy(obs))
+        runs[tau] = env.state.joint_q.numpy().copy()
+    np.testing.assert_array_equal(runs[0.00125], runs[0.01])
+    assert np.abs(runs[0.02] - runs[0.01]).max() > 1e-5
 
 
 def test_contact_gap_changes_which_pairs_are_tracked_not_the_motion():

@@ -63,3 +63,22 @@ MUTATIONS = [
         _TESTS,
     ),
 ]
+
+MUTATIONS += [
+    M(
+        "finger_torsion_on_every_shape",
+        "wpctrl/tasks/scene.py",
+        "        ns.condim.assign(np.where(fingers, 4, ns.condim.numpy()).astype(np.int32))\n",
+        "        ns.condim.assign(np.full(model.shape_count, 4, np.int32))\n",
+        "finger_torsion gives every shape condim 4, not just the fingers'",
+        ("tests/test_tasks.py",),
+    ),
+    M(
+        "finger_torsion_condim_kept",
+        "wpctrl/tasks/scene.py",
+        "        ns.condim.assign(np.where(fingers, 4, ns.condim.numpy()).astype(np.int32))\n",
+        "        pass\n",
+        "finger_torsion sets a torsional coefficient MuJoCo never uses (condim left at 3)",
+        ("tests/test_tasks.py",),
+    ),
+]

@@ -13,13 +13,24 @@ differ where a task touches them. What :class:`TaskPhysics` sets, and why:
   ends up centimetres off. The controller still runs at ManiSkill's rates (100 Hz drive targets, 20 Hz actions).
 - **Contacts**: ``contact_solref`` (5 ms, critically damped) and ``contact_solimp`` (0.99-0.999) make contacts
   nearly rigid: with MuJoCo's defaults (20 ms, 0.9-0.95) the gripper's 30 N squeeze pushes the fingers centimetres
-  into the 64 g cube and the grasp fails.
+  into the 64 g cube and the grasp fails. Its price: a closed grasp never comes to rest. Fingers and held object
+  chatter (the finger joints swing over 1.7-3.3 mm while the hand holds a cube still; PhysX's move 0.01 mm), and under
+  PickCube's full-speed moves the cube slides 5-10 mm in the fingers (PhysX 0.3-0.9 mm); a carried peg walks out of
+  them. Two MuJoCo steps (1.25 ms) stop most of it (0.5 mm, the cube 1.4-3.8 mm but one of six 12.5 mm) and replay
+  grasps closer (PickCube's public episodes 0.49 -> 0.34 cm, StackCube's demos 0.45 -> 0.05 cm), but a cube struck by
+  the fingers then leaves them otherwise than PhysX's: PushCube's ``pd_ee_delta_pos`` replays land 1.2 -> 5.5 cm off
+  (32 fresh episodes: 1.2 -> 4.7 cm), so 5 ms stays (``docs/tasks.md``).
 - **Friction cone** elliptic with ``impratio`` 10: a lifted cube stays in the fingers as on PhysX, and sliding friction
   is the same in every direction, as PhysX's patch friction is (SAPIEN sets no other friction type): a cube launched
   at 0.5 m/s slides 4.2 cm whichever way (PhysX 4.0 cm). MuJoCo's pyramidal cone is weaker off its axes (4.2 cm along
   them, 6.0 cm at 45 degrees; a 22.5-degree launch veers to 35) and doubles a pushed cube's replay error. The
   elliptic cone's price: a peg twisted in half-closed fingers is held with 0.56 N·m where PhysX gives way at 0.33
   (LiftPegUpright's demos do not replay; ``docs/tasks.md``).
+- **Finger torsion** (``finger_torsion``, off by default): PhysX's patch friction on the fingers (ManiSkill's
+  ``patch_radius`` 0.1 m) also resists a twist about the contact normal, which MuJoCo's condim-3 contacts do not;
+  ``finger_torsion`` > 0 gives the finger shapes condim 4 and that torsional coefficient. PegInsertionSide's demos need
+  it (3 / 4 insert with 0.05 m and 1.25 ms contacts, 0 / 4 without); LiftPegUpright's need the peg to turn in the
+  fingers and replay further off with it.
 - **Friction**: PhysX averages, MuJoCo takes the larger coefficient. With the scene's two materials (default 0.3,
   the Panda's finger pads 2.0), giving the finger shapes the average (1.15) reproduces every pair: finger-cube and
   finger-table 1.15, everything else 0.3 (:func:`mujoco_friction`).
@@ -41,6 +52,9 @@ __all__ = ["TaskPhysics", "mujoco_friction"]
 
 _INTEGRATORS = ("discrete", "implicitfast", "implicit", "euler")
 _CONES = ("elliptic", "pyramidal")
+_MIN_TORSION = 1e-4
+"""The smallest torsional coefficient [m] TaskPhysics takes above 0: MuJoCo-Warp warns that a condim-4 geom's under
+its ``mjMINMU`` (1e-5, compared after Newton's float32) may give NaN."""
 
 
 @dataclass(frozen=True)
@@ -56,7 +70,8 @@ class TaskPhysics:
     """MuJoCo's constraint solver iterations (its default)."""
     ls_iterations: int = 50
     contact_solref: tuple[float, float] = (0.005, 1.0)
-    """MuJoCo ``solref`` of every contact: (time constant [s], damping ratio)."""
+    """MuJoCo ``solref`` of every contact: (time constant [s], damping ratio). MuJoCo raises a time constant under two
+    of its steps to two steps (``refsafe``): 1.25 ms is two steps at 16 substeps and acts as 2.5 ms at 8."""
     contact_solimp: tuple[float, float, float] = (0.99, 0.999, 0.001)
     """MuJoCo ``solimp`` (dmin, dmax, width [m]) of every contact."""
     limit_solref: tuple[float, float] | None = (0.00125, 1.0)
@@ -72,6 +87,17 @@ class TaskPhysics:
     which pairs are tracked, not the forces: a tracked pair pushes only once it touches. Newton's default, 0.1 m, tracks
     every link within 10 cm of the table, the cube or another link (about ten times the contacts of 0.01 m, and a
     step 2.3 times slower on the CPU); 1 cm is eight MuJoCo steps of a 1 m/s approach at the default substeps."""
+    finger_torsion: float = 0.0
+    """Torsional friction coefficient [m] of the Panda's finger shapes; 0 (the default) leaves them without any. Above 0
+    the finger shapes get MuJoCo's ``condim`` 4 (friction about the contact normal too) and this coefficient, every
+    other shape a torsional coefficient of 0, so every finger contact resists a twist about its normal with up to this
+    coefficient times its normal force. It stands in for PhysX's torsional patch friction on ManiSkill's finger
+    material (``patch_radius`` / ``min_patch_radius`` 0.1 m), which MuJoCo's elliptic cone lacks: with 0.05 (and
+    ``contact_solref=(0.00125, 1.0)``) PegInsertionSide's demos replay 3 / 4, the peg 0.3 cm from PhysX's in the
+    median, where they replay 0 / 4 without. It is not the default: LiftPegUpright's demos need the peg to turn in the
+    fingers, and they replay further off with it (at 1.25 ms contacts 0 / 4 either way, the peg 10.2 -> 11.4 cm off;
+    with the pyramidal cone that replays them, 4 / 4 -> 0 / 4; ``docs/tasks.md``). Values between 0 and 1e-4 are
+    refused (MuJoCo warns of NaN under 1e-5)."""
 
     def __post_init__(self):
         _int_at_least(self, "substeps", 1)
@@ -86,6 +112,13 @@ class TaskPhysics:
             or not (0.0 <= self.contact_gap < float("inf"))
         ):
             raise ConfigError(f"TaskPhysics.contact_gap: expected a finite number >= 0 [m], got {self.contact_gap!r}")
+        if (
+            isinstance(self.finger_torsion, bool)
+            or not isinstance(self.finger_torsion, (int, float))
+            or not (self.finger_torsion == 0.0 or _MIN_TORSION <= self.finger_torsion < float("inf"))
+        ):
+            raise ConfigError(f"TaskPhysics.finger_torsion: expected 0 (none) or a finite number >= {_MIN_TORSION} [m] "
+                              f"(MuJoCo warns of NaN under 1e-5), got {self.finger_torsion!r}")  # fmt: skip
         if isinstance(self.impratio, bool) or not isinstance(self.impratio, (int, float)) or not self.impratio >= 1.0:
             raise ConfigError(f"TaskPhysics.impratio: expected a number >= 1, got {self.impratio!r}")
         for name in ("contact_solref", "limit_solref"):

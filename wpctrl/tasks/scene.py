@@ -29,7 +29,8 @@ __all__ = ["PANDA_FINGER_MATERIAL", "Scene", "build_scene", "panda_urdf_path"]
 
 PANDA_FINGER_MATERIAL = {"static_friction": 2.0, "dynamic_friction": 2.0, "restitution": 0.0}
 """ManiSkill's ``Panda.urdf_config``: the ``gripper`` material of ``panda_leftfinger`` / ``panda_rightfinger``
-(``mani_skill/agents/robots/panda/panda.py``; PhysX's patch radius 0.1 has no MuJoCo counterpart)."""
+(``mani_skill/agents/robots/panda/panda.py``). Its PhysX torsional patch radius (0.1 m) has no exact MuJoCo counterpart;
+``TaskPhysics.finger_torsion`` adds MuJoCo's torsional friction on the fingers instead (off by default)."""
 FINGER_LINKS = ("panda_leftfinger", "panda_rightfinger")
 TCP_LINK = "panda_hand_tcp"
 _URDF = os.path.join("robots", "panda", "panda_v2.urdf")
@@ -199,7 +200,8 @@ def _add_actor(env: newton.ModelBuilder, actor: Actor, mu: float) -> None:
 
 
 def _apply_mujoco_attributes(model: newton.Model, physics: TaskPhysics, n_shapes: int) -> None:
-    """Raw MuJoCo contact and joint-limit parameters on every shape / DOF (SolverMuJoCo reads them at build)."""
+    """Raw MuJoCo contact and joint-limit parameters on every shape / DOF (SolverMuJoCo reads them at build); with
+    ``physics.finger_torsion`` the finger shapes' ``condim`` 4 and torsional friction (0 on every other shape)."""
     from newton._src.solvers.mujoco.constants import SOLREF_MODE_RAW
 
     ns = model.mujoco
@@ -209,6 +211,11 @@ def _apply_mujoco_attributes(model: newton.Model, physics: TaskPhysics, n_shapes
     ns.solref_mode.assign(np.full(model.shape_count, SOLREF_MODE_RAW, np.int32))
     solimp = np.tile(np.array([*physics.contact_solimp, 0.5, 2.0], np.float32), (model.shape_count, 1))
     ns.geom_solimp.assign(solimp)
+    if physics.finger_torsion > 0.0:
+        labels = [lb.rsplit("/", 1)[-1] for lb in model.body_label]
+        fingers = np.array([b >= 0 and labels[b] in FINGER_LINKS for b in model.shape_body.numpy()], bool)
+        ns.condim.assign(np.where(fingers, 4, ns.condim.numpy()).astype(np.int32))
+        model.shape_material_mu_torsional.assign(np.where(fingers, physics.finger_torsion, 0.0).astype(np.float32))
     if physics.limit_solref is None:
         return
     ndof = model.joint_dof_count

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import newton
 import numpy as np
+import warp as wp
 
 from ..config import ConfigError
 from .definitions import Actor, Box
@@ -24,33 +25,18 @@ GEOMETRY_FLAGS = newton.ModelFlags.SHAPE_PROPERTIES | newton.ModelFlags.BODY_INE
 """What :func:`apply_episode_geometry` changes, for ``solver.notify_model_changed``."""
 
 
-def _rotation(q_wxyz) -> np.ndarray:
-    w, x, y, z = q_wxyz
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])  # fmt: skip
-
-
 def box_inertia(shapes: tuple[Box, ...], density: float) -> tuple[float, np.ndarray, np.ndarray]:
-    """Mass [kg], centre of mass (3,) and inertia about it (3, 3) of solid boxes of one ``density`` [kg/m^3], as
-    PhysX computes an actor's from its collision shapes."""
-    mass, first = 0.0, np.zeros(3)
+    """Mass [kg], centre of mass (3,) and inertia about it (3, 3) of solid boxes of one ``density`` [kg/m^3], by
+    Newton's own mass-property functions (those its builder used for the declared shapes)."""
     parts = []
     for b in shapes:
-        h = np.asarray(b.half_size, float)
-        m = density * 8.0 * h.prod()
-        local = m / 3.0 * np.diag([h[1] ** 2 + h[2] ** 2, h[0] ** 2 + h[2] ** 2, h[0] ** 2 + h[1] ** 2])
-        r = _rotation(b.quat)
-        parts.append((m, np.asarray(b.offset, float), r @ local @ r.T))
-        mass += m
-        first += m * np.asarray(b.offset, float)
-    com = first / mass if mass > 0.0 else np.zeros(3)
-    inertia = np.zeros((3, 3))
-    for m, c, i in parts:
-        d = c - com
-        inertia += i + m * (d @ d * np.eye(3) - np.outer(d, d))
+        m, c, i = newton.geometry.compute_inertia_shape(newton.GeoType.BOX, wp.vec3(*b.half_size), None, density)
+        q = wp.quat(b.quat[1], b.quat[2], b.quat[3], b.quat[0])
+        parts.append((m, np.asarray(wp.quat_rotate(q, c)) + np.asarray(b.offset, float), i, q))
+    mass = sum(m for m, _, _, _ in parts)
+    com = sum(m * c for m, c, _, _ in parts) / mass if mass > 0.0 else np.zeros(3)
+    inertia = sum(np.asarray(newton.geometry.transform_inertia(m, i, wp.vec3(*(c - com)), q), float).reshape(3, 3)
+                  for m, c, i, q in parts)  # fmt: skip
     return mass, com, inertia
 
 

@@ -63,7 +63,7 @@ def _f32(values) -> np.ndarray:
 
 @pytest.mark.slow  # the real ManiSkill (about 10 s on a 2-core CPU)
 def test_recording_holds_the_episodes_in_the_replay_format(recorded):
-    from wpctrl.tasks.replay import load_episodes
+    from wpctrl.tasks.recording import load_episodes
 
     data, result = recorded["data"], recorded["result"]
     assert load_episodes(recorded["path"]) == data  # the replay's reader takes it as written

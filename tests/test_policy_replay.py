@@ -33,7 +33,8 @@ import wpctrl  # noqa: E402
 import wpctrl.tasks as T  # noqa: E402
 from wpctrl.tasks.names import TASK_ACTORS  # noqa: E402
 from wpctrl.tasks.policy_episodes import read_policy_episodes  # noqa: E402
-from wpctrl.tasks.replay import load_episodes, main  # noqa: E402
+from wpctrl.tasks.recording import load_episodes  # noqa: E402
+from wpctrl.tasks.replay import main  # noqa: E402
 
 POLICY = Path(os.environ.get("WPCTRL_POLICY_EPISODES", "/work/shared/tasks/policy"))
 FILES = {

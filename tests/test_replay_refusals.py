@@ -28,7 +28,8 @@ torch = pytest.importorskip("torch")
 import wpctrl  # noqa: E402
 import wpctrl.tasks as T  # noqa: E402
 from wpctrl.tasks.names import CONTROL_MODES  # noqa: E402
-from wpctrl.tasks.replay import action_width, main  # noqa: E402
+from wpctrl.tasks.recording import action_width  # noqa: E402
+from wpctrl.tasks.replay import main  # noqa: E402
 
 DATA = Path(__file__).parent / "data" / "tasks"
 EE = "PushCube-v1__pd_ee_delta_pos.json"

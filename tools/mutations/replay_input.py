@@ -1,4 +1,4 @@
-"""Mutations: what the replay reads and refuses (``wpctrl/tasks/replay.py``, ``wpctrl/tasks/_validate.py``,
+"""Mutations: what the replay reads and refuses (``wpctrl/tasks/recording.py``, ``wpctrl/tasks/_validate.py``,
 ``wpctrl/tasks/policy_episodes.py``)."""
 
 from .model import M
@@ -9,7 +9,7 @@ _POLICY = ("tests/test_policy_replay.py",)
 MUTATIONS = [
     M(
         "replay_action_width_unchecked",
-        "wpctrl/tasks/replay.py",
+        "wpctrl/tasks/recording.py",
         "        if a.shape[1] != width:\n",
         "        if a.shape[1] > width:\n",
         "a recording with fewer action values per step than its control mode takes is replayed",

@@ -18,8 +18,9 @@ from __future__ import annotations
 
 from .factory import CONTROL_MODES, OBS_MODES, make
 from .physics import TaskPhysics
+from .recording import load_episodes
 from .registry import TASKS, Task, get_task, register_task
-from .replay import load_episodes, replay
+from .replay import replay
 
 TaskSpec = Task
 """The base class of the tasks (:class:`Task`), by its former name."""

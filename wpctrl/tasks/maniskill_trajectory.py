@@ -11,7 +11,7 @@ ManiSkill writes a recording as a pair of files of one base name (``RecordEpisod
   ``success`` / ``fail`` / ``terminated`` / ``truncated`` (T) after each step, and, when recorded, ``obs`` and
   ``rewards``.
 
-:func:`read_trajectory` turns the pair into the episode structure :func:`wpctrl.tasks.replay.load_episodes` returns
+:func:`read_trajectory` turns the pair into the episode structure :func:`wpctrl.tasks.recording.load_episodes` returns
 for the project's JSON recordings: ``init_state_dict`` (``env_states`` at t = 0), ``actions``, ``info["success"]``
 per step (t = 0 .. T; ManiSkill does not record the reset's, so t = 0 is False) and ``cube_pose`` (the pose of the
 task's main object, :func:`wpctrl.tasks.names.main_object`, from ``env_states``, per step). Everything is checked on

@@ -103,6 +103,11 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
                     cfg.delta_solver_config = dict(cfg.delta_solver_config, solver_iterations=100)
         self.ctrl = wpctrl.build_controller(mode, model, self.control_freq, self.sim_freq)
         self.solver = newton.solvers.SolverMuJoCo(model, **physics.solver_kwargs())
+        contacts_per_world = -(-self.solver.get_max_contact_count() // n)
+        rows = physics.constraint_rows(contacts_per_world, sc.dofs_per_env)
+        if self.solver.mjw_data.njmax < rows:  # room for every contact's rows, else MuJoCo-Warp drops some
+            self.solver = newton.solvers.SolverMuJoCo(model, njmax=rows, nconmax=contacts_per_world,
+                                                      **physics.solver_kwargs())  # fmt: skip
         self.dt = 1.0 / (self.sim_freq * physics.substeps)
         self.state = model.state()
         self._other = model.state()

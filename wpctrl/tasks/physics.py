@@ -99,6 +99,16 @@ class TaskPhysics:
     with the pyramidal cone that replays them, 4 / 4 -> 0 / 4; ``docs/tasks.md``). Values between 0 and 1e-4 are
     refused (MuJoCo warns of NaN under 1e-5)."""
 
+    finger_solimp: tuple[float, float, float] | None = (0.7, 0.7, 0.001)
+    """MuJoCo ``solimp`` (dmin, dmax, width [m]) of the Panda's finger shapes; None gives them ``contact_solimp``.
+    MuJoCo mixes the two shapes' values of a pair half and half, so a finger contact's impedance is 0.85 (0.7 and
+    the other shape's 0.99-0.999): a fingertip pressed on the cube sinks into it as far as PhysX's does under the
+    same force (1.1-1.3 mm at 35-40 N; with ``contact_solimp`` on the fingers too, 0.15-0.3 mm). The contact
+    probes in ``docs/tasks.md`` measure it."""
+    finger_solref: tuple[float, float] | None = None
+    """MuJoCo ``solref`` (time constant [s], damping ratio) of the Panda's finger shapes; None gives them
+    ``contact_solref``. MuJoCo mixes the two shapes' values of a pair half and half."""
+
     def __post_init__(self):
         _int_at_least(self, "substeps", 1)
         _int_at_least(self, "iterations", 1)
@@ -121,14 +131,16 @@ class TaskPhysics:
                               f"(MuJoCo warns of NaN under 1e-5), got {self.finger_torsion!r}")  # fmt: skip
         if isinstance(self.impratio, bool) or not isinstance(self.impratio, (int, float)) or not self.impratio >= 1.0:
             raise ConfigError(f"TaskPhysics.impratio: expected a number >= 1, got {self.impratio!r}")
-        for name in ("contact_solref", "limit_solref"):
+        for name in ("contact_solref", "limit_solref", "finger_solref"):
             v = getattr(self, name)
-            if v is None and name == "limit_solref":
+            if v is None and name != "contact_solref":
                 continue
             if not _numbers(v, 2) or not (v[0] > 0.0 and v[1] > 0.0):
                 raise ConfigError(f"TaskPhysics.{name}: expected (time constant > 0 [s], damping ratio > 0), got {v!r}")
-        for name in ("contact_solimp", "limit_solimp"):
+        for name in ("contact_solimp", "limit_solimp", "finger_solimp"):
             v = getattr(self, name)
+            if v is None and name == "finger_solimp":
+                continue
             if not _numbers(v, 3) or not (0.0 < v[0] <= v[1] < 1.0 and v[2] > 0.0):
                 raise ConfigError(f"TaskPhysics.{name}: expected (dmin, dmax, width) with 0 < dmin <= dmax < 1 and "
                                   f"width > 0 [m], got {v!r}")  # fmt: skip
@@ -142,6 +154,16 @@ class TaskPhysics:
             iterations=int(self.iterations),
             ls_iterations=int(self.ls_iterations),
         )
+
+    def constraint_rows(self, contacts_per_world: int, dofs_per_world: int) -> int:
+        """MuJoCo-Warp's constraint rows per world (its ``njmax``) for ``contacts_per_world`` contacts (the collision
+        pipeline's capacity) and ``dofs_per_world`` joint DOFs: every contact's rows at its cone (elliptic: its
+        ``condim``, 3 or 4 with :attr:`finger_torsion`; pyramidal: 2 (condim - 1)), a limit row per DOF and room for
+        the equality rows of the mimic joints. MuJoCo-Warp's own estimate counts far fewer contacts, and the rows it
+        has no room for are dropped from the solve (``nefc overflow``)."""
+        condim = 4 if self.finger_torsion > 0.0 else 3
+        per_contact = condim if self.cone == "elliptic" else 2 * (condim - 1)
+        return int(contacts_per_world) * per_contact + int(dofs_per_world) + 16
 
     def as_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}

@@ -210,10 +210,16 @@ def _apply_mujoco_attributes(model: newton.Model, physics: TaskPhysics, n_shapes
     ns.solref.assign(np.tile(np.asarray(physics.contact_solref, np.float32), (model.shape_count, 1)))
     ns.solref_mode.assign(np.full(model.shape_count, SOLREF_MODE_RAW, np.int32))
     solimp = np.tile(np.array([*physics.contact_solimp, 0.5, 2.0], np.float32), (model.shape_count, 1))
+    labels = [lb.rsplit("/", 1)[-1] for lb in model.body_label]
+    fingers = np.array([b >= 0 and labels[b] in FINGER_LINKS for b in model.shape_body.numpy()], bool)
+    if physics.finger_solimp is not None:
+        solimp[fingers, 0:3] = physics.finger_solimp
     ns.geom_solimp.assign(solimp)
+    if physics.finger_solref is not None:
+        solref = ns.solref.numpy()
+        solref[fingers] = physics.finger_solref
+        ns.solref.assign(solref)
     if physics.finger_torsion > 0.0:
-        labels = [lb.rsplit("/", 1)[-1] for lb in model.body_label]
-        fingers = np.array([b >= 0 and labels[b] in FINGER_LINKS for b in model.shape_body.numpy()], bool)
         ns.condim.assign(np.where(fingers, 4, ns.condim.numpy()).astype(np.int32))
         model.shape_material_mu_torsional.assign(np.where(fingers, physics.finger_torsion, 0.0).astype(np.float32))
     if physics.limit_solref is None:

@@ -142,11 +142,10 @@ def assert_demo_replays(path: Path):
     return report
 
 
-# With the default physics Newton's fingers grip a peg otherwise than PhysX's (measured in docs/tasks.md and the tasks'
-# own tests): LiftPegUpright's peg is held against a twist PhysX lets it turn under, PegInsertionSide's slides and
-# turns in the grasp while carried. Their demos miss the goals until the contact model changes.
+# With the default physics Newton's fingers grip a peg otherwise than PhysX's (measured in docs/tasks.md and the task's
+# own tests): PegInsertionSide's peg slides and turns in the grasp while carried. Its demos miss the goals until the
+# contact model changes.
 _DEFAULT_PHYSICS_MISSES = {
-    "LiftPegUpright-v1": "the fingers resist the peg's twist (0.56 N·m against PhysX's 0.33)",
     "PegInsertionSide-v1": "the peg slides and turns in the grasp while carried (PhysX holds it to 0.1 mm) and misses "
     "the hole's 3 mm clearance (TaskPhysics.finger_torsion: 3 / 4, tests/test_task_peg_insertion_side.py)",
 }

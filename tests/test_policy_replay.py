@@ -45,12 +45,12 @@ REST = [0.0, np.pi / 8, 0.0, -5 * np.pi / 8, 0.0, 3 * np.pi / 4, np.pi / 4, 0.04
 
 # measured 2026-11-28 with the default TaskPhysics (16 substeps), CPU: episodes whose success agrees with ManiSkill's
 MEASURED_REPLAY = {  # task: (episodes, success once agrees, success at the end agrees)
-    "PushCube-v1": (10, 6, 6),
-    "PickCube-v1": (6, 4, 4),
+    "PushCube-v1": (10, 9, 8),
+    "PickCube-v1": (6, 4, 5),
 }
 MEASURED_CLOSED_LOOP = {  # task: (Newton's successes once, success once agrees with ManiSkill's)
-    "PushCube-v1": (8, 8),
-    "PickCube-v1": (5, 4),
+    "PushCube-v1": (7, 9),
+    "PickCube-v1": (4, 4),
 }
 
 
@@ -331,7 +331,8 @@ def test_target_the_arm_follows_physx_within_1_mrad_for_five_steps(task, envs):
 def test_replay_agrees_with_maniskill_on_the_measured_episodes(task, envs):
     """The public file replayed open-loop with the default physics: the success once and the success at the end of
     at least the measured number of episodes less one agree with ManiSkill's (ManiSkill: PushCube 6 / 10 once,
-    0 / 10 at the end; PickCube 5 / 6 and 3 / 6)."""
+    0 / 10 at the end; PickCube 5 / 6 and 3 / 6). Measured: PushCube 9 / 10 and 8 / 10 agree, PickCube 4 / 6 and
+    5 / 6 (with stiff finger contacts, ``finger_solimp=None``: 6 / 10, 6 / 10 and 4 / 6, 4 / 6)."""
     report = T.replay(_public(task), env=envs(task))
     n, once, end = MEASURED_REPLAY[task]
     assert len(report.episodes) == n
@@ -342,12 +343,16 @@ def test_replay_agrees_with_maniskill_on_the_measured_episodes(task, envs):
     assert report.outcome_agreement >= (end - 1) / n, report.format()
 
 
-@pytest.mark.xfail(strict=True, reason="measured with the default physics: success once agrees on 6 / 10 PushCube "
-                   "and 4 / 6 PickCube episodes (at the end 6 / 10, 4 / 6); Newton succeeds in all 10 PushCube "
-                   "episodes, ManiSkill in 6. PhysX itself at 200 iterations agrees with its 15-iteration recording "
-                   "on 7 / 10 and 4 / 6")  # fmt: skip
-@pytest.mark.parametrize("task", FILES)
+_PICK_BELOW_TARGET = pytest.mark.xfail(strict=True, reason=(
+    "measured with the default physics: success once agrees on 4 / 6 PickCube episodes (at the end 5 / 6); PhysX "
+    "itself at 200 iterations agrees with its 15-iteration recording on 4 / 6 (the same two episodes are lost)"))
+
+
+@pytest.mark.parametrize("task", [pytest.param(t, marks=[_PICK_BELOW_TARGET] if t == "PickCube-v1" else [])
+                                  for t in FILES])  # fmt: skip
 def test_target_replay_agrees_with_maniskill_episode_by_episode(task, envs):
+    """The goal: success once agrees episode by episode in >= 90 % of the public file's episodes (PushCube: 9 / 10
+    measured, 6 / 10 with stiff finger contacts)."""
     assert T.replay(_public(task), env=envs(task)).once_agreement >= 0.9
 
 

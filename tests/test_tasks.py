@@ -92,7 +92,9 @@ def test_make_refuses_bad_input_naming_the_field(kwargs, field):
      ("friction_combine", "min"), ("iterations", 0), ("ls_iterations", 0), ("contact_gap", -0.001),
      ("contact_gap", float("inf")), ("contact_gap", "1cm"), ("contact_gap", True), ("finger_torsion", -0.01),
      ("finger_torsion", 5e-5), ("finger_torsion", float("nan")), ("finger_torsion", float("inf")),
-     ("finger_torsion", "0.05"), ("finger_torsion", True)],
+     ("finger_torsion", "0.05"), ("finger_torsion", True), ("finger_solimp", (0.7, 0.6, 0.001)),
+     ("finger_solimp", (0.0, 0.7, 0.001)), ("finger_solimp", (0.7, 0.7)), ("finger_solimp", 0.7),
+     ("finger_solref", (0.005, 0.0)), ("finger_solref", (float("nan"), 1.0))],
 )  # fmt: skip
 def test_task_physics_refuses_values_outside_their_range(field, value):
     with pytest.raises(wpctrl.ConfigError, match=f"TaskPhysics.{field}"):
@@ -102,7 +104,8 @@ def test_task_physics_refuses_values_outside_their_range(field, value):
 
 INSIDE = dict(substeps=1, integrator="implicit", cone="pyramidal", impratio=1.0, iterations=1, ls_iterations=1,
               contact_solref=(1e-4, 1e-3), contact_solimp=(0.5, 0.5, 1e-4), limit_solref=(1e-4, 1e-3),
-              limit_solimp=(0.5, 0.5, 1e-4), friction_combine="max", contact_gap=0.0, finger_torsion=1e-4)  # fmt: skip
+              limit_solimp=(0.5, 0.5, 1e-4), friction_combine="max", contact_gap=0.0, finger_torsion=1e-4,
+              finger_solref=(1e-4, 1e-3), finger_solimp=(0.5, 0.5, 1e-4))  # fmt: skip
 """Every TaskPhysics field at (or just inside) the edge of its range, none at its default."""
 
 
@@ -158,6 +161,45 @@ def test_finger_torsion_gives_the_finger_geoms_condim_4_and_that_coefficient():
     assert (friction[..., finger, 1] == np.float32(0.05)).all()
     assert (friction[..., ~finger, 1] == 0.0).all()
     np.testing.assert_array_equal(friction[..., [0, 2]], friction0[..., [0, 2]])
+
+
+def test_finger_solimp_and_solref_land_on_the_finger_geoms_only():
+    """TaskPhysics.finger_solimp / finger_solref: in MuJoCo-Warp's model the geoms of the finger links carry them in
+    every world and every other geom keeps contact_solimp / contact_solref; None gives the fingers the contact values
+    too. The default softens the finger geoms only (dmin = dmax = 0.7)."""
+    from wpctrl.tasks.scene import FINGER_LINKS
+
+    assert T.TaskPhysics().finger_solimp == (0.7, 0.7, 0.001) and T.TaskPhysics().finger_solref is None
+    for physics in (T.TaskPhysics(substeps=2), T.TaskPhysics(substeps=2, finger_solimp=None),
+                    T.TaskPhysics(substeps=2, finger_solimp=(0.6, 0.8, 0.002), finger_solref=(0.01, 0.5))):  # fmt: skip
+        env = T.make("PushCube-v1", num_envs=2, physics=physics, graph=False)
+        labels = [lb.rsplit("/", 1)[-1] for lb in env.model.body_label]
+        finger_shape = np.array([b >= 0 and labels[b] in FINGER_LINKS for b in env.model.shape_body.numpy()])
+        finger = finger_shape[env.solver.mjc_geom_to_newton_shape.numpy()]  # (world, geom)
+        assert finger.any(axis=1).all() and not finger.all()
+        mw = env.solver.mjw_model
+        solimp, solref = mw.geom_solimp.numpy()[..., :3], mw.geom_solref.numpy()
+        if solimp.ndim == 2:
+            solimp, solref = np.broadcast_to(solimp, finger.shape + (3,)), np.broadcast_to(solref, finger.shape + (2,))
+        want_imp = physics.finger_solimp or physics.contact_solimp
+        want_ref = physics.finger_solref or physics.contact_solref
+        np.testing.assert_allclose(solimp[finger], np.broadcast_to(want_imp, solimp[finger].shape), rtol=1e-6)
+        np.testing.assert_allclose(solimp[~finger], np.broadcast_to(physics.contact_solimp, solimp[~finger].shape),
+                                   rtol=1e-6)  # fmt: skip
+        np.testing.assert_allclose(solref[finger], np.broadcast_to(want_ref, solref[finger].shape), rtol=1e-6)
+        np.testing.assert_allclose(solref[~finger], np.broadcast_to(physics.contact_solref, solref[~finger].shape),
+                                   rtol=1e-6)  # fmt: skip
+
+
+def test_mujoco_warp_has_constraint_rows_for_every_contact_it_can_hold():
+    """MuJoCo-Warp's per-world constraint rows (njmax) cover every contact its buffer holds at the cone's rows per
+    contact (elliptic: condim, 3, or 4 with finger torsion; pyramidal: 2 (condim - 1)) plus a row per DOF: rows it has
+    no room for would be dropped from the solve. Its own estimate for the tasks' scene counted about a third."""
+    for physics, per_contact in ((T.TaskPhysics(substeps=2), 3), (T.TaskPhysics(substeps=2, cone="pyramidal"), 4),
+                                 (T.TaskPhysics(substeps=2, finger_torsion=0.05), 4)):  # fmt: skip
+        env = T.make("StackCube-v1", num_envs=3, physics=physics, graph=False)
+        contacts = -(-env.solver.get_max_contact_count() // 3)
+        assert env.solver.mjw_data.njmax >= contacts * per_contact + env.scene.dofs_per_env, (physics, contacts)
 
 
 def test_a_contact_time_constant_under_two_mujoco_steps_acts_as_two_steps():

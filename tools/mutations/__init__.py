@@ -36,6 +36,7 @@ AREAS = (
     "pull_cube",
     "layout",
     "peg_insertion_side",
+    "finger_contacts",
     "replay_input",
 )
 """The areas, in the order the runner takes them."""

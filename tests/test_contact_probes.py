@@ -1,0 +1,103 @@
+"""The Panda's fingers on PickCube's cube, Newton beside the real ManiSkill 3.0.1 (PhysX CPU), driven the same way from
+the same state (tests/contact_probes.py): a fingertip pressed down on the cube's face, edge and corner with a rising
+force, a cube gripped, lifted and swung, a cube pushed at three heights.
+
+Measured (2026-11-28, default TaskPhysics): pressed at 35-40 N a fingertip sits 1.0 / 1.4 / 1.2 mm (face / edge /
+corner) deep in the cube on PhysX and 1.3 / 1.2 / 1.1 mm on Newton, within 0.35 mm at every force; with the fingers'
+contacts as stiff as the others' (``finger_solimp=None``) Newton's sank 0.15-0.3 mm, 0.7-1.1 mm short. The press tolerance,
+0.45 mm, fails both that and the 2-3 mm corner sink a learned PushCube policy met. Where the tip reaches 1-3 mm onto a corner, PhysX's slides off it
+at 22 / 39 / 54 N; Newton's stays on up to 85 N, creeping inward instead (a strict expected failure below).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("torch")
+pytest.importorskip("mani_skill")
+pytestmark = pytest.mark.slow  # the real ManiSkill side by side: `-m slow` (CI runs it)
+
+from contact_probes import CUBE_AT, Probe  # noqa: E402
+
+DEPTH_TOL = 0.45e-3
+"""How far Newton's fingertip depth may be from PhysX's [m] (measured within 0.35 mm)."""
+
+
+@pytest.fixture(scope="module")
+def probe():
+    return Probe()
+
+
+@pytest.fixture(scope="module")
+def presses(probe):
+    return {where: probe.press(where) for where in ("face", "edge", "corner")}
+
+
+def _on_top(out) -> list[tuple[dict, dict]]:
+    """The steps where both fingertips press the cube (PhysX's force >= 10 N) and PhysX's has not slid off."""
+    pairs = []
+    for px, nw in zip(out["physx"], out["newton"]):
+        if px["reach"] <= 0.0:
+            break
+        if px["force"] >= 10.0:
+            pairs.append((px, nw))
+    return pairs
+
+
+@pytest.mark.parametrize("where", ["face", "edge", "corner"])
+def test_a_fingertip_pressed_on_the_cube_sinks_as_far_as_on_physx(presses, where):
+    """At every force from 10 N up to PhysX's largest (35-40 N), Newton's fingertip sits as deep in the cube as
+    PhysX's, within :data:`DEPTH_TOL`, under the same force (within 25 %), and both sink at least 0.7 mm at the top of
+    the ramp: the finger contacts are as soft as PhysX's, where the other contacts' stiffness left 0.15-0.3 mm."""
+    pairs = _on_top(presses[where])
+    assert len(pairs) >= 15, len(pairs)
+    for px, nw in pairs:
+        assert abs(nw["depth"] - px["depth"]) <= DEPTH_TOL, (where, px["force"], px["depth"], nw["depth"])
+        assert nw["force"] == pytest.approx(px["force"], rel=0.25, abs=3.0), (where, px["force"], nw["force"])
+    px, nw = pairs[-1]
+    assert min(px["depth"], nw["depth"]) >= 0.7e-3, (px["depth"], nw["depth"])
+
+
+def test_the_pressed_cube_stays_flat_and_moves_with_the_finger_as_on_physx(presses):
+    """Pressed on its face the cube tilts under 1 degree on both and is dragged the same way by the arm's give
+    (within 3 mm of PhysX's at every step; measured up to 2.0 mm, across the direction of the give)."""
+    for px, nw in zip(presses["face"]["physx"], presses["face"]["newton"]):
+        assert px["tilt_deg"] < 1.0 and nw["tilt_deg"] < 1.0
+        assert np.abs(nw["cube"] - px["cube"]).max() < 3e-3, (px["cube"], nw["cube"])
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "measured: with the tip 1 / 2 / 3 mm onto a corner PhysX's slides off at 22 / 39 / 54 N (its contact normal turns "
+    "to the cube's side while the tip sits ~60 % of that overlap deep); Newton's stays on the top face up to 85 N and "
+    "creeps 4-6 mm further onto it (MuJoCo's regularised friction lets a loaded contact slide slowly; impratio 100 "
+    "stops the creep and lets it slide off at 1 mm, but breaks LiftPegUpright's demos)"))  # fmt: skip
+def test_target_a_fingertip_on_a_corner_slides_off_as_on_physx(probe):
+    for overlap in (0.001, 0.002, 0.003):
+        out = probe.press("corner", overlap=overlap, depth=0.045)
+        off = [next((r["force"] for r, nxt in zip(side, side[1:]) if nxt["reach"] < 0), None)
+               for side in (out["physx"], out["newton"])]
+        assert off[0] is not None and off[1] is not None, (overlap, off)
+        assert off[1] == pytest.approx(off[0], rel=0.3), (overlap, off)
+
+
+def test_a_gripped_cube_stays_in_the_fingers_as_on_physx(probe):
+    """Gripped, lifted 10 cm in four control steps, swung 10 cm sideways and back and held: the cube's place in
+    the TCP's frame stays within 1 mm of PhysX's at every step after the grip (measured within 0.4 mm), and both
+    simulators lift it (it ends 10 cm up)."""
+    out = probe.hold()
+    for px, nw in list(zip(out["physx"], out["newton"]))[9:]:
+        assert np.abs(nw["cube_in_tcp"] - px["cube_in_tcp"]).max() < 1e-3, (px["cube_in_tcp"], nw["cube_in_tcp"])
+    for side in ("physx", "newton"):
+        assert out[side][-1]["cube"][2] > CUBE_AT[2] + 0.09, (side, out[side][-1]["cube"])
+
+
+@pytest.mark.parametrize("height", [0.005, 0.015, 0.025])
+def test_a_cube_pushed_at_each_height_moves_as_on_physx(probe, height):
+    """The closed fingertips pushed into the cube's side, their bottom 5 / 15 / 25 mm above the table: the cube ends
+    within 3 mm of PhysX's and tilts under 2 degrees on both (measured within 0.1 mm; it slides 6 cm)."""
+    out = probe.push(height)
+    px, nw = out["physx"][-1], out["newton"][-1]
+    assert px["cube"][0] - CUBE_AT[0] > 0.04, px["cube"]
+    assert np.abs(nw["cube"] - px["cube"]).max() < 3e-3, (px["cube"], nw["cube"])
+    assert px["tilt_deg"] < 2.0 and nw["tilt_deg"] < 2.0

@@ -1,0 +1,33 @@
+"""Mutations: the finger contacts' softness (``TaskPhysics.finger_solimp`` in ``wpctrl/tasks/physics.py`` and
+``wpctrl/tasks/scene.py``) and the constraint rows MuJoCo-Warp is built with (``wpctrl/tasks/env.py``)."""
+
+from .model import M
+
+_PROBES = ("tests/test_contact_probes.py", "tests/test_tasks.py")
+
+MUTATIONS = [
+    M(
+        "finger_contacts_stiff",
+        "wpctrl/tasks/physics.py",
+        "finger_solimp: tuple[float, float, float] | None = (0.7, 0.7, 0.001)",
+        "finger_solimp: tuple[float, float, float] | None = None",
+        "the fingers' contacts as stiff as the others' (a pressed fingertip sinks 0.2 mm where PhysX's sinks 1.2)",
+        _PROBES,
+    ),
+    M(
+        "finger_solimp_on_every_shape",
+        "wpctrl/tasks/scene.py",
+        "        solimp[fingers, 0:3] = physics.finger_solimp",
+        "        solimp[:, 0:3] = physics.finger_solimp",
+        "every shape's contacts as soft as the fingers' (the cube sinks into the table)",
+        ("tests/test_tasks.py",),
+    ),
+    M(
+        "constraint_rows_from_mujoco_warp",
+        "wpctrl/tasks/env.py",
+        "        if self.solver.mjw_data.njmax < rows:",
+        "        if False:",
+        "MuJoCo-Warp's own constraint-row estimate (about a third of the contacts' rows; the rest dropped)",
+        ("tests/test_tasks.py",),
+    ),
+]

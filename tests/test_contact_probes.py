@@ -4,9 +4,10 @@ force, a cube gripped, lifted and swung, a cube pushed at three heights.
 
 Measured (2026-11-28, default TaskPhysics): pressed at 35-40 N a fingertip sits 1.0 / 1.4 / 1.2 mm (face / edge /
 corner) deep in the cube on PhysX and 1.3 / 1.2 / 1.1 mm on Newton, within 0.35 mm at every force; with the fingers'
-contacts as stiff as the others' (``finger_solimp=None``) Newton's sank 0.15-0.3 mm, 0.7-1.1 mm short. The press tolerance,
-0.45 mm, fails both that and the 2-3 mm corner sink a learned PushCube policy met. Where the tip reaches 1-3 mm onto a corner, PhysX's slides off it
-at 22 / 39 / 54 N; Newton's stays on up to 85 N, creeping inward instead (a strict expected failure below).
+contacts as stiff as the others' (``finger_solimp=None``) Newton's sank 0.15-0.3 mm, 0.7-1.1 mm short. The press
+tolerance, 0.45 mm, fails both that and the 2-3 mm corner sink a learned PushCube policy met. Where the tip reaches
+1-3 mm onto a corner, PhysX's slides off it at 22 / 39 / 54 N; Newton's stays on up to 85 N, creeping inward instead
+(a strict expected failure below).
 """
 
 from __future__ import annotations

@@ -410,10 +410,10 @@ def test_demos_replay_to_maniskills_success_and_peg_position(demo_replay):
 
 @pytest.mark.slow
 def test_demos_replay_with_physx_s_twist_resistance():
-    """With MuJoCo's pyramidal friction cone (impratio 1, stiff finger contacts) the fingers resist the peg's twist about their closing axis
-    as PhysX's do (the peg's weight about the grasp where it hangs still after the lift within 15 % of PhysX's
-    0.33 Nm), and the demos replay to ManiSkill's outcome: success in >= 90 % of its successful demos, the peg's final
-    position within 2 cm of PhysX's in the median."""
+    """With MuJoCo's pyramidal friction cone (impratio 1, stiff finger contacts) the fingers resist the peg's twist
+    about their closing axis as PhysX's do (the peg's weight about the grasp where it hangs still after the lift
+    within 15 % of PhysX's 0.33 Nm), and the demos replay to ManiSkill's outcome: success in >= 90 % of its
+    successful demos, the peg's final position within 2 cm of PhysX's in the median."""
     replay = _replay(PYRAMIDAL)
     for r in replay:
         print(r)

@@ -19,18 +19,27 @@ differ where a task touches them. What :class:`TaskPhysics` sets, and why:
   them. Two MuJoCo steps (1.25 ms) stop most of it (0.5 mm, the cube 1.4-3.8 mm but one of six 12.5 mm) and replay
   grasps closer (PickCube's public episodes 0.49 -> 0.34 cm, StackCube's demos 0.45 -> 0.05 cm), but a cube struck by
   the fingers then leaves them otherwise than PhysX's: PushCube's ``pd_ee_delta_pos`` replays land 1.2 -> 5.5 cm off
-  (32 fresh episodes: 1.2 -> 4.7 cm), so 5 ms stays (``docs/tasks.md``).
+  (32 fresh episodes: 1.2 -> 4.7 cm), so 5 ms stays (``docs/tasks.md``; measured with stiff finger contacts).
+- **Finger contacts** (``finger_solimp``, impedance 0.7 on the finger shapes, 0.85 once MuJoCo mixes it with the
+  other shape's): under load PhysX's fingertips sink into what they press, about 0.03 mm per newton (15 position
+  iterations leave that overlap between a driven link and a light body), where the other shapes' impedance let a
+  fingertip sink 0.15-0.3 mm at 36 N. With it a fingertip pressed on the cube's face, edge or corner sits within
+  0.35 mm of PhysX's depth at every force (``tests/test_contact_probes.py``); a learned PushCube policy's fingertip on
+  the cube's corner then sinks in as on PhysX, and its ManiSkill episodes replay to their outcome 9 / 10 times
+  instead of 6 / 10; LiftPegUpright's peg turns in the fingers (0.43 N·m held, PhysX 0.33) and its demos replay.
+  MuJoCo's regularised friction still lets a loaded fingertip creep across the cube's top where PhysX's sticks and
+  then slides off the corner.
 - **Friction cone** elliptic with ``impratio`` 10: a lifted cube stays in the fingers as on PhysX, and sliding friction
   is the same in every direction, as PhysX's patch friction is (SAPIEN sets no other friction type): a cube launched
   at 0.5 m/s slides 4.2 cm whichever way (PhysX 4.0 cm). MuJoCo's pyramidal cone is weaker off its axes (4.2 cm along
   them, 6.0 cm at 45 degrees; a 22.5-degree launch veers to 35) and doubles a pushed cube's replay error. The
-  elliptic cone's price: a peg twisted in half-closed fingers is held with 0.56 N·m where PhysX gives way at 0.33
-  (LiftPegUpright's demos do not replay; ``docs/tasks.md``).
+  elliptic cone's price: a peg twisted in half-closed fingers is held harder than on PhysX (0.43 N·m with the soft
+  finger contacts, 0.56 with stiff ones, PhysX 0.33; ``docs/tasks.md``).
 - **Finger torsion** (``finger_torsion``, off by default): PhysX's patch friction on the fingers (ManiSkill's
   ``patch_radius`` 0.1 m) also resists a twist about the contact normal, which MuJoCo's condim-3 contacts do not;
   ``finger_torsion`` > 0 gives the finger shapes condim 4 and that torsional coefficient. PegInsertionSide's demos need
-  it (3 / 4 insert with 0.05 m and 1.25 ms contacts, 0 / 4 without); LiftPegUpright's need the peg to turn in the
-  fingers and replay further off with it.
+  it (3 / 4 insert with 0.05 m, 1.25 ms contacts and stiff finger contacts, 0 / 4 without); LiftPegUpright's need the
+  peg to turn in the fingers and replay further off with it.
 - **Friction**: PhysX averages, MuJoCo takes the larger coefficient. With the scene's two materials (default 0.3,
   the Panda's finger pads 2.0), giving the finger shapes the average (1.15) reproduces every pair: finger-cube and
   finger-table 1.15, everything else 0.3 (:func:`mujoco_friction`).
@@ -93,11 +102,10 @@ class TaskPhysics:
     other shape a torsional coefficient of 0, so every finger contact resists a twist about its normal with up to this
     coefficient times its normal force. It stands in for PhysX's torsional patch friction on ManiSkill's finger
     material (``patch_radius`` / ``min_patch_radius`` 0.1 m), which MuJoCo's elliptic cone lacks: with 0.05 (and
-    ``contact_solref=(0.00125, 1.0)``) PegInsertionSide's demos replay 3 / 4, the peg 0.3 cm from PhysX's in the
-    median, where they replay 0 / 4 without. It is not the default: LiftPegUpright's demos need the peg to turn in the
-    fingers, and they replay further off with it (at 1.25 ms contacts 0 / 4 either way, the peg 10.2 -> 11.4 cm off;
-    with the pyramidal cone that replays them, 4 / 4 -> 0 / 4; ``docs/tasks.md``). Values between 0 and 1e-4 are
-    refused (MuJoCo warns of NaN under 1e-5)."""
+    ``contact_solref=(0.00125, 1.0)``, ``finger_solimp=None``) PegInsertionSide's demos replay 3 / 4, the peg 0.3 cm
+    from PhysX's in the median, where they replay 0 / 4 without. It is not the default: LiftPegUpright's demos need the
+    peg to turn in the fingers, and with it they replay 0 / 4 instead of 4 / 4 (``docs/tasks.md``). Values between 0
+    and 1e-4 are refused (MuJoCo warns of NaN under 1e-5)."""
 
     finger_solimp: tuple[float, float, float] | None = (0.7, 0.7, 0.001)
     """MuJoCo ``solimp`` (dmin, dmax, width [m]) of the Panda's finger shapes; None gives them ``contact_solimp``.

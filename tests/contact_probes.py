@@ -73,6 +73,8 @@ def reading(raw: dict) -> dict:
         "tilt_deg": math.degrees(math.acos(float(np.clip(up[2], -1.0, 1.0)))),
         "cube": cube[:3].copy(),
         "cube_in_tcp": Rotation.from_quat(_xyzw(tcp[3:])).inv().apply(cube[:3] - tcp[:3]),
+        "finger_q": np.asarray(raw["qpos"], float)[7:9],
+        "finger_qd": np.asarray(raw["qvel"], float)[7:9],
     }
 
 
@@ -83,7 +85,7 @@ def _maniskill_raw(base) -> dict:
              + scene.get_pairwise_contact_forces(a.finger2_link, base.cube))[0].numpy()  # fmt: skip
     return {"f1": a.finger1_link.pose.raw_pose[0].numpy(), "f2": a.finger2_link.pose.raw_pose[0].numpy(),
             "cube": base.cube.pose.raw_pose[0].numpy(), "tcp": a.tcp.pose.raw_pose[0].numpy(),
-            "force": -force}  # fmt: skip
+            "force": -force, "qpos": a.robot.get_qpos()[0].numpy(), "qvel": a.robot.get_qvel()[0].numpy()}  # fmt: skip
 
 
 def _newton_raw(env) -> dict:
@@ -95,8 +97,11 @@ def _newton_raw(env) -> dict:
         return np.concatenate([p[:3], [p[6], p[3], p[4], p[5]]])
 
     force = env._sensor.force_matrix.numpy()  # (2, actors): the force on each finger from the cube
+    q0, qd0 = sc.robot_coord0, sc.robot_dof0
     return {"f1": pose(sc.finger_bodies0[0]), "f2": pose(sc.finger_bodies0[1]), "cube": pose(sc.actor_body0["cube"]),
-            "tcp": pose(sc.tcp_body0), "force": -(force[0, 0] + force[1, 0])}  # fmt: skip
+            "tcp": pose(sc.tcp_body0), "force": -(force[0, 0] + force[1, 0]),
+            "qpos": env.state.joint_q.numpy()[q0 : q0 + 9],
+            "qvel": env.state.joint_qd.numpy()[qd0 : qd0 + 9]}  # fmt: skip
 
 
 class Probe:

@@ -102,3 +102,17 @@ def test_a_cube_pushed_at_each_height_moves_as_on_physx(probe, height):
     assert px["cube"][0] - CUBE_AT[0] > 0.04, px["cube"]
     assert np.abs(nw["cube"] - px["cube"]).max() < 3e-3, (px["cube"], nw["cube"])
     assert px["tilt_deg"] < 2.0 and nw["tilt_deg"] < 2.0
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "measured: in a still grip PhysX reports the finger joints moving at 0.01-0.07 m/s (0.2-0.4 m/s under a learned "
+    "PickCube policy's grip) while their positions stay put to 0.01 mm, the unresolved push of the drive against the "
+    "contact left in the solver's velocities; Newton reports 0. A policy trained on Newton reads them: replacing "
+    "ManiSkill's finger velocities by the fingers' motion over the control step lifts its ManiSkill success from "
+    "66 % to 96 % (docs/training.md)"))  # fmt: skip
+def test_target_a_still_grip_reports_the_finger_velocities_physx_reports(probe):
+    out = probe.hold()
+    physx, newton = out["physx"][-6:], out["newton"][-6:]
+    for before, px, nw in zip(physx, physx[1:], newton[1:]):
+        assert np.abs(px["finger_q"] - before["finger_q"]).max() < 1e-4  # PhysX's fingers are still
+        assert np.abs(nw["finger_qd"] - px["finger_qd"]).max() < 0.02, (px["finger_qd"], nw["finger_qd"])

@@ -1,6 +1,7 @@
 """A Newton-trained PickCube policy in the real ManiSkill, with ManiSkill's observation as it is and with the finger
 joints' reported velocities replaced by the fingers' motion over the control step (finite differences of their
-positions): what PhysX's velocity readings in a still grip cost the policy.
+positions): what PhysX's velocity readings in a still grip cost the policy. Both runs go through
+:func:`wpctrl.train.evaluate.evaluate_maniskill`, the loop of ``wpctrl evaluate --sim maniskill``.
 
     python tools/finger_velocity_transfer.py POLICY.ts [--episodes 60] [--seed 5000]
 """
@@ -10,12 +11,33 @@ from __future__ import annotations
 import argparse
 import warnings
 
+FINGER_QPOS, FINGER_QVEL = slice(7, 9), slice(16, 18)
+"""The fingers' joints in ManiSkill's flattened state observation (the Panda's qpos 0:9, qvel 9:18)."""
+CONTROL_DT = 1.0 / 20.0
+"""ManiSkill's control step [s]."""
+
+
+class FiniteDifferenceFingers:
+    """``policy`` seeing the fingers' velocities as their motion since the previous control step. Every
+    ``episode_steps`` calls an episode starts (``evaluate_maniskill`` runs every episode to its end), and its first
+    observation has no motion yet."""
+
+    def __init__(self, policy, episode_steps: int):
+        self.policy, self.episode_steps, self.calls, self.previous = policy, episode_steps, 0, None
+
+    def __call__(self, obs):
+        if self.calls % self.episode_steps == 0:
+            self.previous = obs[:, FINGER_QPOS].clone()
+        self.calls += 1
+        seen = obs.clone()
+        seen[:, FINGER_QVEL] = (obs[:, FINGER_QPOS] - self.previous) / CONTROL_DT
+        self.previous = obs[:, FINGER_QPOS].clone()
+        return self.policy(seen)
+
 
 def main() -> None:
-    import torch
-
-    from wpctrl.tasks.maniskill_side import make_maniskill
-    from wpctrl.train.evaluate import load_policy
+    from wpctrl.tasks import TASKS
+    from wpctrl.train.evaluate import evaluate_maniskill, load_policy
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("policy")
@@ -24,25 +46,13 @@ def main() -> None:
     args = ap.parse_args()
     warnings.filterwarnings("ignore")
     policy, meta = load_policy(args.policy)
-    env = make_maniskill(meta.get("task", "PickCube-v1"), meta.get("control_mode", "pd_joint_delta_pos"))
-    qpos, qvel = slice(7, 9), slice(16, 18)  # the fingers' joints in ManiSkill's flattened state observation
-    dt = 1.0 / 20.0  # the control step
-    for variant in ("as reported", "finite differences"):
-        succeeded = 0
-        for i in range(args.episodes):
-            obs, _ = env.reset(seed=args.seed + i)
-            previous, success = obs[:, qpos].clone(), False
-            for _ in range(50):
-                seen = obs.clone()
-                if variant == "finite differences":
-                    seen[:, qvel] = (obs[:, qpos] - previous) / dt
-                previous = obs[:, qpos].clone()
-                with torch.no_grad():
-                    action = policy(seen)
-                obs, _, _, _, info = env.step(action)
-                success |= bool(info["success"][0])
-            succeeded += success
-        print(f"finger velocities {variant}: success once {succeeded} / {args.episodes}", flush=True)
+    task, mode = meta["task"], meta["control_mode"]
+    variants = {"as reported": policy,
+                "finite differences": FiniteDifferenceFingers(policy, TASKS[task].max_episode_steps)}  # fmt: skip
+    for name, seen_by in variants.items():
+        result = evaluate_maniskill(seen_by, task, mode, args.episodes, seed=args.seed)
+        print(f"finger velocities {name}: success once {result['success_rate']:.1%}, "
+              f"at the end {result['success_at_end_rate']:.1%} ({args.episodes} episodes)", flush=True)  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -135,23 +135,30 @@ def test_task_physics_values_at_the_edge_reach_mujoco():
     np.testing.assert_array_equal(np.unique(mw.geom_friction.numpy()[..., 1]), np.float32([0.0, 1e-4]))
 
 
+def _finger_geoms(env) -> np.ndarray:
+    """(world, geom) True where MuJoCo-Warp's geom is a shape of a finger link (scene.FINGER_LINKS), found from the
+    Newton shapes' bodies by name; the same geoms in every world, both fingers' and not every geom."""
+    from wpctrl.tasks.scene import FINGER_LINKS
+
+    labels = [lb.rsplit("/", 1)[-1] for lb in env.model.body_label]
+    finger_shape = np.array([b >= 0 and labels[b] in FINGER_LINKS for b in env.model.shape_body.numpy()])
+    shape_of_geom = env.solver.mjc_geom_to_newton_shape.numpy()  # (world, geom) -> Newton shape
+    assert (shape_of_geom >= 0).all()
+    finger = finger_shape[shape_of_geom]
+    assert (finger == finger[0]).all() and 2 <= finger[0].sum() < finger.shape[1]  # both fingers, every world
+    return finger
+
+
 def test_finger_torsion_gives_the_finger_geoms_condim_4_and_that_coefficient():
     """TaskPhysics.finger_torsion > 0: in MuJoCo-Warp's model the geoms of the finger links (scene.FINGER_LINKS) have
     condim 4 and exactly that torsional coefficient, in every world; every other geom keeps condim 3 and gets a
     torsional coefficient of 0; sliding and rolling friction are the default build's everywhere. The default (0)
     gives no geom condim 4."""
-    from wpctrl.tasks.scene import FINGER_LINKS
-
     assert T.TaskPhysics().finger_torsion == 0.0
     models = {}
     for torsion in (0.0, 0.05):
         env = T.make("PushCube-v1", num_envs=2, physics=T.TaskPhysics(substeps=2, finger_torsion=torsion), graph=False)
-        labels = [lb.rsplit("/", 1)[-1] for lb in env.model.body_label]
-        finger_shape = np.array([b >= 0 and labels[b] in FINGER_LINKS for b in env.model.shape_body.numpy()])
-        shape_of_geom = env.solver.mjc_geom_to_newton_shape.numpy()  # (world, geom) -> Newton shape
-        assert (shape_of_geom >= 0).all()
-        finger = finger_shape[shape_of_geom]
-        assert (finger == finger[0]).all() and 2 <= finger[0].sum() < finger.shape[1]  # both fingers, every world
+        finger = _finger_geoms(env)
         mw = env.solver.mjw_model
         models[torsion] = (finger[0], mw.geom_condim.numpy(), mw.geom_friction.numpy())
     (finger, condim0, friction0), (finger1, condim, friction) = models[0.0], models[0.05]
@@ -167,16 +174,11 @@ def test_finger_solimp_and_solref_land_on_the_finger_geoms_only():
     """TaskPhysics.finger_solimp / finger_solref: in MuJoCo-Warp's model the geoms of the finger links carry them in
     every world and every other geom keeps contact_solimp / contact_solref; None gives the fingers the contact values
     too. The default softens the finger geoms only (dmin = dmax = 0.7)."""
-    from wpctrl.tasks.scene import FINGER_LINKS
-
     assert T.TaskPhysics().finger_solimp == (0.7, 0.7, 0.001) and T.TaskPhysics().finger_solref is None
     for physics in (T.TaskPhysics(substeps=2), T.TaskPhysics(substeps=2, finger_solimp=None),
                     T.TaskPhysics(substeps=2, finger_solimp=(0.6, 0.8, 0.002), finger_solref=(0.01, 0.5))):  # fmt: skip
         env = T.make("PushCube-v1", num_envs=2, physics=physics, graph=False)
-        labels = [lb.rsplit("/", 1)[-1] for lb in env.model.body_label]
-        finger_shape = np.array([b >= 0 and labels[b] in FINGER_LINKS for b in env.model.shape_body.numpy()])
-        finger = finger_shape[env.solver.mjc_geom_to_newton_shape.numpy()]  # (world, geom)
-        assert finger.any(axis=1).all() and not finger.all()
+        finger = _finger_geoms(env)
         mw = env.solver.mjw_model
         solimp, solref = mw.geom_solimp.numpy()[..., :3], mw.geom_solref.numpy()
         if solimp.ndim == 2:

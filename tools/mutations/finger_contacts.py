@@ -23,6 +23,22 @@ MUTATIONS = [
         ("tests/test_tasks.py",),
     ),
     M(
+        "finger_solref_on_every_shape",
+        "wpctrl/tasks/scene.py",
+        "        solref[fingers] = physics.finger_solref",
+        "        solref[:] = physics.finger_solref",
+        "finger_solref sets every shape's contact time constant, not just the fingers'",
+        ("tests/test_tasks.py",),
+    ),
+    M(
+        "constraint_rows_pyramidal_as_elliptic",
+        "wpctrl/tasks/physics.py",
+        'per_contact = condim if self.cone == "elliptic" else 2 * (condim - 1)',
+        "per_contact = condim",
+        "the pyramidal cone's contacts counted at the elliptic cone's rows (3, where it needs 4)",
+        ("tests/test_tasks.py",),
+    ),
+    M(
         "constraint_rows_from_mujoco_warp",
         "wpctrl/tasks/env.py",
         "        if self.solver.mjw_data.njmax < rows:",

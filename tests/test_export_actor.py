@@ -100,13 +100,13 @@ def _weights(cfg: dict = TASK_ACTOR) -> dict:
     return {**actor.state_dict(), "distribution.log_std_param": torch.zeros(ACTIONS)}
 
 
-def _checkpoint(path, actor_cfg=TASK_ACTOR, weights=None):
+def _checkpoint(path, actor_cfg=TASK_ACTOR, weights=None, **more):
     """A ManiSkill-task checkpoint as `wpctrl train` writes it (the infos export reads), in ``path``/policy.pt."""
     path.mkdir(parents=True, exist_ok=True)
     bounds = {"action_low": [-1.0] * ACTIONS, "action_high": [1.0] * ACTIONS}
     infos = {"format": "wpctrl-task-policy-1", "task": "PushCube-v1", "control_mode": "pd_joint_delta_pos",
              "obs_dim": OBS, "num_actions": ACTIONS, **bounds, "obs_fields": [["agent", "qpos", 9]], "substeps": 4,
-             "partial_reset": True, "actor": actor_cfg}  # fmt: skip
+             "partial_reset": True, "actor": actor_cfg, **more}  # fmt: skip
     torch.save({"actor_state_dict": _weights() if weights is None else weights, "infos": infos}, path / "policy.pt")
     return path
 
@@ -124,6 +124,52 @@ def test_export_of_a_checkpoint_writes_the_rebuilt_actor(tmp_path):
     obs = torch.randn(7, OBS)
     assert torch.equal(module(obs), actor(obs))
     assert json.loads(extra[EXTRA_FILE])["task"] == "PushCube-v1"
+
+
+def test_exported_policy_reads_nothing_of_the_hidden_columns(tmp_path):
+    """A run that hid columns 16 and 17 (the finger joints' velocities): the TorchScript and ONNX policies are rsl-rl's
+    actor (the independent reference) on the observation with those columns zeroed, whatever they hold; the other
+    columns still move the action; the metadata names the hidden columns."""
+    pytest.importorskip("onnx", reason="the onnx package is not installed")
+    from tensordict import TensorDict
+
+    from wpctrl.train.export import EXTRA_FILE, export
+
+    cfg = _project_actor_configs()["tasks"]
+    reference = _rsl_rl_actor(cfg, seed=3)
+    run = _checkpoint(tmp_path / "run", cfg, {**reference.state_dict()}, hidden_obs=[16, 17])
+    result = export(run)
+    extra = {EXTRA_FILE: ""}
+    module = torch.jit.load(result["policy.ts"], _extra_files=extra)
+    assert json.loads(extra[EXTRA_FILE])["hidden_obs"] == [16, 17]
+    obs = torch.randn(50, OBS, generator=torch.Generator().manual_seed(2))
+    zeroed = obs.clone()
+    zeroed[:, 16:18] = 0.0
+    with torch.inference_mode():
+        want = reference(TensorDict({"policy": zeroed}, batch_size=[50]))
+        got = module(obs)
+        np.testing.assert_allclose(got.numpy(), want.numpy(), rtol=1e-6, atol=1e-6)
+        assert float((module(obs) - reference(TensorDict({"policy": obs}, batch_size=[50]))).abs().max()) > 1e-3
+        other = obs.clone()
+        other[:, 15] += 1.0
+        assert float((module(other) - got).abs().max()) > 1e-3
+    from onnx.reference import ReferenceEvaluator
+
+    onnx_out = ReferenceEvaluator(result["policy.onnx"]).run(None, {"obs": obs.numpy()})[0]
+    np.testing.assert_allclose(onnx_out, want.numpy(), rtol=1e-5, atol=1e-5)
+
+
+@pytest.mark.parametrize("hidden, message", [([35], "hidden_obs: expected columns in [0, 35), got [35]"),
+                                             ("16", "hidden_obs: expected a list of observation columns, got '16'"),
+                                             ([16.0], "hidden_obs: expected a list of observation columns")])
+def test_export_refuses_hidden_columns_outside_the_observation(hidden, message, tmp_path, capsys):
+    from wpctrl.train.export import main
+
+    run = _checkpoint(tmp_path / "run", hidden_obs=hidden)
+    assert main([str(run)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"wpctrl export: error: {run / 'policy.pt'}: ") and message in err, err
+    assert not (run / "policy.ts").exists()
 
 
 def _without(d: dict, key: str) -> dict:

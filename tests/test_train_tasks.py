@@ -32,16 +32,30 @@ def _actions(n: int, k: int, seed: int) -> torch.Tensor:
 # -- the rsl-rl adapter ------------------------------------------------------------------------------------------------
 
 
-def test_final_observations_returns_and_resets_against_the_env_without_auto_reset():
+FINGER_QVEL = [9 + 7, 9 + 8]
+"""The finger joints' velocities in ManiSkill's flattened state: after the Panda's 9 qpos, its joints 7 and 8."""
+
+
+@pytest.mark.parametrize("hide_obs", ["none", None])
+def test_final_observations_returns_and_resets_against_the_env_without_auto_reset(hide_obs):
     """Two PushCube envs from the same seed take the same actions: the adapter's (auto reset, partial resets) and a
     plain one without auto reset. Envs 1 and 3 are set to time out at the third step. The adapter's final observations
     are the plain env's observations bit for bit; the done envs restart (step 0, another state), the others continue
-    bit for bit; the episode statistics are the plain env's rewards summed since the adapter's reset."""
-    vec = TaskVecEnv("PushCube-v1", N, seed=7, substeps=SUBSTEPS)
+    bit for bit; the episode statistics are the plain env's rewards summed since the adapter's reset. By default
+    (``hide_obs`` None) the adapter shows zeros in place of the finger joints' velocities, and nothing else differs."""
+    vec = TaskVecEnv("PushCube-v1", N, seed=7, substeps=SUBSTEPS, hide_obs=hide_obs)
     ref = T.make("PushCube-v1", num_envs=N, seed=7, auto_reset=False, physics=T.TaskPhysics(substeps=SUBSTEPS))
+    hidden = FINGER_QVEL if hide_obs is None else []
+    assert vec.hidden_columns == hidden
+
+    def seen(obs):
+        obs = obs.numpy().copy()
+        obs[:, hidden] = 0.0
+        return obs
+
     vec.reset(seed=7)
     ref_obs, _ = ref.reset(seed=7)
-    np.testing.assert_array_equal(vec.get_observations()["policy"].numpy(), ref_obs.numpy())
+    np.testing.assert_array_equal(vec.get_observations()["policy"].numpy(), seen(ref_obs))
     lengths = vec.episode_length_buf.clone()
     lengths[[1, 3]] = vec.max_episode_length - 3
     vec.episode_length_buf = lengths  # rsl-rl's learn(init_at_random_ep_len=True) assigns it this way
@@ -55,15 +69,36 @@ def test_final_observations_returns_and_resets_against_the_env_without_auto_rese
     done = np.array([False, True, False, True])
     assert dones.numpy().tolist() == done.tolist()
     assert extras["truncated"].numpy().tolist() == done.tolist() and not extras["terminated"].any()
-    np.testing.assert_array_equal(extras["final_observations"].numpy(), ref_obs.numpy())
-    np.testing.assert_array_equal(obs["policy"].numpy()[~done], ref_obs.numpy()[~done])
-    assert not np.allclose(obs["policy"].numpy()[done], ref_obs.numpy()[done])
+    assert np.abs(ref_obs.numpy()[:, FINGER_QVEL]).min() > 1e-3  # the fingers move: hiding them shows
+    np.testing.assert_array_equal(extras["final_observations"].numpy(), seen(ref_obs))
+    np.testing.assert_array_equal(obs["policy"].numpy()[~done], seen(ref_obs)[~done])
+    assert not np.allclose(obs["policy"].numpy()[done], seen(ref_obs)[done])
     assert vec.episode_length_buf.numpy().tolist() == [3, 0, 3, 0]
     stats = vec.take_stats()
     assert stats["episodes"] == 2 and stats["env_steps"] == 3 * N
     assert stats["mean_episode_reward"] == pytest.approx(float(rewards[done].mean()), rel=1e-6)
     assert stats["mean_episode_length"] == vec.max_episode_length and stats["success_rate"] == 0.0
     assert vec.take_stats()["episodes"] == 0  # read once
+
+
+def test_the_training_env_randomises_its_physics_at_every_reset_when_asked():
+    """``randomize="on"``: each env's factors lie in the training ranges, and an env the step restarts draws new
+    ones; by default there are none."""
+    from wpctrl.tasks.randomization import TRAINING_RANGES
+
+    assert TaskVecEnv("PushCube-v1", N, seed=7, substeps=SUBSTEPS).env.randomization_factors is None
+    vec = TaskVecEnv("PushCube-v1", N, seed=7, substeps=4, randomize="on")  # 2 substeps: 10 ms, over the range
+    f = vec.env.randomization_factors.numpy().copy()
+    for k, name in enumerate(("friction", "contact_time", "mass")):
+        lo, hi = TRAINING_RANGES[name]
+        assert ((f[:, k] >= lo) & (f[:, k] <= hi)).all() and np.ptp(f[:, k]) > 0, name
+    lengths = vec.episode_length_buf.clone()
+    lengths[0] = vec.max_episode_length - 1
+    vec.episode_length_buf = lengths
+    _, _, dones, _ = vec.step(torch.zeros(N, 8))
+    assert dones.numpy().tolist() == [True, False, False, False]
+    g = vec.env.randomization_factors.numpy()
+    assert not np.allclose(g[0], f[0]) and np.array_equal(g[1:], f[1:])
 
 
 @pytest.mark.parametrize("partial_reset", [True, False])
@@ -191,7 +226,14 @@ def _rsl_rl_actor(checkpoint):
     obs = TensorDict({"policy": torch.zeros(1, infos["obs_dim"])}, batch_size=[1])
     actor = MLPModel(obs, {"actor": ["policy"]}, "actor", infos["num_actions"], **cfg)
     actor.load_state_dict(data["actor_state_dict"])
-    return actor.eval(), lambda x: actor(TensorDict({"policy": x}, batch_size=[x.shape[0]]))
+    assert infos["hidden_obs"] == FINGER_QVEL  # the default: training showed the actor zeros there
+
+    def act(x):
+        seen = x.clone()
+        seen[:, FINGER_QVEL] = 0.0
+        return actor(TensorDict({"policy": seen}, batch_size=[x.shape[0]]))
+
+    return actor.eval(), act
 
 
 @pytest.mark.slow  # needs the PPO smoke run (CI runs it)

@@ -54,6 +54,16 @@ def test_evaluation_and_export_modules_import_neither_rsl_rl_nor_the_trainer():
         ({"task": "PushCube-v1", "device": "cpu", "ppo_update": "captured"},
          "TrainConfig.ppo_update: 'captured' needs a CUDA device, got device cpu"),
         ({"task": "PushCube-v1", "device": "cpu", "envs": 8}, "envs 8 x steps_per_env 4 = a batch of 32 samples"),
+        ({"task": "PushCube-v1", "hide_obs": "fingers"},
+         "TrainConfig.hide_obs: expected one of ['finger_qvel', 'none'], got 'fingers'"),
+        ({"hide_obs": "none"}, "TrainConfig.hide_obs: only for the ManiSkill tasks"),
+        ({"task": "PushCube-v1", "randomize": "mass=2:1"},
+         "TrainConfig.randomize: TaskRandomization.mass: expected a range (low, high) of scale factors with 0 < low "
+         "<= high, got (2.0, 1.0)"),
+        ({"task": "PushCube-v1", "randomize": "gravity=1:2"},
+         "TrainConfig.randomize: expected 'off', 'on' or name=low:high,... with names ['friction', 'contact_time', "
+         "'mass'], got 'gravity=1:2'"),
+        ({"task": "PushCube-v1", "randomize": 1}, "TrainConfig.randomize: expected 'off', 'on' or name=low:high"),
     ],
 )  # fmt: skip
 def test_train_config_names_the_field_that_cannot_work(kwargs, message):
@@ -103,6 +113,7 @@ def test_train_config_mirrors_the_command_lines_options_and_defaults():
     assert (cfg.envs, cfg.iterations, cfg.steps_per_env, cfg.eval_envs, cfg.eval_episodes) == (64, 20, 4, 64, 64)
     assert (cfg.control_mode, cfg.ppo_update, cfg.obs_normalization, cfg.action_sampling) == (
         "pd_joint_delta_pos", "rsl-rl", "off", "sync-free")  # fmt: skip
+    assert (cfg.hide_obs, cfg.randomize) == ("finger_qvel", "off")
     reach = TrainConfig(device="cpu", envs=16).resolved()
     assert (reach.control_mode, reach.iterations, reach.steps_per_env, reach.eval_episodes) == (
         "pd_ee_delta_pos", 20, 24, 16)  # fmt: skip

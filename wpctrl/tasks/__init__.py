@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from .factory import CONTROL_MODES, OBS_MODES, make
 from .physics import TaskPhysics
+from .randomization import TaskRandomization
 from .recording import load_episodes
 from .registry import TASKS, Task, get_task, register_task
 from .replay import replay
@@ -33,6 +34,7 @@ __all__ = [
     "TASKS",
     "Task",
     "TaskPhysics",
+    "TaskRandomization",
     "TaskSpec",
     "get_task",
     "load_episodes",

@@ -21,6 +21,8 @@ from .funcs import Sim
 from .geometry import GEOMETRY_FLAGS, apply_episode_geometry
 from .kernels import episode_kernel, task_kernels
 from .physics import TaskPhysics
+from .randomization import TaskRandomization
+from .randomizer import Randomizer
 from .registry import Task
 from .scene import build_scene
 from .state_dict import StateDictMixin
@@ -60,6 +62,7 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
         graph: bool | None,
         max_episode_steps: int | None = None,
         reconfiguration_freq: int | None = None,
+        randomization: TaskRandomization | None = None,
     ):
         import torch
 
@@ -146,6 +149,9 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
         for i, k in enumerate(self.info_keys):
             self._t[k], self._t["final_" + k] = self._t["info"][:, i], self._t["final_info"][:, i]
 
+        self.randomization = randomization
+        self._randomizer = Randomizer(self, randomization) if randomization is not None else None
+
         self._sim = self._sim_struct(task, finger_force)
         self._reset_kernel, self._observe_kernel = task_kernels(task)
 
@@ -214,6 +220,8 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
 
     def _reset_envs(self, mask: wp.array) -> None:
         """Initialise the episodes of ``mask``'s envs (device draws), their controller targets and observations."""
+        if self._randomizer is not None:  # before the reset kernel counts the episode: the draws of the same one
+            self._randomizer.apply(mask)
         wp.launch(
             self._reset_kernel,
             dim=self.num_envs,
@@ -281,6 +289,12 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
             f"TaskEnv({self.task_spec.env_id}, num_envs={self.num_envs}, device={self.wp_device.alias}, "
             f"control_mode={self.control_mode}, obs_mode={self.obs_mode}, reward_mode={self.reward_mode})"
         )
+
+    @property
+    def randomization_factors(self):
+        """(num_envs, 3) torch view: each env's friction, contact-time and mass factors of its running episode
+        (:class:`~wpctrl.tasks.randomization.TaskRandomization`); None without randomisation."""
+        return None if self._randomizer is None else wp.to_torch(self._randomizer.factors)
 
     @property
     def elapsed_steps(self):
@@ -372,6 +386,8 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
         params = self.task_spec.draw_episode_params(self.seed_buf.numpy())
         if apply_episode_geometry(self.scene, self.task_spec, params):
             self.solver.notify_model_changed(GEOMETRY_FLAGS)
+            if self._randomizer is not None:  # the solver's model holds the new scene's values: the draws scale them
+                self._randomizer.capture_base()
         self.episode_params = params
         self.param_buf.assign(_param_rows(params))
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 from ..config import ConfigError
 from .names import CONTROL_MODES, OBS_MODES
 from .physics import TaskPhysics
+from .randomization import TaskRandomization
 from .registry import TASKS, unknown_task
 
 SIM_BACKENDS = ("mujoco",)
@@ -31,6 +32,7 @@ def make(
     verbose: bool = False,
     max_episode_steps: int | None = None,
     reconfiguration_freq: int | None = None,
+    randomization: TaskRandomization | None = None,
 ):
     """A ManiSkill task on Newton (:class:`~wpctrl.tasks.env.TaskEnv`), ``num_envs`` copies on ``device``.
 
@@ -60,6 +62,8 @@ def make(
         reconfiguration_freq: Every how many :meth:`~wpctrl.tasks.env.TaskEnv.reset` calls the scene is drawn again
             from the episode seeds (ManiSkill's argument; None: the task's default, as ManiSkill's: 1 for
             PegInsertionSide-v1 with one env, else 0, never). Only tasks whose geometry comes from the seed change.
+        randomization: Per-env friction, contact softness and object mass drawn at every reset
+            (:class:`~wpctrl.tasks.randomization.TaskRandomization`; None, the default: none).
         verbose: Let Warp print what it does while the env is built: its start-up banner and a
             ``Module ... load on device ...`` line per kernel module. By default (``False``) ``make`` prints nothing:
             for the duration of the call it raises ``warp.config.log_level`` to ``warp.LOG_WARNING`` (and puts your
@@ -99,6 +103,9 @@ def make(
         physics = TaskPhysics()
     elif not isinstance(physics, TaskPhysics):
         raise ConfigError(f"make: physics expected a TaskPhysics, got {type(physics).__name__}")
+    if randomization is not None and not isinstance(randomization, TaskRandomization):
+        raise ConfigError(f"make: randomization expected a TaskRandomization (or None), got "
+                          f"{type(randomization).__name__}")  # fmt: skip
     try:  # the env's tensors are torch's
         import torch  # noqa: F401
     except ImportError as e:
@@ -112,6 +119,6 @@ def make(
     with quiet_warp(verbose):  # the banner, the CUDA-driver line and the module-load lines: only when asked for
         device = check_device(device, "make: device")
         options = (bool(auto_reset), bool(ignore_terminations), physics, controller_semantics, asset_dir, graph,
-                   max_episode_steps, reconfiguration_freq)  # fmt: skip
+                   max_episode_steps, reconfiguration_freq, randomization)  # fmt: skip
         return TaskEnv(TASKS[env_id], num_envs, device, control_mode, obs_mode, reward_mode, seed_value(seed),
                        *options)  # fmt: skip

@@ -74,10 +74,24 @@ class ObservationNormalizer(nn.Module):
         return (obs - self._mean) / (self._std + self.eps)
 
 
+class HiddenInputs(nn.Module):
+    """Zeros in the observation columns the policy was trained without (:mod:`wpctrl.train.hidden_inputs`)."""
+
+    def __init__(self, obs_dim: int, columns):
+        super().__init__()
+        keep = torch.ones(1, obs_dim, dtype=torch.bool)
+        keep[0, list(columns)] = False
+        self.register_buffer("keep", keep)
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        return torch.where(self.keep, obs, torch.zeros_like(obs))
+
+
 class PolicyActor(nn.Module):
-    """Observation ``(batch, obs_dim)`` -> deterministic action ``(batch, num_actions)``: the normaliser (or none),
-    then the MLP, whose output is the Gaussian's mean. Its state dict has the keys of rsl-rl's ``MLPModel`` less the
-    distribution's."""
+    """Observation ``(batch, obs_dim)`` -> deterministic action ``(batch, num_actions)``: the hidden columns zeroed
+    (:meth:`hide_inputs`; none by default), the normaliser (or none), then the MLP, whose output is the Gaussian's
+    mean. Its state dict has the keys of rsl-rl's ``MLPModel`` less the distribution's (and the hidden columns' mask,
+    once set)."""
 
     def __init__(self, obs_dim: int, num_actions: int, hidden_dims, activation: str = "elu",
                  obs_normalization: bool = False):  # fmt: skip
@@ -91,9 +105,19 @@ class PolicyActor(nn.Module):
             layers += [nn.Linear(n_in, n_out), ACTIVATIONS[activation.lower()]()]
         layers.append(nn.Linear(widths[-1], num_actions))
         self.mlp = nn.Sequential(*layers)
+        self.hidden_inputs: nn.Module = nn.Identity()
+
+    def hide_inputs(self, columns) -> PolicyActor:
+        """Zero the observation columns ``columns`` before the normaliser (the policy was trained with zeros there)."""
+        columns = [int(c) for c in columns]
+        bad = [c for c in columns if not 0 <= c < self.obs_dim]
+        if bad:
+            raise ExportError(f"hidden_obs: expected columns in [0, {self.obs_dim}), got {bad}")
+        self.hidden_inputs = HiddenInputs(self.obs_dim, columns) if columns else nn.Identity()
+        return self
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        return self.mlp(self.obs_normalizer(obs))
+        return self.mlp(self.obs_normalizer(self.hidden_inputs(obs)))
 
     def observation_statistics(self) -> tuple[torch.Tensor, torch.Tensor]:
         """The normaliser's running mean and standard deviation, each ``(obs_dim,)``; zeros and ones without one."""

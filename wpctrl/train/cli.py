@@ -13,6 +13,7 @@ import time
 
 from ..console import add_output_options
 from .command_args import command_parser, given_flags, missing_train_extra
+from .hidden_inputs import HIDE_OBS
 from .logger import LOGGERS
 from .reach_ppo import evaluate, train_cfg
 from .resume import ResumeError, apply_resume
@@ -129,6 +130,22 @@ def parser() -> argparse.ArgumentParser:
         default=None,
         help="ManiSkill tasks: 'off' feeds the observations raw, as ManiSkill's PPO does (the default); 'on' "
         "normalises them with rsl-rl's running normaliser",
+    )
+    p.add_argument(
+        "--hide-obs",
+        choices=HIDE_OBS,
+        default=None,
+        help="ManiSkill tasks: observation entries the policy does not read: 'finger_qvel' (the default) hides the "
+        "finger joints' velocities, which PhysX reports non-zero in a still grip (its solver's artefact) where "
+        "Newton reports the fingers' motion; the exported policy zeroes them itself. 'none' hides nothing",
+    )
+    p.add_argument(
+        "--randomize",
+        default=None,
+        metavar="SPEC",
+        help="ManiSkill tasks: per-env physics drawn at every reset of the training envs: 'on' (friction x0.7-1.3, "
+        "contact time constant x1-2, the objects' mass x0.5-1.5), 'name=low:high,...' with names friction, "
+        "contact_time, mass, or 'off' (the default). Evaluations run the nominal physics",
     )
     p.add_argument(
         "--action-sampling",

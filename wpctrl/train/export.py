@@ -3,8 +3,9 @@ registry; its widths are the checkpoint's record), as a self-contained TorchScri
 module (``policy.ts``) and, where the ``onnx`` package is importable, an ONNX model (``policy.onnx``).
 
 Both map ManiSkill's flattened ``obs_mode="state"`` observation ``(batch, obs_dim)`` (float32) to the deterministic
-action ``(batch, num_actions)`` (the Gaussian's mean; ManiSkill's controllers clip it to the action space): rsl-rl's
-running observation normaliser, then the actor's MLP, both rebuilt from the checkpoint in plain torch
+action ``(batch, num_actions)`` (the Gaussian's mean; ManiSkill's controllers clip it to the action space): the
+columns the run hid zeroed (``hidden_obs``, :mod:`.hidden_inputs`), rsl-rl's running observation normaliser, then
+the actor's MLP, both rebuilt from the checkpoint in plain torch
 (:mod:`.actor`), so that exporting needs torch alone, not rsl-rl. ``policy.ts`` loads with torch alone
 (``torch.jit.load``); its extra file (``EXTRA_FILE``) (and ``policy.json`` beside it, and the ONNX model's metadata)
 name the task, control mode, observation layout and action bounds.
@@ -66,6 +67,13 @@ def load_actor(checkpoint: Path) -> tuple[PolicyActor, dict]:
                           f"export takes runs of `wpctrl train --task {' | '.join(TASK_IDS)}`)")  # fmt: skip
     actor = build_actor(infos.get("actor"), int(infos["obs_dim"]), int(infos["num_actions"]),
                         data.get("actor_state_dict"), checkpoint)  # fmt: skip
+    hidden = infos.get("hidden_obs", [])
+    if not isinstance(hidden, list) or not all(isinstance(c, int) and not isinstance(c, bool) for c in hidden):
+        raise ExportError(f"{checkpoint}: hidden_obs: expected a list of observation columns, got {hidden!r}")
+    try:
+        actor.hide_inputs(hidden)
+    except ExportError as e:
+        raise ExportError(f"{checkpoint}: {e}") from e
     return actor, infos
 
 
@@ -75,7 +83,9 @@ def _metadata(infos: dict) -> dict:
         "format": "wpctrl-exported-policy-1",
         **{k: infos[k] for k in keys},
         **({"max_episode_steps": infos["max_episode_steps"]} if "max_episode_steps" in infos else {}),
-        "input": "ManiSkill's flattened obs_mode='state' observation (batch, obs_dim), float32",
+        "hidden_obs": list(infos.get("hidden_obs", [])),
+        "input": "ManiSkill's flattened obs_mode='state' observation (batch, obs_dim), float32; the columns of "
+                 "hidden_obs are not read (the policy zeroes them, as training did)",
         "output": "deterministic action (batch, num_actions); ManiSkill's controller clips it to the action bounds",
     }
 

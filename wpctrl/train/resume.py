@@ -52,6 +52,8 @@ def recorded_config(summary: dict) -> dict:
             substeps=summary["substeps"],
             no_partial_reset=not summary["partial_reset"],
             obs_normalization="on" if summary["ppo"]["actor"].get("obs_normalization") else "off",
+            hide_obs=summary.get("hide_obs", "none"),  # a run recorded before the option hid nothing
+            randomize=summary.get("randomize", "off"),
         )
     return cfg
 

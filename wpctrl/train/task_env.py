@@ -24,7 +24,7 @@ STAT_KEYS = ("episodes", "return", "success_once", "success_at_end", "length", "
 
 class TaskVecEnv(VecEnv):
     """An env of :func:`wpctrl.tasks.make` (``obs_mode="state"``) for rsl-rl: observation group ``"policy"`` is
-    ManiSkill's flattened state vector.
+    ManiSkill's flattened state vector, its hidden columns zeroed (``hide_obs``).
 
     Args:
         task: A task id of :data:`wpctrl.tasks.TASKS` (``"PushCube-v1"``, ``"StackCube-v1"``, ...): its observation
@@ -37,6 +37,10 @@ class TaskVecEnv(VecEnv):
         partial_reset: Success ends an episode (ManiSkill's PPO default); False: episodes end only at the time limit.
         substeps: MuJoCo-Warp steps per physics step (None: :class:`~wpctrl.tasks.TaskPhysics`'s default).
         graph: Capture the env step in a graph (default: True).
+        hide_obs: Observation entries the policy and critic see as zeros (:mod:`wpctrl.train.hidden_inputs`:
+            ``"finger_qvel"``, ``"none"``; None: the default, ``"finger_qvel"``).
+        randomize: Per-env physics drawn at every reset (:func:`wpctrl.tasks.randomization.from_spec`: ``"on"``,
+            ``"friction=0.7:1.3,..."``; None or ``"off"``: none).
     """
 
     def __init__(
@@ -51,14 +55,19 @@ class TaskVecEnv(VecEnv):
         substeps: int | None = None,
         graph: bool | None = None,
         asset_dir: str | None = None,
+        hide_obs: str | None = None,
+        randomize: str | None = None,
     ):
         import wpctrl.tasks as T
+        from wpctrl.tasks.randomization import from_spec
+
+        from .hidden_inputs import DEFAULT_HIDE_OBS, hidden_columns
 
         physics = T.TaskPhysics() if substeps is None else T.TaskPhysics(substeps=substeps)
         self.env = T.make(task, num_envs=num_envs, device=device, control_mode=control_mode, obs_mode="state",
                           reward_mode=reward_mode, seed=seed, auto_reset=True,
                           ignore_terminations=not partial_reset, physics=physics, asset_dir=asset_dir,
-                          graph=graph)  # fmt: skip
+                          graph=graph, randomization=from_spec(randomize or "off"))  # fmt: skip
         self.task = task
         self.num_envs = self.env.num_envs
         self.num_actions = int(self.env.single_action_space.shape[0])
@@ -67,11 +76,16 @@ class TaskVecEnv(VecEnv):
         self.device = self.env.device
         self.partial_reset = bool(partial_reset)
         self.substeps = physics.substeps
+        self.hide_obs = hide_obs or DEFAULT_HIDE_OBS
+        self.hidden_columns = hidden_columns(task, self.hide_obs)
         self.cfg = {"task": task, "num_envs": self.num_envs, "control_mode": control_mode, "reward_mode": reward_mode,
-                    "partial_reset": self.partial_reset, "substeps": physics.substeps}  # fmt: skip
+                    "partial_reset": self.partial_reset, "substeps": physics.substeps,
+                    "hide_obs": self.hide_obs, "randomize": randomize or "off"}  # fmt: skip
         self.action_low = torch.as_tensor(self.env.single_action_space.low, device=self.device)
         self.action_high = torch.as_tensor(self.env.single_action_space.high, device=self.device)
         n = self.num_envs
+        self._keep = torch.ones(self.num_obs, dtype=torch.bool, device=self.device)
+        self._keep[self.hidden_columns] = False
         self._obs = torch.zeros(n, self.num_obs, device=self.device)
         self._return = torch.zeros(n, device=self.device)
         self._success_once = torch.zeros(n, dtype=torch.bool, device=self.device)
@@ -95,6 +109,10 @@ class TaskVecEnv(VecEnv):
         # rsl-rl's learn(init_at_random_ep_len=True) assigns a new tensor: copy it into the device buffer
         self.env.elapsed_steps.copy_(value)
 
+    def hide(self, obs: torch.Tensor) -> torch.Tensor:
+        """``obs`` with the hidden columns zeroed (a new tensor; ``obs`` itself unchanged)."""
+        return torch.where(self._keep, obs, 0.0) if self.hidden_columns else obs
+
     def get_observations(self):
         from tensordict import TensorDict
 
@@ -103,7 +121,7 @@ class TaskVecEnv(VecEnv):
     def reset(self, seed: int | None = None):
         """Every env starts a new episode; their first observations. Episode statistics restart."""
         obs, _ = self.env.reset(seed=seed)
-        self._obs.copy_(obs)
+        self._obs.copy_(self.hide(obs))
         self._return.zero_()
         self._success_once.zero_()
         return self.get_observations()
@@ -137,9 +155,10 @@ class TaskVecEnv(VecEnv):
         self._stats += add
         self._return.masked_fill_(dones, 0.0)
         self._success_once.masked_fill_(dones, False)
+        obs = self.hide(obs)
         self._obs.copy_(obs)
-        extras = {"final_observations": info["final_observation"], "terminated": terminated, "truncated": truncated,
-                  "success": success}  # fmt: skip
+        extras = {"final_observations": self.hide(info["final_observation"]), "terminated": terminated,
+                  "truncated": truncated, "success": success}  # fmt: skip
         return TensorDict({"policy": obs}, batch_size=[self.num_envs]), reward, dones, extras
 
     def take_stats(self) -> dict:

@@ -132,6 +132,7 @@ def checkpoint_infos(env: TaskVecEnv, cfg: dict) -> dict:
         "action_low": env.action_low.cpu().tolist(),
         "action_high": env.action_high.cpu().tolist(),
         "obs_fields": [[f.group, f.name, f.size] for f in spec.obs_fields],
+        "hidden_obs": list(env.hidden_columns),
         "max_episode_steps": env.max_episode_length,
         "substeps": env.substeps,
         "partial_reset": env.partial_reset,
@@ -164,7 +165,8 @@ class ManiSkillTraining:
             torch.set_num_threads(1)
         graph = not c.no_graph
         self.env = TaskVecEnv(c.task, c.envs, device=c.device, control_mode=c.control_mode, seed=c.seed,
-                              partial_reset=not c.no_partial_reset, substeps=c.substeps, graph=graph)  # fmt: skip
+                              partial_reset=not c.no_partial_reset, substeps=c.substeps, graph=graph,
+                              hide_obs=c.hide_obs, randomize=c.randomize)  # fmt: skip
         self.eval_env = T.make(c.task, num_envs=c.eval_envs, device=c.device, control_mode=c.control_mode,
                                seed=c.seed + EVAL_SEED, auto_reset=False, ignore_terminations=True,
                                physics=T.TaskPhysics(substeps=self.env.substeps), graph=graph)  # fmt: skip
@@ -190,7 +192,8 @@ class ManiSkillTraining:
     def describe(self) -> str:
         c = self.cfg
         return (f"{c.task}, {c.envs} envs on {c.device} ({self.env.substeps} MuJoCo steps per physics step), "
-                f"{c.control_mode}, evaluation on {c.eval_envs} envs, PPO update {c.ppo_update}, "
+                f"{c.control_mode}, hiding {c.hide_obs}, randomising {c.randomize}, evaluation on {c.eval_envs} envs, "
+                f"PPO update {c.ppo_update}, "
                 f"{c.action_sampling} action sampling")  # fmt: skip
 
     def start(self, seed: int):
@@ -203,7 +206,7 @@ class ManiSkillTraining:
         from tensordict import TensorDict
 
         def deterministic(obs):
-            return self.alg.actor(TensorDict({"policy": obs}, batch_size=[obs.shape[0]]))
+            return self.alg.actor(TensorDict({"policy": self.env.hide(obs)}, batch_size=[obs.shape[0]]))
 
         # held-out episodes: a seed the training env never draws from
         return evaluate_policy(deterministic, self.eval_env, self.cfg.eval_episodes, seed=self.cfg.seed + EVAL_SEED)
@@ -216,6 +219,7 @@ class ManiSkillTraining:
         return {"eval_envs": c.eval_envs, "ppo_update": c.ppo_update, "action_sampling": c.action_sampling,
                 "substeps": self.env.substeps, "partial_reset": self.env.partial_reset,
                 "max_episode_steps": self.env.max_episode_length, "obs_dim": self.env.num_obs,
+                "hide_obs": c.hide_obs, "hidden_obs": list(self.env.hidden_columns), "randomize": c.randomize,
                 "recipe": task_recipe(c.task)}  # fmt: skip
 
     def checkpoint_infos(self, ppo: dict) -> dict:

@@ -14,6 +14,7 @@ from pathlib import Path
 from ..tasks.names import CONTROL_MODES as PANDA_MODES
 from ..tasks.names import TASK_MODULES
 from .command_args import flag, unused_option
+from .hidden_inputs import DEFAULT_HIDE_OBS, HIDE_OBS
 from .logger import LOGGERS, logger_error
 from .ppo_config import batch_error, task_recipe
 
@@ -34,7 +35,7 @@ REACH_STEPS_PER_ENV = 24
 REACH_MINIBATCHES = 4
 
 TASK_ONLY = ("epochs", "minibatches", "substeps", "eval_envs", "time_limit", "ppo_update", "obs_normalization",
-             "action_sampling", "no_partial_reset")  # fmt: skip
+             "action_sampling", "no_partial_reset", "hide_obs", "randomize")  # fmt: skip
 """The options only the ManiSkill tasks use (the reach task refuses them)."""
 
 TASK_LIST = ", ".join(MANISKILL_TASKS)
@@ -42,7 +43,7 @@ TASK_LIST = ", ".join(MANISKILL_TASKS)
 
 _POSITIVE = ("envs", "iterations", "steps_per_env", "eval_episodes", "eval_envs", "epochs", "minibatches", "substeps")
 _CHOICES = {"task": TASKS, "logger": LOGGERS, "ppo_update": PPO_UPDATES, "obs_normalization": OBS_NORMALIZATIONS,
-            "action_sampling": SAMPLINGS}  # fmt: skip
+            "action_sampling": SAMPLINGS, "hide_obs": HIDE_OBS}  # fmt: skip
 
 
 class TrainConfigError(ValueError):
@@ -87,6 +88,12 @@ class TrainConfig:
     ppo_update: str | None = None
     obs_normalization: str | None = None
     action_sampling: str | None = None
+    hide_obs: str | None = None
+    """Tasks: observation entries the policy does not read (:mod:`wpctrl.train.hidden_inputs`; None:
+    ``finger_qvel``, the finger joints' velocities)."""
+    randomize: str | None = None
+    """Tasks: per-env physics drawn at every reset of the training envs (``"on"``, ``"friction=0.7:1.3,..."``:
+    :func:`wpctrl.tasks.randomization.from_spec`); None / ``"off"``: none. The evaluation envs never randomise."""
     out: str | Path = "wpctrl-train"
     no_graph: bool = False
     logger: str = "tensorboard"
@@ -135,6 +142,16 @@ class TrainConfig:
             return f"{name('target_success')}: expected a success rate in (0, 1], got {self.target_success}"
         if self.target_success is not None and self.eval_every == 0:
             return f"{name('target_success')}: needs {name('eval_every')} N (the evaluations that decide when to stop)"
+        if self.randomize is not None:
+            from ..config import ConfigError
+            from ..tasks.randomization import from_spec
+
+            if not isinstance(self.randomize, str):
+                return f"{name('randomize')}: expected 'off', 'on' or name=low:high,..., got {self.randomize!r}"
+            try:
+                from_spec(self.randomize)
+            except ConfigError as e:
+                return f"{name('randomize')}: {str(e).removeprefix('randomize: ')}"
         if self.time_limit is not None and not self.time_limit > 0:
             return f"{name('time_limit')}: expected a positive number of seconds, got {self.time_limit}"
         if why := self.unused_problem(name):
@@ -228,6 +245,8 @@ class TrainConfig:
                 ppo_update=self.ppo_update or ("captured" if cuda else "rsl-rl"),
                 obs_normalization=self.obs_normalization or "off",
                 action_sampling=self.action_sampling or "sync-free",
+                hide_obs=self.hide_obs or DEFAULT_HIDE_OBS,
+                randomize=self.randomize or "off",
             )
         return dataclasses.replace(
             self,

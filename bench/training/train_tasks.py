@@ -138,6 +138,7 @@ def run_task(args, task: str, out: Path, concurrent: list[str]) -> dict:
         eval_every=0 if warmup else _eval_every(args, task), eval_envs=min(args.eval_envs, 16) if warmup
         else args.eval_envs, time_limit=None if warmup else args.time_limit,
         target_success=None if warmup else args.target_success, logger="none", out=str(run_dir),
+        hide_obs=args.hide_obs, randomize=args.randomize,
     )  # fmt: skip
     trainer = Trainer(cfg, started=T0)
     trainer.run()
@@ -201,7 +202,7 @@ def task_record(summary: dict, args, concurrent: list[str]) -> dict:
     keys = ("task", "control_mode", "envs", "steps_per_env", "iterations", "env_steps", "substeps", "seed", "device",
             "device_name", "graph", "ppo_update", "action_sampling", "partial_reset", "eval_envs", "max_episode_steps",
             "obs_dim", "recipe", "stopped_by", "import_s", "setup_s", "train_start_s", "train_wall_s", "total_s",
-            "collection_env_steps_per_s_median")  # fmt: skip
+            "collection_env_steps_per_s_median", "hide_obs", "hidden_obs", "randomize")  # fmt: skip
     return {
         "format": "wpctrl-bench-train-tasks-1",
         **{k: summary.get(k) for k in keys},
@@ -232,7 +233,8 @@ def _worker_argv(args, task: str, warmup: bool) -> list[str]:
             str(args.eval_every_steps), "--newton-episodes", str(args.newton_episodes), "--maniskill-episodes",
             str(args.maniskill_episodes), "--concurrent", args.concurrent_label, "--out", str(args.out)]  # fmt: skip
     for flag, v in (("--substeps", args.substeps), ("--steps-per-env", args.steps_per_env),
-                    ("--target-success", args.target_success), ("--commit", args.commit)):  # fmt: skip
+                    ("--target-success", args.target_success), ("--commit", args.commit),
+                    ("--hide-obs", args.hide_obs), ("--randomize", args.randomize)):  # fmt: skip
         if v is not None:
             argv += [flag, str(v)]
     return argv + (["--warmup-only"] if warmup else [])
@@ -406,6 +408,8 @@ def parser() -> argparse.ArgumentParser:
                    "GPU recipe of docs/training.md uses 8)")  # fmt: skip
     p.add_argument("--steps-per-env", type=int, default=None, help="default: the task's recipe (4; StackCube 16)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--hide-obs", default=None, help="wpctrl train's --hide-obs (default: finger_qvel)")
+    p.add_argument("--randomize", default=None, help="wpctrl train's --randomize (default: off)")
     p.add_argument("--time-limit", type=float, default=300.0, help="seconds per task from its process's start")
     p.add_argument("--iterations", type=int, default=100_000, help="an iteration cap (the time limit stops first)")
     p.add_argument("--eval-every", type=int, default=0, help="iterations between evaluations (overrides "

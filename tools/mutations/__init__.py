@@ -38,6 +38,7 @@ AREAS = (
     "peg_insertion_side",
     "finger_contacts",
     "replay_input",
+    "task_randomization",
 )
 """The areas, in the order the runner takes them."""
 

@@ -64,6 +64,10 @@ def test_evaluation_and_export_modules_import_neither_rsl_rl_nor_the_trainer():
          "TrainConfig.randomize: expected 'off', 'on' or name=low:high,... with names ['friction', 'contact_time', "
          "'mass'], got 'gravity=1:2'"),
         ({"task": "PushCube-v1", "randomize": 1}, "TrainConfig.randomize: expected 'off', 'on' or name=low:high"),
+        ({"task": "PushCube-v1", "randomize": "contact_time=0.4:1", "substeps": 8},
+         "TrainConfig.randomize: TaskRandomization.contact_time: expected low >= 0.5 (MuJoCo raises a time constant "
+         "under two of its steps, 2.5 ms, to two steps, so a shorter one would not be drawn; the scene's shortest is "
+         "5 ms), got (0.4, 1.0) (with substeps 8)"),
     ],
 )  # fmt: skip
 def test_train_config_names_the_field_that_cannot_work(kwargs, message):

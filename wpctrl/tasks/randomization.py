@@ -59,6 +59,17 @@ class TaskRandomization:
     def as_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
+    def contact_time_problem(self, shortest: float, dt: float) -> str | None:
+        """Why ``contact_time`` cannot be drawn in a scene whose shortest contact time constant is ``shortest`` [s]
+        with MuJoCo steps of ``dt`` [s] (MuJoCo raises a time constant under two steps to two steps, so a factor that
+        takes one there would not act as drawn), or None."""
+        low = 2.0 * dt / shortest
+        if self.contact_time is None or self.contact_time[0] >= low * (1.0 - 1e-6):
+            return None
+        return (f"TaskRandomization.contact_time: expected low >= {low:.3g} (MuJoCo raises a time constant under two "
+                f"of its steps, {2e3 * dt:.3g} ms, to two steps, so a shorter one would not be drawn; the scene's "
+                f"shortest is {shortest * 1e3:.3g} ms), got {self.contact_time!r}")  # fmt: skip
+
 
 TRAINING_RANGES = {"friction": (0.7, 1.3), "contact_time": (1.0, 2.0), "mass": (0.5, 1.5)}
 """``from_spec("on")``'s ranges: friction within 30 %, contacts up to twice as soft (a time constant under the scene's

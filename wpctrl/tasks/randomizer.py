@@ -85,15 +85,9 @@ class Randomizer:
                 raise RuntimeError(f"randomization: MuJoCo-Warp's {name} is not per world (shape {a.shape})")
         ranges = cfg.ranges()
         self.low, self.high = wp.vec3(*ranges[:, 0]), wp.vec3(*ranges[:, 1])
-        solref = m.geom_solref.numpy()[..., 0]
-        shortest = 2.0 * env.dt
-        low = shortest / float(solref.min())
-        if cfg.contact_time is not None and cfg.contact_time[0] < low * (1.0 - 1e-6):
-            raise ConfigError(
-                f"TaskRandomization.contact_time: expected low >= {low:.3g} (MuJoCo raises a "
-                f"time constant under two of its steps, {shortest * 1e3:.3g} ms, to two steps, so a shorter one would "
-                f"not be drawn; the scene's shortest is {float(solref.min()) * 1e3:.3g} ms), got {cfg.contact_time!r}"
-            )  # fmt: skip
+        why = cfg.contact_time_problem(float(m.geom_solref.numpy()[..., 0].min()), env.dt)
+        if why:
+            raise ConfigError(why)
         to_newton = env.solver.mjc_body_to_newton.numpy()[0]
         wanted = [env.scene.actor_body0[a.name] for a in env.task_spec.bodies]
         mj_bodies = np.array([int(np.flatnonzero(to_newton == b)[0]) for b in wanted], np.int32)

@@ -144,14 +144,19 @@ class TrainConfig:
             return f"{name('target_success')}: needs {name('eval_every')} N (the evaluations that decide when to stop)"
         if self.randomize is not None:
             from ..config import ConfigError
+            from ..tasks.physics import TaskPhysics
             from ..tasks.randomization import from_spec
 
             if not isinstance(self.randomize, str):
                 return f"{name('randomize')}: expected 'off', 'on' or name=low:high,..., got {self.randomize!r}"
             try:
-                from_spec(self.randomize)
+                spec = from_spec(self.randomize)
             except ConfigError as e:
                 return f"{name('randomize')}: {str(e).removeprefix('randomize: ')}"
+            physics = TaskPhysics() if self.substeps is None else TaskPhysics(substeps=self.substeps)
+            shortest = min(physics.contact_solref[0], (physics.finger_solref or physics.contact_solref)[0])
+            if spec is not None and (why := spec.contact_time_problem(shortest, 0.01 / physics.substeps)):
+                return f"{name('randomize')}: {why} (with {name('substeps')} {physics.substeps})"
         if self.time_limit is not None and not self.time_limit > 0:
             return f"{name('time_limit')}: expected a positive number of seconds, got {self.time_limit}"
         if why := self.unused_problem(name):

@@ -56,9 +56,6 @@ class TaskRandomization:
         """(3, 2): friction, contact time, mass; (1, 1) where not drawn."""
         return np.array([getattr(self, f.name) or (1.0, 1.0) for f in fields(self)], np.float32)
 
-    def as_dict(self) -> dict:
-        return {f.name: getattr(self, f.name) for f in fields(self)}
-
     def contact_time_problem(self, shortest: float, dt: float) -> str | None:
         """Why ``contact_time`` cannot be drawn in a scene whose shortest contact time constant is ``shortest`` [s]
         with MuJoCo steps of ``dt`` [s] (MuJoCo raises a time constant under two steps to two steps, so a factor that

@@ -77,7 +77,7 @@ class Randomizer:
     :meth:`capture_base` whenever the env tells the solver of a model change) and the kernel that draws and writes."""
 
     def __init__(self, env, cfg: TaskRandomization):
-        self.env, self.cfg = env, cfg
+        self.env = env
         m = env.solver.mjw_model
         for name in _ARRAYS:
             a = getattr(m, name)

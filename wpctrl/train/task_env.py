@@ -61,6 +61,7 @@ class TaskVecEnv(VecEnv):
         import wpctrl.tasks as T
         from wpctrl.tasks.randomization import from_spec
 
+        from .actor import HiddenInputs
         from .hidden_inputs import DEFAULT_HIDE_OBS, hidden_columns
 
         physics = T.TaskPhysics() if substeps is None else T.TaskPhysics(substeps=substeps)
@@ -84,8 +85,7 @@ class TaskVecEnv(VecEnv):
         self.action_low = torch.as_tensor(self.env.single_action_space.low, device=self.device)
         self.action_high = torch.as_tensor(self.env.single_action_space.high, device=self.device)
         n = self.num_envs
-        self._keep = torch.ones(self.num_obs, dtype=torch.bool, device=self.device)
-        self._keep[self.hidden_columns] = False
+        self._hidden = HiddenInputs(self.num_obs, self.hidden_columns).to(self.device) if self.hidden_columns else None
         self._obs = torch.zeros(n, self.num_obs, device=self.device)
         self._return = torch.zeros(n, device=self.device)
         self._success_once = torch.zeros(n, dtype=torch.bool, device=self.device)
@@ -110,8 +110,9 @@ class TaskVecEnv(VecEnv):
         self.env.elapsed_steps.copy_(value)
 
     def hide(self, obs: torch.Tensor) -> torch.Tensor:
-        """``obs`` with the hidden columns zeroed (a new tensor; ``obs`` itself unchanged)."""
-        return torch.where(self._keep, obs, 0.0) if self.hidden_columns else obs
+        """``obs`` with the hidden columns zeroed (a new tensor; ``obs`` itself unchanged), by the module the exported
+        policy zeroes them with (:class:`~wpctrl.train.actor.HiddenInputs`)."""
+        return obs if self._hidden is None else self._hidden(obs)
 
     def get_observations(self):
         from tensordict import TensorDict

@@ -16,7 +16,7 @@ the robot). For each actuation option this measures:
 Options: ``implicit`` (MuJoCo's built-in PD, Newton's joint-level effort clamp), ``implicit-actclamp`` (the same PD
 with the clamp moved to the actuator's force range: see ``bench/actuators/mujoco_clamp.py``), ``explicit`` with
 ``explicit_pd`` = ``naive`` / ``stable`` / ``coupled``, and ``stable x15`` / ``coupled x15`` (15 solver substeps per
-10 ms), ``coupled H per control step`` (``inertia_update="control"``: the coupled drive's H computed once per control
+10 ms), ``implicit x16`` / ``coupled x16`` (16, the tasks' :class:`wpctrl.tasks.TaskPhysics` default), ``coupled H per control step`` (``inertia_update="control"``: the coupled drive's H computed once per control
 step). ``python bench/actuators/fidelity.py --help``; writes ``fidelity_<device>.json`` / ``.md`` under ``--out``.
 """
 
@@ -50,6 +50,8 @@ OPTIONS = {
     "coupled": ("explicit", "coupled", 1, False, None),
     "stable x15": ("explicit", "stable", 15, False, "substep"),
     "coupled x15": ("explicit", "coupled", 15, False, None),
+    "implicit x16": ("implicit", None, 16, False, None),  # the tasks' physics (wpctrl.tasks.TaskPhysics)
+    "coupled x16": ("explicit", "coupled", 16, False, None),
     "coupled H per control step": ("explicit", "coupled", 1, False, "control"),
 }
 LARGE_MODES = ("pd_joint_pos", "pd_joint_pos_vel")

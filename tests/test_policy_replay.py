@@ -122,7 +122,7 @@ BAD_NAMES = {
     "no policy suffix": ("PushCube-v1__pd_joint_delta_pos.npz", "the file name expected <Task>__<control_mode>"),
     "three parts": ("PushCube-v1__pd_joint_delta_pos__x__policy.npz", "the file name expected"),
     "unknown task": ("PushCube-v9__pd_joint_delta_pos__policy.npz", r"task 'PushCube-v9' \(from the file name\)"),
-    "a task wpctrl does not build": ("PlaceSphere-v1__pd_joint_pos__policy.npz", r"task 'PlaceSphere-v1'"),
+    "a task wpctrl does not build": ("PushT-v1__pd_joint_pos__policy.npz", r"task 'PushT-v1'"),
     "unknown control mode": ("PushCube-v1__pd_fast__policy.npz", r"control mode 'pd_fast' \(from the file name\)"),
 }
 

@@ -16,8 +16,9 @@ the robot). For each actuation option this measures:
 Options: ``implicit`` (MuJoCo's built-in PD, Newton's joint-level effort clamp), ``implicit-actclamp`` (the same PD
 with the clamp moved to the actuator's force range: see ``bench/actuators/mujoco_clamp.py``), ``explicit`` with
 ``explicit_pd`` = ``naive`` / ``stable`` / ``coupled``, and ``stable x15`` / ``coupled x15`` (15 solver substeps per
-10 ms), ``implicit x16`` / ``coupled x16`` (16, the tasks' :class:`wpctrl.tasks.TaskPhysics` default), ``coupled H per control step`` (``inertia_update="control"``: the coupled drive's H computed once per control
-step). ``python bench/actuators/fidelity.py --help``; writes ``fidelity_<device>.json`` / ``.md`` under ``--out``.
+10 ms), ``implicit x16`` / ``coupled x16`` (16, the tasks' :class:`wpctrl.tasks.TaskPhysics` default),
+``coupled H per control step`` (``inertia_update="control"``: the coupled drive's H computed once per control step).
+``python bench/actuators/fidelity.py --help``; writes ``fidelity_<device>.json`` / ``.md`` under ``--out``.
 """
 
 from __future__ import annotations

@@ -39,6 +39,7 @@ AREAS = (
     "finger_contacts",
     "replay_input",
     "task_randomization",
+    "place_sphere",
 )
 """The areas, in the order the runner takes them."""
 

@@ -23,6 +23,7 @@ __all__ = [
     "Capsule",
     "Marker",
     "ObsField",
+    "Sphere",
     "TableScene",
 ]
 
@@ -89,6 +90,16 @@ class Capsule:
 
 
 @dataclass(frozen=True)
+class Sphere:
+    """A sphere collision shape of ``radius`` [m] centred at ``offset`` in its actor's frame
+    (``add_sphere_collision``)."""
+
+    radius: float
+    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    quat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
 class Actor:
     """A rigid body of a task (ManiSkill's ``build_dynamic`` actor, or ``build_kinematic`` with ``kinematic``): its
     state-dict name, its collision shapes in its own frame, their density and PhysX static friction (None: the scene
@@ -96,7 +107,7 @@ class Actor:
     declares the shapes it is built with here, the same count and kinds."""
 
     name: str
-    shapes: tuple[Box | Capsule, ...]
+    shapes: tuple[Box | Capsule | Sphere, ...]
     density: float = 1000.0
     static_friction: float | None = None
     build_height: float = 0.0

@@ -26,6 +26,7 @@ TASK_MODULES: dict[str, str] = {
     "StackCube-v1": "stack_cube",
     "LiftPegUpright-v1": "lift_peg_upright",
     "PegInsertionSide-v1": "peg_insertion_side",
+    "PlaceSphere-v1": "place_sphere",
 }
 """The built-in tasks: ManiSkill env id -> its module under ``wpctrl/tasks/`` (imported when the task is first used).
 One line per task."""

@@ -21,7 +21,7 @@ import numpy as np
 import warp as wp
 
 from ..maniskill.collision import filter_srdf_pairs
-from .definitions import PANDA_DOF, PANDA_REST_QPOS, PANDA_ROOT_POSE, TABLE, Actor, Box, Capsule
+from .definitions import PANDA_DOF, PANDA_REST_QPOS, PANDA_ROOT_POSE, TABLE, Actor, Box, Capsule, Sphere
 from .physics import TaskPhysics, mujoco_friction
 from .registry import Task
 
@@ -195,6 +195,8 @@ def _add_actor(env: newton.ModelBuilder, actor: Actor, mu: float) -> None:
             xform = wp.transform(wp.transform_get_translation(xform), wp.transform_get_rotation(xform) * turn)
             env.add_shape_capsule(body, xform=xform, radius=shape.radius, half_height=shape.half_length,
                                   label=actor.name, cfg=cfg)  # fmt: skip
+        elif isinstance(shape, Sphere):
+            env.add_shape_sphere(body, xform=xform, radius=shape.radius, label=actor.name, cfg=cfg)
         else:
             raise TypeError(f"actor {actor.name}: unknown shape {shape!r}")
 

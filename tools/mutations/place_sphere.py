@@ -1,0 +1,48 @@
+"""Mutations: PlaceSphere-v1 (wpctrl/tasks/place_sphere.py)."""
+
+from .model import M
+
+_TESTS = ("tests/test_task_place_sphere.py",)
+
+MUTATIONS = [
+    M(
+        "place_success_while_grasped",
+        "wpctrl/tasks/place_sphere.py",
+        "    s.info[e, SUCCESS] = on_bin and static and not grasped\n",
+        "    s.info[e, SUCCESS] = on_bin and static\n",
+        "PlaceSphere's success accepts the ball still held in the gripper",
+        _TESTS,
+    ),
+    M(
+        "place_ungrasp_reward_one",
+        "wpctrl/tasks/place_sphere.py",
+        "UNGRASPED = 16.0\n",
+        "UNGRASPED = 1.0\n",
+        "the ungrasp reward of a released ball is 1 (StackCube's) instead of PlaceSphere's 16",
+        _TESTS,
+    ),
+    M(
+        "place_no_robot_static_term",
+        "wpctrl/tasks/place_sphere.py",
+        "        if arm_static(s, e, ROBOT_STATIC):\n            still = 1.0\n",
+        "",
+        "the reward on the bin leaves out the arm's stillness term",
+        _TESTS,
+    ),
+    M(
+        "place_bin_x_range",
+        "wpctrl/tasks/place_sphere.py",
+        "    bx = wp.randf(rng) * 0.1\n",
+        "    bx = wp.randf(rng) * 0.1 - 0.05\n",
+        "the bin's x is drawn over [-0.05, 0.05] instead of [0, 0.1]",
+        _TESTS,
+    ),
+    M(
+        "place_floor_height",
+        "wpctrl/tasks/place_sphere.py",
+        "_FLOOR_TOP = WALL_HALF + RADIUS\n",
+        "_FLOOR_TOP = 2.0 * WALL_HALF + RADIUS\n",
+        "the ball's resting height above the bin counts the whole floor thickness",
+        _TESTS,
+    ),
+]

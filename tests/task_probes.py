@@ -25,3 +25,45 @@ def write_finger_forces(env, forces: np.ndarray, column: int = 0) -> None:
     values = fm.numpy()
     values[:, column] = forces.reshape(2 * env.num_envs, 3)
     fm.assign(wp.array(values, dtype=wp.vec3, device=fm.device))
+
+
+def ref_is_grasping(forces: np.ndarray, directions: np.ndarray, max_angle: float = 85.0) -> np.ndarray:
+    """ManiSkill's ``Panda.is_grasping`` re-derived in numpy: per finger ``||f|| >= 0.5`` N and the angle between its
+    opening direction and ``f`` at most ``max_angle`` degrees; both fingers. ``forces``, ``directions``: (N, 2, 3)."""
+    norm = np.linalg.norm(forces, axis=-1)
+    cos = np.einsum("nfk,nfk->nf", forces, directions) / np.maximum(norm * np.linalg.norm(directions, axis=-1), 1e-12)
+    return ((norm >= 0.5) & (np.degrees(np.arccos(np.clip(cos, -1, 1))) <= max_angle)).all(axis=1)
+
+
+def grasp_forces(axes: np.ndarray, grasp: bool, off_cone_env: int = 3) -> np.ndarray:
+    """(N, 2, 3) finger contact forces for the flag tests: 2 N along each finger's opening direction where ``grasp``
+    (env ``off_cone_env``'s left finger turned 86 degrees off it, just outside ``is_grasping``'s 85-degree cone), else
+    none."""
+    import math
+
+    if not grasp:
+        return np.zeros_like(axes)
+    forces = 2.0 * axes
+    side = np.cross(axes[off_cone_env, 0], [0.0, 0.0, 1.0])
+    side /= np.linalg.norm(side)
+    rad = math.radians(86.0)
+    forces[off_cone_env, 0] = 2.0 * (math.cos(rad) * axes[off_cone_env, 0] + math.sin(rad) * side)
+    return forces
+
+
+def maniskill_demo_states(ms, episodes: list, every: int) -> list:
+    """The real ManiSkill env ``ms``'s state dicts along recorded demos (it replays them bit for bit from their initial
+    state dicts): every ``every``-th step, the last three and the end."""
+    import torch
+
+    base = ms.unwrapped
+    out = []
+    for ep in episodes:
+        ms.reset(seed=ep["seed"])
+        base.set_state_dict({g: {k: torch.tensor([v]) for k, v in d.items()} for g, d in ep["init_state_dict"].items()})
+        for k, action in enumerate(ep["actions"]):
+            if k % every == 0 or k >= len(ep["actions"]) - 3:
+                out.append(base.get_state_dict())
+            ms.step(torch.tensor([action]))
+        out.append(base.get_state_dict())
+    return out

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import gzip
 import json
-import math
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +25,7 @@ import pytest
 torch = pytest.importorskip("torch")
 scipy_stats = pytest.importorskip("scipy.stats")
 
-from task_probes import finger_axes, write_finger_forces  # noqa: E402
+from task_probes import finger_axes, grasp_forces, maniskill_demo_states, ref_is_grasping, write_finger_forces  # noqa: E402
 
 import wpctrl.tasks as T  # noqa: E402
 from wpctrl.tasks.definitions import PANDA_REST_QPOS  # noqa: E402
@@ -51,13 +50,6 @@ def ref_bin() -> list[tuple[list[float], list[float]]]:
     poses = [[0, 0, 0], [-dx, 0, dz], [dx, 0, dz], [0, -dy, dz], [0, dy, dz]]
     sizes = [[BLOCK[1], BLOCK[2], BLOCK[0]], EDGE, EDGE, [EDGE[1], EDGE[0], EDGE[2]], [EDGE[1], EDGE[0], EDGE[2]]]
     return list(zip(poses, sizes))
-
-
-def ref_is_grasping(forces, directions):
-    """``Panda.is_grasping``: per finger ||f|| >= 0.5 N and angle(direction, f) <= 85 degrees; both fingers."""
-    norm = np.linalg.norm(forces, axis=-1)
-    cos = np.einsum("nfk,nfk->nf", forces, directions) / np.maximum(norm * np.linalg.norm(directions, axis=-1), 1e-12)
-    return ((norm >= 0.5) & (np.degrees(np.arccos(np.clip(cos, -1, 1))) <= 85.0)).all(axis=1)
 
 
 def ref_evaluate(ball, box, grasped):
@@ -199,12 +191,7 @@ def test_flags_reward_and_observation_are_the_numpy_rederivation(env, grasp):
         s = _bin_states(env, seed)
         env.set_state_dict(s)
         axes = finger_axes(env)
-        forces = 2.0 * axes if grasp else np.zeros_like(axes)
-        if grasp:  # env 3: the left finger's force outside the 85-degree cone
-            side = np.cross(axes[3, 0], [0.0, 0.0, 1.0])
-            side /= np.linalg.norm(side)
-            rad = math.radians(86.0)
-            forces[3, 0] = 2.0 * (math.cos(rad) * axes[3, 0] + math.sin(rad) * side)
+        forces = grasp_forces(axes, grasp)  # env 3: the left finger outside the 85-degree cone
         write_finger_forces(env, forces)
         ev = env.evaluate()
         ball, box = s["actors"]["sphere"].numpy(), s["actors"]["bin"].numpy()
@@ -332,27 +319,13 @@ def test_definitions_are_maniskills(maniskill):
     assert float(nw.model.body_mass.numpy()[nw.scene.actor_body0["sphere"]]) == pytest.approx(body.mass, rel=1e-6)
 
 
-def _maniskill_demo_states(ms, episodes, every: int = 5) -> list:
-    base = ms.unwrapped
-    out = []
-    for ep in episodes:
-        ms.reset(seed=ep["seed"])
-        base.set_state_dict({g: {k: torch.tensor([v]) for k, v in d.items()} for g, d in ep["init_state_dict"].items()})
-        for k, action in enumerate(ep["actions"]):
-            if k % every == 0 or k >= len(ep["actions"]) - 3:
-                out.append(base.get_state_dict())
-            ms.step(torch.tensor([action]))
-        out.append(base.get_state_dict())
-    return out
-
-
 @pytest.mark.slow
 def test_same_state_gives_maniskills_obs_flags_and_rewards(maniskill):
     """States along ManiSkill's demos loaded into both simulators: the observation within 1e-5 (``is_grasped`` as
     ManiSkill's contacts give it, written into Newton's sensor), ``is_obj_on_bin`` and ``is_obj_static`` as ManiSkill's
     ``evaluate()``, and success, dense and normalized reward as ManiSkill's ``compute_dense_reward`` with
     ``is_obj_grasped`` set either way. The state dict round trip."""
-    states = _maniskill_demo_states(maniskill, _demos()["episodes"][:2])
+    states = maniskill_demo_states(maniskill, _demos()["episodes"][:2], every=5)
     base = maniskill.unwrapped
     nw = T.make(ENV_ID, num_envs=1, control_mode="pd_joint_pos", physics=FAST, auto_reset=False)
     seen = {"on": 0, "success": 0}

@@ -25,7 +25,7 @@ torch = pytest.importorskip("torch")
 scipy_stats = pytest.importorskip("scipy.stats")
 
 
-from task_probes import finger_axes, write_finger_forces  # noqa: E402
+from task_probes import finger_axes, grasp_forces, maniskill_demo_states, ref_is_grasping, write_finger_forces  # noqa: E402
 
 import wpctrl  # noqa: E402
 import wpctrl.tasks as T  # noqa: E402
@@ -62,13 +62,6 @@ def ref_sample_xy(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndar
         take = ~ok & (np.linalg.norm(pos - a, axis=1) > 2 * radius)
         b[take], ok[take] = pos[take], True
     return xy + a, xy + b
-
-
-def ref_is_grasping(forces, directions):
-    """``Panda.is_grasping``: per finger ||f|| >= 0.5 N and angle(direction, f) <= 85 degrees; both fingers."""
-    norm = np.linalg.norm(forces, axis=-1)
-    cos = np.einsum("nfk,nfk->nf", forces, directions) / np.maximum(norm * np.linalg.norm(directions, axis=-1), 1e-12)
-    return ((norm >= 0.5) & (np.degrees(np.arccos(np.clip(cos, -1, 1))) <= 85.0)).all(axis=1)
 
 
 def ref_evaluate(a, b, grasped):
@@ -211,12 +204,7 @@ def test_flags_reward_and_observation_are_the_numpy_rederivation(env, grasp):
         s = _stack_states(env, seed)
         env.set_state_dict(s)
         axes = finger_axes(env)
-        forces = 2.0 * axes if grasp else np.zeros_like(axes)
-        if grasp:  # env 3: the left finger's force outside the 85-degree cone
-            side = np.cross(axes[3, 0], [0.0, 0.0, 1.0])
-            side /= np.linalg.norm(side)
-            rad = math.radians(86.0)
-            forces[3, 0] = 2.0 * (math.cos(rad) * axes[3, 0] + math.sin(rad) * side)
+        forces = grasp_forces(axes, grasp)  # env 3: the left finger outside the 85-degree cone
         write_finger_forces(env, forces)
         ev = env.evaluate()
         a, b = s["actors"]["cubeA"].numpy(), s["actors"]["cubeB"].numpy()
@@ -281,22 +269,6 @@ def maniskill():
     return make_maniskill(ENV_ID, "pd_joint_pos", robot_uids="panda", max_episode_steps=500)
 
 
-def _maniskill_demo_states(ms, episodes, every: int = 4) -> list:
-    """ManiSkill's states along its own demos (it replays them bit for bit): resting, reached, grasped and carried,
-    cube A on cube B, released."""
-    base = ms.unwrapped
-    out = []
-    for ep in episodes:
-        ms.reset(seed=ep["seed"])
-        base.set_state_dict({g: {k: torch.tensor([v]) for k, v in d.items()} for g, d in ep["init_state_dict"].items()})
-        for k, action in enumerate(ep["actions"]):
-            if k % every == 0 or k >= len(ep["actions"]) - 3:
-                out.append(base.get_state_dict())
-            ms.step(torch.tensor([action]))
-        out.append(base.get_state_dict())
-    return out
-
-
 @pytest.mark.slow
 def test_definitions_are_maniskills(maniskill):
     """The module's constants against ManiSkill's class source and a live env's PhysX objects."""
@@ -344,7 +316,7 @@ def test_same_state_gives_maniskills_obs_flags_and_rewards(maniskill):
     ``compute_dense_reward`` with ``is_cubeA_grasped`` set either way (ManiSkill: in the info it is given; Newton: the
     fingers' contact forces on cube A written along / against their opening directions). The state dict round trip."""
     eps = _demos()["episodes"][:2]
-    states = _maniskill_demo_states(maniskill, eps)
+    states = maniskill_demo_states(maniskill, eps, every=4)
     base = maniskill.unwrapped
     nw = T.make(ENV_ID, num_envs=1, control_mode="pd_joint_pos", physics=FAST, auto_reset=False)
     seen = {"on": 0, "success": 0}

@@ -29,7 +29,7 @@ scipy_stats = pytest.importorskip("scipy.stats")
 from task_probes import finger_axes, grasp_forces, maniskill_demo_states, ref_is_grasping, write_finger_forces  # noqa: E402
 
 import wpctrl.tasks as T  # noqa: E402
-from wpctrl.tasks.definitions import PANDA_REST_QPOS  # noqa: E402
+from wpctrl.tasks.definitions import PANDA_GRIPPER_WIDTH, PANDA_REST_QPOS  # noqa: E402
 
 ENV_ID = "PlaceSphere-v1"
 DEMOS = Path("/work/shared/tasks/PlaceSphere-v1__pd_joint_pos.json.gz")
@@ -336,7 +336,7 @@ def test_definitions_are_maniskills(maniskill):
     assert gym.spec(ENV_ID).max_episode_steps == T.TASKS[ENV_ID].max_episode_steps
     base = maniskill.unwrapped
     maniskill.reset(seed=0)
-    assert float(base.agent.robot.get_qlimits()[0, -1, 1] * 2) == pytest.approx(P.GRIPPER_WIDTH)
+    assert float(base.agent.robot.get_qlimits()[0, -1, 1] * 2) == pytest.approx(PANDA_GRIPPER_WIDTH)
     body = base.obj._objs[0].find_component_by_type(sapien.physx.PhysxRigidDynamicComponent)
     (sphere,) = body.collision_shapes
     assert sphere.radius == pytest.approx(P.RADIUS) and sphere.physical_material.static_friction == pytest.approx(0.3)

@@ -29,7 +29,7 @@ from task_probes import finger_axes, grasp_forces, maniskill_demo_states, ref_is
 
 import wpctrl  # noqa: E402
 import wpctrl.tasks as T  # noqa: E402
-from wpctrl.tasks.definitions import PANDA_REST_QPOS  # noqa: E402
+from wpctrl.tasks.definitions import PANDA_GRIPPER_WIDTH, PANDA_REST_QPOS  # noqa: E402
 
 ENV_ID = "StackCube-v1"
 DEMOS = Path("/work/shared/tasks/StackCube-v1__pd_joint_pos.json.gz")
@@ -295,7 +295,7 @@ def test_definitions_are_maniskills(maniskill):
     assert gym.spec(ENV_ID).max_episode_steps == T.TASKS[ENV_ID].max_episode_steps
     base = maniskill.unwrapped
     maniskill.reset(seed=0)
-    assert float(base.agent.robot.get_qlimits()[0, -1, 1] * 2) == pytest.approx(S.GRIPPER_WIDTH)
+    assert float(base.agent.robot.get_qlimits()[0, -1, 1] * 2) == pytest.approx(PANDA_GRIPPER_WIDTH)
     assert base.cube_half_size.tolist() == pytest.approx([S.CUBE_HALF_SIZE] * 3)
     newton_env = T.make(ENV_ID, num_envs=1, physics=FAST)
     mass = newton_env.model.body_mass.numpy()

@@ -24,7 +24,7 @@ MUTATIONS = [
     M(
         "place_no_robot_static_term",
         "wpctrl/tasks/place_sphere.py",
-        "        if arm_static(s, e, ROBOT_STATIC):\n            still = 1.0\n",
+        "        if arm_static(s, e, ROBOT_STATIC):\n            arm_still = 1.0\n",
         "",
         "the reward on the bin leaves out the arm's stillness term",
         _TESTS,
@@ -35,6 +35,14 @@ MUTATIONS = [
         "    bx = wp.randf(rng) * 0.1\n",
         "    bx = wp.randf(rng) * 0.1 - 0.05\n",
         "the bin's x is drawn over [-0.05, 0.05] instead of [0, 0.1]",
+        _TESTS,
+    ),
+    M(
+        "place_sphere_shape_radius",
+        "wpctrl/tasks/scene.py",
+        "env.add_shape_sphere(body, xform=xform, radius=shape.radius,",
+        "env.add_shape_sphere(body, xform=xform, radius=0.5 * shape.radius,",
+        "a task actor's sphere shape is built with half its declared radius",
         _TESTS,
     ),
     M(

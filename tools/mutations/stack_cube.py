@@ -23,9 +23,9 @@ MUTATIONS = [
     ),
     M(
         "stack_ungrasp_half_width",
-        "wpctrl/tasks/stack_cube.py",
-        "ungrasp = (qpos(s, e, 7) + qpos(s, e, 8)) / GRIPPER_WIDTH",
-        "ungrasp = (qpos(s, e, 7) + qpos(s, e, 8)) / (0.5 * GRIPPER_WIDTH)",
+        "wpctrl/tasks/funcs.py",
+        "return (qpos(s, e, 7) + qpos(s, e, 8)) / PANDA_GRIPPER_WIDTH",
+        "return (qpos(s, e, 7) + qpos(s, e, 8)) / (0.5 * PANDA_GRIPPER_WIDTH)",
         "the ungrasp reward divides the finger opening by one finger's range instead of the gripper's width",
         _TESTS,
     ),

@@ -63,6 +63,9 @@ ROBOT_INIT_QPOS_NOISE = 0.02
 """The tasks' default ``robot_init_qpos_noise`` [rad]."""
 PANDA_ARM_DOF = 7
 PANDA_DOF = 9
+PANDA_GRIPPER_WIDTH = 0.08
+"""``agent.robot.get_qlimits()[0, -1, 1] * 2`` [m]: twice the upper limit (0.04 m) of the Panda's
+``panda_finger_joint2`` (``panda_v2.urdf``), the tasks' ``gripper_width``."""
 
 
 # -- what a task declares ----------------------------------------------------------------------------------------------

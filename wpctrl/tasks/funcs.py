@@ -18,7 +18,7 @@ import math
 
 import warp as wp
 
-from .definitions import PANDA_ARM_DOF
+from .definitions import PANDA_ARM_DOF, PANDA_GRIPPER_WIDTH
 
 __all__ = ["GRASP_MAX_ANGLE", "GRASP_MIN_FORCE", "Sim", "vec1", "vec7"]
 
@@ -194,6 +194,20 @@ def arm_static(s: Sim, e: int, threshold: float) -> bool:
         if wp.abs(s.joint_qd[qd0 + j]) > threshold:
             static = False
     return static
+
+
+@wp.func
+def gripper_opening(s: Sim, e: int) -> float:
+    """``torch.sum(robot.get_qpos()[:, -2:], axis=1) / gripper_width``: how far the fingers are open, 0 to 1 (the
+    ``ungrasp_reward`` of StackCube and PlaceSphere while the object is held)."""
+    return (qpos(s, e, 7) + qpos(s, e, 8)) / PANDA_GRIPPER_WIDTH
+
+
+@wp.func
+def still_reward(s: Sim, e: int, i: int) -> float:
+    """``1 - tanh(||linear_velocity|| * 10 + ||angular_velocity||)`` of actor ``i`` (StackCube's and PlaceSphere's
+    ``static_reward``)."""
+    return 1.0 - wp.tanh(wp.length(actor_lin_vel(s, e, i)) * 10.0 + wp.length(actor_ang_vel(s, e, i)))
 
 
 @wp.func

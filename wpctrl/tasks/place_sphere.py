@@ -17,16 +17,15 @@ import warp as wp
 from .definitions import Actor, Box, ObsField, Sphere
 from .funcs import (
     Sim,
-    actor_ang_vel,
-    actor_lin_vel,
     actor_pos,
     actor_pose7,
     actor_static,
     arm_static,
     flag,
+    gripper_opening,
     is_grasping,
-    qpos,
     set_actor_pose,
+    still_reward,
     tcp_pos,
     tcp_pose7,
     vec1,
@@ -46,10 +45,6 @@ BLOCK_HALF = (WALL_HALF, 2 * WALL_HALF + INNER_HALF, 2 * WALL_HALF + INNER_HALF)
 """``block_half_size``: the floor's half sizes as ManiSkill lists them (thickness first) [m]."""
 EDGE_HALF = (WALL_HALF, 2 * WALL_HALF + INNER_HALF, 2 * WALL_HALF)
 """``edge_block_half_size``: a wall's half sizes (thickness, length, height) [m]."""
-SPHERE_REGION = ((-0.1, -0.1), (-0.05, 0.1))
-"""``_initialize_episode``: ``xyz[..., 0] = rand * 0.05 - 0.1``, ``xyz[..., 1] = rand * 0.2 - 0.1`` [m]."""
-BIN_REGION = ((0.0, -0.1), (0.1, 0.1))
-"""``pos[:, 0] = rand * 0.1``, ``pos[:, 1] = rand * 0.2 - 0.1``; the bin's z is ``block_half_size[0]`` [m]."""
 ON_XY_TOL, ON_Z_TOL = 0.005, 0.005
 """``evaluate``: ``xy_flag = ||offset[:2]|| <= 0.005``,
 ``z_flag = |offset[2] - radius - block_half_size[0]| <= 0.005`` [m]."""
@@ -59,8 +54,6 @@ ROBOT_STATIC = 0.2
 """``compute_dense_reward``: ``agent.is_static(0.2)``, every arm joint slower than 0.2 rad/s."""
 UNGRASPED = 16.0
 """``ungrasp_reward[~is_obj_grasped] = 16.0``."""
-GRIPPER_WIDTH = 0.08
-"""``agent.robot.get_qlimits()[0, -1, 1] * 2`` [m]: twice the finger joints' upper limit."""
 MAX_REWARD = 13.0
 """``reward[info["success"]] = 13``; ``compute_normalized_dense_reward``: ``max_reward = 13.0``."""
 INFO_KEYS = ("is_obj_grasped", "is_obj_on_bin", "is_obj_static")
@@ -84,7 +77,8 @@ def bin_boxes() -> tuple[Box, ...]:
 
 @wp.func
 def place_sphere_initialize(s: Sim, e: int, rng: wp.uint32):
-    # ManiSkill draws the ball's x for every env, then its y, then the bin's x and y (four torch.rand calls)
+    # _initialize_episode: the ball's xyz[..., 0] = rand * 0.05 - 0.1, xyz[..., 1] = rand * 0.2 - 0.1, z = radius;
+    # the bin's pos[:, 0] = rand * 0.1, pos[:, 1] = rand * 0.2 - 0.1, z = block_half_size[0]; neither turned
     sx = wp.randf(rng) * 0.05 - 0.1
     sy = wp.randf(rng) * 0.2 - 0.1
     bx = wp.randf(rng) * 0.1
@@ -119,13 +113,11 @@ def place_sphere_dense_reward(s: Sim, e: int) -> float:
     if s.info[e, ON_BIN]:
         ungrasp = UNGRASPED
         if grasped:
-            ungrasp = (qpos(s, e, 7) + qpos(s, e, 8)) / GRIPPER_WIDTH
-        v = wp.length(actor_lin_vel(s, e, SPHERE))
-        av = wp.length(actor_ang_vel(s, e, SPHERE))
-        still = 0.0
+            ungrasp = gripper_opening(s, e)
+        arm_still = 0.0
         if arm_static(s, e, ROBOT_STATIC):
-            still = 1.0
-        r = 6.0 + (ungrasp + (1.0 - wp.tanh(v * 10.0 + av)) + still) / 3.0
+            arm_still = 1.0
+        r = 6.0 + (ungrasp + still_reward(s, e, SPHERE) + arm_still) / 3.0
     return r
 
 

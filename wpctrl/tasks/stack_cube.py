@@ -18,14 +18,13 @@ import warp as wp
 from .definitions import Actor, Box, ObsField
 from .funcs import (
     Sim,
-    actor_ang_vel,
-    actor_lin_vel,
     actor_pos,
     actor_pose7,
     actor_static,
+    gripper_opening,
     is_grasping,
-    qpos,
     set_actor_pose,
+    still_reward,
     tcp_pos,
     tcp_pose7,
     vec7,
@@ -53,9 +52,6 @@ ON_Z_TOL = 0.005
 """``evaluate``: ``z_flag = |offset[2] - 2 * half size| <= 0.005`` [m]."""
 STATIC_LIN, STATIC_ANG = 1.0e-2, 0.5
 """``evaluate``: ``cubeA.is_static(lin_thresh=1e-2, ang_thresh=0.5)`` [m/s, rad/s]."""
-GRIPPER_WIDTH = 0.08
-"""``compute_dense_reward``: ``agent.robot.get_qlimits()[0, -1, 1] * 2`` [m], twice the upper limit (0.04 m) of the
-Panda's ``panda_finger_joint2`` (``panda_v2.urdf``)."""
 INFO_KEYS = ("is_cubeA_grasped", "is_cubeA_on_cubeB", "is_cubeA_static")
 SUCCESS, GRASPED, ON_B, STATIC = 0, 1, 2, 3
 """Columns of ``sim.info``: ``success``, then :data:`INFO_KEYS` (``evaluate()``'s dict order)."""
@@ -125,10 +121,8 @@ def stack_cube_dense_reward(s: Sim, e: int) -> float:
     if s.info[e, ON_B]:
         ungrasp = 1.0
         if grasped:
-            ungrasp = (qpos(s, e, 7) + qpos(s, e, 8)) / GRIPPER_WIDTH
-        v = wp.length(actor_lin_vel(s, e, CUBE_A))
-        av = wp.length(actor_ang_vel(s, e, CUBE_A))
-        r = 6.0 + (ungrasp + (1.0 - wp.tanh(v * 10.0 + av))) / 2.0
+            ungrasp = gripper_opening(s, e)
+        r = 6.0 + (ungrasp + still_reward(s, e, CUBE_A)) / 2.0
     return r
 
 

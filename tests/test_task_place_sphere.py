@@ -296,6 +296,41 @@ def test_the_demos_succeed_when_an_impact_gives_nothing_back():
     assert np.mean(ok) >= 0.9 and np.median([e.cube_error[-1] for e in report.episodes]) <= 0.01, report.format()
 
 
+NEWTON_POLICY = Path(__file__).parent / "data" / "tasks" / "PlaceSphere-v1__pd_joint_delta_pos__newton_policy.json.gz"
+"""ManiSkill's run of a policy trained on Newton (``wpctrl evaluate --sim maniskill --record``: 20 episodes, seeds
+5000-5019; the policy is ``bench/results/h200/tasks_default_contacts/PlaceSphere-v1/policy.ts``). It never opens the
+gripper: on Newton the ball that its closed fingers press into the bin slips out of the grasp and counts as placed,
+on PhysX it stays in the fingers (docs/training.md)."""
+
+
+@pytest.fixture(scope="module")
+def newton_policy_replay():
+    return T.replay(str(NEWTON_POLICY))
+
+
+def test_a_newton_policys_maniskill_episodes_move_the_ball_as_physx_does(newton_policy_replay):
+    """Replayed open loop on Newton (default physics), ManiSkill's episodes of the Newton-trained policy keep the
+    ball's path: it ends within 2.5 cm of PhysX's in the median (measured 2026-11-28: 1.5 cm), and the success at
+    the end agrees in at least 18 of the 20 (measured 19; PhysX: 2 successes once, 1 at the end)."""
+    report = newton_policy_replay
+    assert len(report.episodes) == 20
+    assert sum(e.success_once_recorded for e in report.episodes) == 2
+    assert report.median_final_cube_error <= 0.025, report.format()
+    assert report.outcome_agreement >= 0.9, report.format()
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason=(
+        "measured 2026-11-28: success once agrees in 9 / 20 (Newton 11 successes, PhysX 2): a ball held in closed fingers "
+        "and pressed into the bin slips out of Newton's grasp (one finger loses the ball, is_obj_grasped drops) and stays "
+        "in PhysX's; stiff finger contacts 14 / 20, impratio 100 or finger torsion 9-10 / 20"
+    ),
+)
+def test_target_a_newton_policys_maniskill_episodes_succeed_where_physx_does(newton_policy_replay):
+    assert newton_policy_replay.once_agreement >= 0.9, newton_policy_replay.format()
+
+
 # -- side by side with the real ManiSkill (slow) -------------------------------------------------------------------
 
 

@@ -319,6 +319,28 @@ def test_a_newton_policys_maniskill_episodes_move_the_ball_as_physx_does(newton_
     assert report.outcome_agreement >= 0.9, report.format()
 
 
+def test_the_replay_report_names_the_flag_where_the_simulators_part(newton_policy_replay):
+    """The report carries every flag of the task both sides computed: ManiSkill's are the file's ``info`` (read here
+    directly), Newton's follow the ball. Where success once differs, the grasp flag parts first: it drops on Newton at
+    or before Newton's first success while PhysX still holds the ball (measured: 1-11 steps before, in all 10)."""
+    raw = json.loads(gzip.open(NEWTON_POLICY).read())["episodes"]
+    report = newton_policy_replay
+    assert set(report.flag_agreement) == {"is_obj_grasped", "is_obj_on_bin", "is_obj_static"}
+    parted = 0
+    for res, ep in zip(report.episodes, raw):
+        for name, rec in res.flags_recorded.items():
+            assert rec == [bool(f) for f in ep["info"][name][1:]], (res.seed, name)
+            assert len(res.flags[name]) == len(rec)
+        if res.success_once and not res.success_once_recorded:
+            first_success = res.success.index(True) + 1
+            step = res.first_parting["is_obj_grasped"]
+            assert step <= first_success, (res.seed, step, first_success)
+            assert res.flags_recorded["is_obj_grasped"][step - 1] and not res.flags["is_obj_grasped"][step - 1]
+            parted += 1
+    assert parted >= 1
+    assert "is_obj_grasped parts at step" in report.format()
+
+
 _NEWTON_POLICY_PARTS = (
     "measured 2026-11-28: success once agrees in 9 / 20 (Newton 11 successes, PhysX 2): a ball held in closed "
     "fingers and pressed into the bin slips out of Newton's grasp (one finger loses the ball, is_obj_grasped "

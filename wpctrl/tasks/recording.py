@@ -74,10 +74,6 @@ def _load(source) -> tuple:
     return data, where
 
 
-INFO_READ = ("success", "is_grasped")
-"""The per-step flags of ``info`` the replay reads (``success`` required), each t = 0 .. T."""
-
-
 def _checked(data, where: str) -> dict:
     """``data`` after the checks of :func:`load_episodes`; ``where`` prefixes the refusals. Every check of a
     recording is here, each refusal naming the field, the expected and the received value, before any env is built
@@ -184,15 +180,13 @@ def _actions(actions, name: str) -> np.ndarray:
 
 
 def _check_info(info, steps: int, name: str) -> None:
-    """The per-step flags the replay reads (:data:`INFO_READ`): ``success`` required, each ``steps + 1`` long
-    (t = 0 after the reset, then after every step), booleans."""
+    """``info``: ManiSkill's ``evaluate()`` flags (``success`` required, and whichever of the task's others were
+    recorded: ``is_grasped``, ``is_obj_on_bin``, ...), each ``steps + 1`` booleans (t = 0 after the reset, then after
+    every step)."""
     if not isinstance(info, dict) or "success" not in info:
         got = sorted(info) if isinstance(info, dict) else type(info).__name__
         raise ConfigError(f"{name} expected an object with 'success' (a flag per step), got {got}")
-    for key in INFO_READ:
-        if key not in info:
-            continue
-        flags = info[key]
+    for key, flags in info.items():
         if not isinstance(flags, list) or len(flags) != steps + 1:
             got = f"{len(flags)} entries" if isinstance(flags, list) else type(flags).__name__
             raise ConfigError(f"{name}.{key} expected n_steps + 1 = {steps + 1} flags (t = 0 after the reset, then "

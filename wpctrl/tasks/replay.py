@@ -47,13 +47,30 @@ class EpisodeResult:
     report's ``main_object``)."""
     success_at_end_recorded: bool
     success_at_end: bool
-    is_grasped_recorded: list[bool] | None = None
-    """PickCube: ManiSkill's ``info["is_grasped"]`` after each step."""
-    is_grasped: list[bool] | None = None
+    flags_recorded: dict[str, list[bool]] = field(default_factory=dict)
+    """ManiSkill's other ``evaluate()`` flags after each step (t = 1 .. T): those of the task's ``info_keys`` the
+    recording holds (PickCube's ``is_grasped``, PlaceSphere's ``is_obj_grasped``, ``is_obj_on_bin``, ...)."""
+    flags: dict[str, list[bool]] = field(default_factory=dict)
+    """Newton's, the same flags after each step."""
 
     @property
     def agrees(self) -> bool:
         return self.success_at_end == self.success_at_end_recorded
+
+    def flag_agreement(self, name: str) -> float:
+        """Fraction of the steps at which Newton's flag ``name`` is ManiSkill's."""
+        return float(np.mean(np.asarray(self.flags[name]) == np.asarray(self.flags_recorded[name])))
+
+    @property
+    def first_parting(self) -> dict[str, int]:
+        """Per flag that ever differs, the first step (1 .. T) at which Newton's is not ManiSkill's: where to look
+        when the outcomes differ."""
+        out = {}
+        for name, rec in self.flags_recorded.items():
+            step = next((t + 1 for t, (a, b) in enumerate(zip(self.flags[name], rec)) if a != b), None)
+            if step is not None:
+                out[name] = step
+        return out
 
     @property
     def success_once(self) -> bool:
@@ -97,6 +114,14 @@ class ReplayReport:
         return float(np.mean(same)) if same else float("nan")
 
     @property
+    def flag_agreement(self) -> dict[str, float]:
+        """Per recorded flag (:attr:`EpisodeResult.flags`), the fraction of all episodes' steps at which Newton's
+        agrees with ManiSkill's."""
+        names = self.episodes[0].flags if self.episodes else {}
+        return {k: float(np.mean(np.concatenate([np.asarray(e.flags[k]) == np.asarray(e.flags_recorded[k])
+                                                 for e in self.episodes]))) for k in names}  # fmt: skip
+
+    @property
     def median_final_cube_error(self) -> float:
         return float(np.median([e.final_cube_error for e in self.episodes])) if self.episodes else float("nan")
 
@@ -111,6 +136,7 @@ class ReplayReport:
             "once_agreement": self.once_agreement,
             "median_final_cube_error_m": self.median_final_cube_error,
             "max_final_cube_error_m": max((e.final_cube_error for e in self.episodes), default=float("nan")),
+            "flag_agreement": self.flag_agreement,
         }
 
     def to_json(self) -> dict:
@@ -127,6 +153,7 @@ class ReplayReport:
                 f"first success step {first} ({first_rec}), {self.main_object} error final "
                 f"{100 * e.final_cube_error:.2f} cm, "
                 f"max {100 * max(e.cube_error):.2f} cm"
+                + "".join(f", {k} parts at step {t}" for k, t in e.first_parting.items())
             )
         s = self.summary()
         lines.append(
@@ -134,6 +161,7 @@ class ReplayReport:
             f"same outcome: {100 * s['outcome_agreement']:.0f} % (success once: {100 * s['once_agreement']:.0f} %); "
             f"median final {self.main_object} error "
             f"{100 * s['median_final_cube_error_m']:.2f} cm"
+            + "".join(f"; {k} agrees at {100 * v:.0f} % of steps" for k, v in s["flag_agreement"].items())
         )
         return "\n".join(lines)
 
@@ -210,7 +238,9 @@ def replay(source, device="cpu", physics=None, asset_dir: str | None = None, env
                          np.float32)  # fmt: skip
     recorded = [np.asarray(main_poses(ep, main), np.float64)[:, :3] for ep in episodes]  # (T_i + 1, 3) each
     success = np.zeros((n, steps), bool)
-    grasped = np.zeros((n, steps), bool)
+    # the task's other flags that every episode recorded, read from Newton at every step as well
+    names = [k for k in env.info_keys if k != "success" and all(k in ep["info"] for ep in episodes)]
+    flags = {k: np.zeros((n, steps), bool) for k in names}
     position = np.zeros((n, steps, 3))
     obs = env.get_obs() if policy is not None else None
     for t in range(steps):
@@ -221,8 +251,8 @@ def replay(source, device="cpu", physics=None, asset_dir: str | None = None, env
                 action = policy(obs.to(torch.float32))
         obs, _, _, _, info = env.step(action)
         success[:, t] = info["success"].cpu().numpy()
-        if "is_grasped" in info:
-            grasped[:, t] = info["is_grasped"].cpu().numpy()
+        for k in names:
+            flags[k][:, t] = info[k].cpu().numpy()
         position[:, t] = env.get_state_dict()["actors"][main][:, :3].cpu().numpy()
         if progress is not None:
             progress.update(1)
@@ -239,10 +269,8 @@ def replay(source, device="cpu", physics=None, asset_dir: str | None = None, env
                 cube_error=error.tolist(),
                 success_at_end_recorded=bool(ep.get("success_at_end", rec[-1])),
                 success_at_end=bool(success[i, k - 1]),
-                is_grasped_recorded=[bool(g) for g in ep["info"]["is_grasped"][1:]]
-                if "is_grasped" in ep["info"]
-                else None,
-                is_grasped=grasped[i, :k].tolist() if "is_grasped" in ep["info"] else None,
+                flags_recorded={f: [bool(g) for g in ep["info"][f][1:]] for f in names},
+                flags={f: flags[f][i, :k].tolist() for f in names},
             )
         )
     return report

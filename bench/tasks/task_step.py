@@ -48,6 +48,13 @@ def _capture(fn, device):
     return cap.graph
 
 
+def _contacts(env) -> dict:
+    """MuJoCo-Warp's contacts and constraint rows (all worlds) of the last step timed: the physics' cost follows
+    them, so the env step and its bare physics are compared on the same load."""
+    d = env.solver.mjw_data
+    return {"contacts": int(d.nacon.numpy().sum()), "constraint_rows": int(d.nefc.numpy().sum())}
+
+
 def bench_one(task: str, n: int, device, substeps: int, control_mode: str) -> dict:
     import wpctrl.tasks as T
 
@@ -67,8 +74,11 @@ def bench_one(task: str, n: int, device, substeps: int, control_mode: str) -> di
     env.reset(seed=0)
     row = {"task": task, "envs": n, "substeps": substeps, "control_mode": control_mode}
     row["env step"] = measure(lambda: env.step(action), sync)["median_s"]
+    row["contacts"] = {"env step": _contacts(env)}
     for name, g in graphs.items():
         row[name] = measure(lambda g=g: wp.capture_launch(g), sync)["median_s"]
+        if name == "physics":
+            row["contacts"]["physics"] = _contacts(env)
     row["env_steps_per_s"] = n / row["env step"]
     row["physics_steps_per_s"] = n / row["physics"]
     row["controller_share"] = row["controller"] / row["env step"]
@@ -77,17 +87,25 @@ def bench_one(task: str, n: int, device, substeps: int, control_mode: str) -> di
     return row
 
 
+def _load(row: dict) -> str:
+    c = row.get("contacts", {})
+    loads = (c.get("env step"), c.get("physics"))
+    return "; ".join(f"{v['contacts']:,} / {v['constraint_rows']:,}" for v in loads if v)
+
+
 def render(meta: dict, rows: list[dict]) -> str:
     header = ["task", "envs", "substeps", "env step [µs]", "env-steps/s", "physics [µs]", "env / physics",
-              "controller [µs] (share)", "task kernels [µs] (share)"]  # fmt: skip
+              "controller [µs] (share)", "task kernels [µs] (share)",
+              "contacts / rows (env step; physics)"]  # fmt: skip
     body = [[r["task"], fmt_envs(r["envs"]), r["substeps"], fmt_us(r["env step"]), f"{r['env_steps_per_s']:,.0f}",
              fmt_us(r["physics"]), f"{r['vs_physics'] * 100:.1f} %",
              f"{fmt_us(r['controller'])} ({100 * r['controller_share']:.2f} %)",
-             f"{fmt_us(r['task kernels'])} ({100 * r['task_share']:.2f} %)"] for r in rows]  # fmt: skip
+             f"{fmt_us(r['task kernels'])} ({100 * r['task_share']:.2f} %)", _load(r)] for r in rows]  # fmt: skip
     return (
         "# Task env step vs the bare MuJoCo-Warp step\n\n" + meta_markdown(meta) + "\n\n" + md_table(header, body)
         + "\n`env / physics`: the bare physics' share of the whole env step (the rest is the controller, the task "
-        "kernels, the action copy and the output tensors).\n"
+        "kernels, the action copy and the output tensors). `contacts / rows`: MuJoCo-Warp's contacts and constraint "
+        "rows over all worlds after the last timed env step and after the last timed bare physics step.\n"
     )  # fmt: skip
 
 

@@ -67,3 +67,46 @@ def maniskill_demo_states(ms, episodes: list, every: int) -> list:
             ms.step(torch.tensor([action]))
         out.append(base.get_state_dict())
     return out
+
+
+def check_same_state_flags_and_rewards(ms, nw, states: list, flags: tuple[str, str, str], max_reward: float) -> dict:
+    """Each of ManiSkill's ``states`` loaded into the real env ``ms`` and the Newton env ``nw`` (one env), for a task
+    whose success is ``placed and static and not grasped`` (``flags``: the grasped, placed and static names). With the
+    grasp set either way (ManiSkill: in the info it is given; Newton: the fingers' contact forces written along /
+    against their opening directions): the flags and success as ManiSkill's ``evaluate()`` gives them, the dense and
+    normalized reward as its ``compute_dense_reward`` within 1e-5, and, where the grasp is ManiSkill's own, the
+    observation within 1e-5. Then the state dict round trip. Returns how many states were placed and how many checks
+    succeeded."""
+    import pytest
+    import torch
+
+    grasped, placed, static = flags
+    base = ms.unwrapped
+    seen = {"on": 0, "success": 0}
+    for state in states:
+        base.set_state_dict(state)
+        info = base.evaluate()
+        obs = base.get_obs(info)[0].numpy()
+        nw.set_state_dict(state)
+        axes = finger_axes(nw)
+        for grasp in (False, True):
+            write_finger_forces(nw, 2.0 * axes if grasp else -2.0 * axes)
+            ev = nw.evaluate()
+            theirs = dict(info)
+            theirs[grasped] = torch.tensor([grasp])
+            theirs["success"] = info[placed] & info[static] & ~theirs[grasped]
+            for k in ("success", grasped, placed, static):
+                assert bool(ev[k][0]) == bool(theirs[k][0]), k
+            dense = base.compute_dense_reward(obs=None, action=None, info=theirs)[0].item()
+            normalized = base.compute_normalized_dense_reward(obs=None, action=None, info=theirs)[0].item()
+            assert nw.reward_dense.numpy()[0] == pytest.approx(dense, abs=1e-5)
+            assert nw.reward_dense.numpy()[0] / max_reward == pytest.approx(normalized, abs=1e-5)
+            if grasp == bool(info[grasped][0]):
+                np.testing.assert_allclose(nw.get_obs()[0].numpy(), obs, atol=1e-5)
+            seen["success"] += bool(ev["success"][0])
+        seen["on"] += bool(info[placed][0])
+        back = nw.get_state_dict()
+        for group in ("actors", "articulations"):
+            for k, v in state[group].items():
+                torch.testing.assert_close(back[group][k], v, rtol=0, atol=2e-7)
+    return seen

@@ -25,7 +25,14 @@ torch = pytest.importorskip("torch")
 scipy_stats = pytest.importorskip("scipy.stats")
 
 
-from task_probes import finger_axes, grasp_forces, maniskill_demo_states, ref_is_grasping, write_finger_forces  # noqa: E402
+from task_probes import (  # noqa: E402
+    check_same_state_flags_and_rewards,
+    finger_axes,
+    grasp_forces,
+    maniskill_demo_states,
+    ref_is_grasping,
+    write_finger_forces,
+)
 
 import wpctrl  # noqa: E402
 import wpctrl.tasks as T  # noqa: E402
@@ -317,34 +324,9 @@ def test_same_state_gives_maniskills_obs_flags_and_rewards(maniskill):
     fingers' contact forces on cube A written along / against their opening directions). The state dict round trip."""
     eps = _demos()["episodes"][:2]
     states = maniskill_demo_states(maniskill, eps, every=4)
-    base = maniskill.unwrapped
     nw = T.make(ENV_ID, num_envs=1, control_mode="pd_joint_pos", physics=FAST, auto_reset=False)
-    seen = {"on": 0, "success": 0}
-    for state in states:
-        base.set_state_dict(state)
-        info = base.evaluate()
-        obs = base.get_obs(info)[0].numpy()
-        nw.set_state_dict(state)
-        np.testing.assert_allclose(nw.get_obs()[0].numpy(), obs, atol=1e-5)
-        axes = finger_axes(nw)
-        for grasp in (False, True):
-            write_finger_forces(nw, 2.0 * axes if grasp else -2.0 * axes)
-            ev = nw.evaluate()
-            theirs = dict(info)
-            theirs["is_cubeA_grasped"] = torch.tensor([grasp])
-            theirs["success"] = info["is_cubeA_on_cubeB"] & info["is_cubeA_static"] & ~theirs["is_cubeA_grasped"]
-            for k in ("success", "is_cubeA_grasped", "is_cubeA_on_cubeB", "is_cubeA_static"):
-                assert bool(ev[k][0]) == bool(theirs[k][0]), k
-            dense = base.compute_dense_reward(obs=None, action=None, info=theirs)[0].item()
-            normalized = base.compute_normalized_dense_reward(obs=None, action=None, info=theirs)[0].item()
-            assert nw.reward_dense.numpy()[0] == pytest.approx(dense, abs=1e-5)
-            assert nw.reward_dense.numpy()[0] / 8.0 == pytest.approx(normalized, abs=1e-5)
-            seen["success"] += bool(ev["success"][0])
-        seen["on"] += bool(info["is_cubeA_on_cubeB"][0])
-        back = nw.get_state_dict()
-        for group in ("actors", "articulations"):
-            for k, v in state[group].items():
-                torch.testing.assert_close(back[group][k], v, rtol=0, atol=2e-7)
+    flags = ("is_cubeA_grasped", "is_cubeA_on_cubeB", "is_cubeA_static")
+    seen = check_same_state_flags_and_rewards(maniskill, nw, states, flags, 8.0)
     assert seen["on"] >= 4 and seen["success"] >= 2, seen  # the demos' stacked states are among them
 
 

@@ -57,20 +57,20 @@ class EpisodeResult:
     def agrees(self) -> bool:
         return self.success_at_end == self.success_at_end_recorded
 
+    def flag_matches(self, name: str) -> np.ndarray:
+        """(T,) whether Newton's flag ``name`` is ManiSkill's after each step."""
+        return np.asarray(self.flags[name]) == np.asarray(self.flags_recorded[name])
+
     def flag_agreement(self, name: str) -> float:
         """Fraction of the steps at which Newton's flag ``name`` is ManiSkill's."""
-        return float(np.mean(np.asarray(self.flags[name]) == np.asarray(self.flags_recorded[name])))
+        return float(self.flag_matches(name).mean())
 
     @property
     def first_parting(self) -> dict[str, int]:
         """Per flag that ever differs, the first step (1 .. T) at which Newton's is not ManiSkill's: where to look
         when the outcomes differ."""
-        out = {}
-        for name, rec in self.flags_recorded.items():
-            step = next((t + 1 for t, (a, b) in enumerate(zip(self.flags[name], rec)) if a != b), None)
-            if step is not None:
-                out[name] = step
-        return out
+        parted = {name: np.flatnonzero(~self.flag_matches(name)) for name in self.flags_recorded}
+        return {name: int(steps[0]) + 1 for name, steps in parted.items() if steps.size}
 
     @property
     def success_once(self) -> bool:
@@ -118,8 +118,7 @@ class ReplayReport:
         """Per recorded flag (:attr:`EpisodeResult.flags`), the fraction of all episodes' steps at which Newton's
         agrees with ManiSkill's."""
         names = self.episodes[0].flags if self.episodes else {}
-        return {k: float(np.mean(np.concatenate([np.asarray(e.flags[k]) == np.asarray(e.flags_recorded[k])
-                                                 for e in self.episodes]))) for k in names}  # fmt: skip
+        return {k: float(np.concatenate([e.flag_matches(k) for e in self.episodes]).mean()) for k in names}
 
     @property
     def median_final_cube_error(self) -> float:

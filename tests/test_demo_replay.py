@@ -142,13 +142,10 @@ def assert_demo_replays(path: Path):
     return report
 
 
-# With the default physics two tasks' demos miss their goals (measured in docs/tasks.md and the tasks' own tests):
-# Newton's fingers grip a peg otherwise than PhysX's (PegInsertionSide's peg slides and turns in the grasp while
-# carried), and MuJoCo's contacts hand part of an impact back where PhysX's restitution is 0 (PlaceSphere's ball rolls
-# off its landing in the bin and comes to rest after the demo's end).
+# With its task's physics one task's demos miss their goals (measured in docs/tasks.md and the task's own tests):
+# MuJoCo's contacts hand part of an impact back where PhysX's restitution is 0 (PlaceSphere's ball rolls off its
+# landing in the bin and comes to rest after the demo's end).
 _DEFAULT_PHYSICS_MISSES = {
-    "PegInsertionSide-v1": "the peg slides and turns in the grasp while carried (PhysX holds it to 0.1 mm) and misses "
-    "the hole's 3 mm clearance (TaskPhysics.finger_torsion: 3 / 4, tests/test_task_peg_insertion_side.py)",
     "PlaceSphere-v1": "the ball lands in the bin at PhysX's step (0.3 cm off) but rolls off its landing and rests 4-10 "
     "steps after PhysX's, past the demo's end (overdamped contacts: 4 / 4, tests/test_task_place_sphere.py)",
 }

@@ -102,6 +102,28 @@ def test_task_physics_refuses_values_outside_their_range(field, value):
     T.TaskPhysics()  # the defaults are valid
 
 
+def test_a_tasks_physics_refuses_unknown_tasks_fields_and_values_naming_them(monkeypatch):
+    """``task_physics`` names an unknown task (with the known ones), an unknown field, a bad value; a task declaring
+    physics that TaskPhysics refuses is refused at registration, naming the task and the field."""
+    from wpctrl.tasks import registry
+    from wpctrl.tasks.push_cube import PushCube
+
+    with pytest.raises(wpctrl.ConfigError, match=r"'PlugCharger-v1'.*known ones"):
+        T.task_physics("PlugCharger-v1")
+    with pytest.raises(wpctrl.ConfigError, match=r"\['finger_twist'\] are not TaskPhysics fields"):
+        T.task_physics("PushCube-v1", finger_twist=0.1)
+    with pytest.raises(wpctrl.ConfigError, match="TaskPhysics.substeps"):
+        T.task_physics("PegInsertionSide-v1", substeps=0)
+    monkeypatch.setattr(registry, "_REGISTERED", dict(registry._REGISTERED))
+    for physics, match in (({"finger_twist": 0.1}, r"task Twisted-test: physics: \['finger_twist'\]"),
+                           ({"finger_torsion": -1.0}, r"task Twisted-test: physics: TaskPhysics.finger_torsion"),
+                           ([("substeps", 8)], r"task Twisted-test: physics expected a mapping")):  # fmt: skip
+        twisted = type("Twisted", (PushCube,), {"physics": physics})
+        with pytest.raises(wpctrl.ConfigError, match=match):
+            T.register_task("Twisted-test", max_episode_steps=5)(twisted)
+    assert "Twisted-test" not in T.TASKS
+
+
 INSIDE = dict(substeps=1, integrator="implicit", cone="pyramidal", impratio=1.0, iterations=1, ls_iterations=1,
               contact_solref=(1e-4, 1e-3), contact_solimp=(0.5, 0.5, 1e-4), limit_solref=(1e-4, 1e-3),
               limit_solimp=(0.5, 0.5, 1e-4), friction_combine="max", contact_gap=0.0, finger_torsion=1e-4,

@@ -16,7 +16,7 @@ extra, or ``asset_dir`` / ``WPCTRL_MANISKILL_ASSETS``).
 
 from __future__ import annotations
 
-from .factory import CONTROL_MODES, OBS_MODES, make
+from .factory import CONTROL_MODES, OBS_MODES, make, task_physics
 from .physics import TaskPhysics
 from .randomization import TaskRandomization
 from .recording import load_episodes
@@ -41,6 +41,7 @@ __all__ = [
     "make",
     "register_task",
     "replay",
+    "task_physics",
 ]
 
 _BUILT_IN = {"PUSH_CUBE": "PushCube-v1", "PICK_CUBE": "PickCube-v1"}

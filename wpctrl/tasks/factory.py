@@ -4,13 +4,29 @@ from __future__ import annotations
 
 from ..config import ConfigError
 from .names import CONTROL_MODES, OBS_MODES
-from .physics import TaskPhysics
+from .physics import TaskPhysics, physics_fields
 from .randomization import TaskRandomization
 from .registry import TASKS, unknown_task
 
 SIM_BACKENDS = ("mujoco",)
 CONTROLLER_SEMANTICS = ("physx_cpu", "physx_cuda")
-__all__ = ["CONTROLLER_SEMANTICS", "CONTROL_MODES", "OBS_MODES", "SIM_BACKENDS", "make"]
+__all__ = ["CONTROLLER_SEMANTICS", "CONTROL_MODES", "OBS_MODES", "SIM_BACKENDS", "make", "task_physics"]
+
+
+def task_physics(env_id: str, **changes) -> TaskPhysics:
+    """The physics a task's env runs with by default: :class:`TaskPhysics`'s defaults with the task's own departures
+    (:attr:`Task.physics <wpctrl.tasks.Task.physics>`: PegInsertionSide-v1's fingers, for one), then ``changes``
+    (TaskPhysics fields, e.g. ``substeps=8``). ``make(env_id, physics=None)`` uses ``task_physics(env_id)``.
+
+    An unknown task id is refused with the known ones; an unknown field or a bad value names the field."""
+    if env_id not in TASKS:
+        raise ConfigError(f"task_physics: env_id: {unknown_task(env_id)}")
+    settings = {**TASKS[env_id].physics, **changes}
+    unknown = sorted(set(changes) - set(physics_fields()))
+    if unknown:
+        raise ConfigError(f"task_physics: {unknown} are not TaskPhysics fields (expected some of "
+                          f"{list(physics_fields())})")  # fmt: skip
+    return TaskPhysics(**settings)
 
 
 def make(
@@ -50,7 +66,9 @@ def make(
             (:meth:`~wpctrl.tasks.env.TaskEnv.reset` takes a new one, or a list of one per env).
         auto_reset: Reset finished envs inside ``step`` (``ManiSkillVectorEnv``'s switch).
         ignore_terminations: Episodes end only at the time limit (success does not terminate).
-        physics: Contact, friction and joint-limit settings (:class:`TaskPhysics`).
+        physics: Contact, friction and joint-limit settings (:class:`TaskPhysics`; None: the task's own,
+            :func:`task_physics`). A ``TaskPhysics`` given here is used as it is: ``task_physics(env_id, substeps=8)``
+            keeps the task's departures and changes one field.
         controller_semantics: Which ManiSkill sim's controller semantics the end-effector modes follow:
             ``"physx_cpu"`` (SAPIEN's iterative CLIK, as ManiSkill on its CPU sim) or ``"physx_cuda"`` (one damped
             least-squares step, as ManiSkill's GPU sim). Joint modes are the same on both.
@@ -100,7 +118,7 @@ def make(
         raise ConfigError(f"make: reconfiguration_freq expected an int >= 0 (or None: the task's default), got "
                           f"{reconfiguration_freq!r}")  # fmt: skip
     if physics is None:
-        physics = TaskPhysics()
+        physics = task_physics(env_id)
     elif not isinstance(physics, TaskPhysics):
         raise ConfigError(f"make: physics expected a TaskPhysics, got {type(physics).__name__}")
     if randomization is not None and not isinstance(randomization, TaskRandomization):

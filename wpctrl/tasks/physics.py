@@ -38,8 +38,8 @@ differ where a task touches them. What :class:`TaskPhysics` sets, and why:
 - **Finger torsion** (``finger_torsion``, off by default): PhysX's patch friction on the fingers (ManiSkill's
   ``patch_radius`` 0.1 m) also resists a twist about the contact normal, which MuJoCo's condim-3 contacts do not;
   ``finger_torsion`` > 0 gives the finger shapes condim 4 and that torsional coefficient. PegInsertionSide's demos need
-  it (3 / 4 insert with 0.05 m, 1.25 ms contacts and stiff finger contacts, 0 / 4 without); LiftPegUpright's need the
-  peg to turn in the fingers and replay further off with it.
+  it, and its task's physics has it (0.1 m with 2.5 ms contacts and stiff finger contacts: 4 / 4 insert, 0 / 4 with
+  these defaults); LiftPegUpright's need the peg to turn in the fingers and replay further off with it.
 - **Friction**: PhysX averages, MuJoCo takes the larger coefficient. With the scene's two materials (default 0.3,
   the Panda's finger pads 2.0), giving the finger shapes the average (1.15) reproduces every pair: finger-cube and
   finger-table 1.15, everything else 0.3 (:func:`mujoco_friction`).
@@ -57,7 +57,7 @@ from dataclasses import dataclass, fields
 
 from ..config import ConfigError
 
-__all__ = ["TaskPhysics", "mujoco_friction"]
+__all__ = ["TaskPhysics", "mujoco_friction", "physics_fields"]
 
 _INTEGRATORS = ("discrete", "implicitfast", "implicit", "euler")
 _CONES = ("elliptic", "pyramidal")
@@ -68,7 +68,11 @@ its ``mjMINMU`` (1e-5, compared after Newton's float32) may give NaN."""
 
 @dataclass(frozen=True)
 class TaskPhysics:
-    """MuJoCo-Warp settings of a task's scene (see the module docstring for what each one reproduces)."""
+    """MuJoCo-Warp settings of a task's scene (see the module docstring for what each one reproduces).
+
+    ``TaskPhysics()`` is the common default. A task may depart from it where its contacts need other settings
+    (``Task.physics``: PegInsertionSide-v1's grip); ``wpctrl.tasks.task_physics(env_id, **changes)`` is a task's own,
+    and what ``make`` uses when given no physics."""
 
     substeps: int = 16
     """MuJoCo-Warp steps per physics step (the physics step is ManiSkill's 1 / ``sim_freq`` = 10 ms)."""
@@ -101,11 +105,11 @@ class TaskPhysics:
     the finger shapes get MuJoCo's ``condim`` 4 (friction about the contact normal too) and this coefficient, every
     other shape a torsional coefficient of 0, so every finger contact resists a twist about its normal with up to this
     coefficient times its normal force. It stands in for PhysX's torsional patch friction on ManiSkill's finger
-    material (``patch_radius`` / ``min_patch_radius`` 0.1 m), which MuJoCo's elliptic cone lacks: with 0.05 (and
-    ``contact_solref=(0.00125, 1.0)``, ``finger_solimp=None``) PegInsertionSide's demos replay 3 / 4, the peg 0.3 cm
-    from PhysX's in the median, where they replay 0 / 4 without. It is not the default: LiftPegUpright's demos need the
-    peg to turn in the fingers, and with it they replay 0 / 4 instead of 4 / 4 (``docs/tasks.md``). Values between 0
-    and 1e-4 are refused (MuJoCo warns of NaN under 1e-5)."""
+    material (``patch_radius`` / ``min_patch_radius`` 0.1 m), which MuJoCo's elliptic cone lacks. PegInsertionSide's
+    physics sets 0.1 (with ``contact_solref=(0.0025, 1.0)``, ``finger_solimp=None``: its demos replay 4 / 4, 0 / 4
+    without). It is not the default: LiftPegUpright's demos need the peg to turn in the fingers, and with it they
+    replay 0 / 4 instead of 4 / 4 (``docs/tasks.md``). Values between 0 and 1e-4 are refused (MuJoCo warns of NaN
+    under 1e-5)."""
 
     finger_solimp: tuple[float, float, float] | None = (0.7, 0.7, 0.001)
     """MuJoCo ``solimp`` (dmin, dmax, width [m]) of the Panda's finger shapes; None gives them ``contact_solimp``.
@@ -175,6 +179,11 @@ class TaskPhysics:
 
     def as_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+def physics_fields() -> tuple[str, ...]:
+    """The names of :class:`TaskPhysics`'s fields."""
+    return tuple(f.name for f in fields(TaskPhysics))
 
 
 def mujoco_friction(materials: dict[str, float], rule: str = "average") -> dict[str, float]:

@@ -15,12 +15,14 @@ from __future__ import annotations
 
 import importlib
 from collections.abc import Iterator, Mapping
+from types import MappingProxyType
 
 import numpy as np
 
 from ..config import ConfigError
 from .definitions import PANDA_DOF, PANDA_REST_QPOS, Actor, Box, Marker, ObsField
 from .names import TASK_MODULES
+from .physics import TaskPhysics, physics_fields
 
 __all__ = ["TASKS", "Task", "get_task", "register_task"]
 
@@ -56,6 +58,10 @@ class Task:
     rest_qpos: tuple[float, ...] = PANDA_REST_QPOS
     """The Panda's qpos before the initialisation noise (``TableSceneBuilder.initialize``'s, unless the task's
     ``_initialize_episode`` sets its own)."""
+    physics: Mapping[str, object] = MappingProxyType({})
+    """Where the task's contacts need MuJoCo settings other than :class:`~wpctrl.tasks.TaskPhysics`'s defaults:
+    field -> value. The task's default physics (:func:`wpctrl.tasks.task_physics`) is ``TaskPhysics(**physics)``;
+    empty for most tasks. The task module says why, measured beside PhysX."""
 
     # -- a scene drawn from the seed (ManiSkill's ``_load_scene`` with ``_batched_episode_rng``) ----------------------
     episode_params: tuple[str, ...] = ()
@@ -150,6 +156,16 @@ def _check(cls: type[Task]) -> None:
     for f in cls.obs_extra:
         if f.func is None:
             raise ConfigError(f"{where}: observation field {f.group}/{f.name} has no device function")
+    if not isinstance(cls.physics, Mapping):
+        raise ConfigError(f"{where}: physics expected a mapping of TaskPhysics fields to values, got {cls.physics!r}")
+    unknown = sorted(set(cls.physics) - set(physics_fields()))
+    if unknown:
+        raise ConfigError(f"{where}: physics: {unknown} are not TaskPhysics fields (expected some of "
+                          f"{list(physics_fields())})")  # fmt: skip
+    try:
+        TaskPhysics(**cls.physics)
+    except ConfigError as e:
+        raise ConfigError(f"{where}: physics: {e}") from e
 
 
 class _Registry(Mapping):

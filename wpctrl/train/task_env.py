@@ -35,7 +35,7 @@ class TaskVecEnv(VecEnv):
         reward_mode: ManiSkill's reward mode (``normalized_dense`` for PPO).
         seed: Seed of the episode draws.
         partial_reset: Success ends an episode (ManiSkill's PPO default); False: episodes end only at the time limit.
-        substeps: MuJoCo-Warp steps per physics step (None: :class:`~wpctrl.tasks.TaskPhysics`'s default).
+        substeps: MuJoCo-Warp steps per physics step (None: the task's physics' own, :func:`wpctrl.tasks.task_physics`).
         graph: Capture the env step in a graph (default: True).
         hide_obs: Observation entries the policy and critic see as zeros (:mod:`wpctrl.train.hidden_inputs`:
             ``"finger_qvel"``, ``"none"``; None: the default, ``"finger_qvel"``).
@@ -64,7 +64,7 @@ class TaskVecEnv(VecEnv):
         from .actor import HiddenInputs
         from .hidden_inputs import DEFAULT_HIDE_OBS, hidden_columns
 
-        physics = T.TaskPhysics() if substeps is None else T.TaskPhysics(substeps=substeps)
+        physics = T.task_physics(task, **({} if substeps is None else {"substeps": substeps}))
         self.env = T.make(task, num_envs=num_envs, device=device, control_mode=control_mode, obs_mode="state",
                           reward_mode=reward_mode, seed=seed, auto_reset=True,
                           ignore_terminations=not partial_reset, physics=physics, asset_dir=asset_dir,
@@ -76,6 +76,8 @@ class TaskVecEnv(VecEnv):
         self.max_episode_length = int(self.env.max_episode_steps)
         self.device = self.env.device
         self.partial_reset = bool(partial_reset)
+        self.physics = physics
+        """The env's :class:`~wpctrl.tasks.TaskPhysics`: the task's own (:func:`wpctrl.tasks.task_physics`)."""
         self.substeps = physics.substeps
         self.hide_obs = hide_obs or DEFAULT_HIDE_OBS
         self.hidden_columns = hidden_columns(task, self.hide_obs)

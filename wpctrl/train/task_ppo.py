@@ -169,7 +169,7 @@ class ManiSkillTraining:
                               hide_obs=c.hide_obs, randomize=c.randomize)  # fmt: skip
         self.eval_env = T.make(c.task, num_envs=c.eval_envs, device=c.device, control_mode=c.control_mode,
                                seed=c.seed + EVAL_SEED, auto_reset=False, ignore_terminations=True,
-                               physics=T.TaskPhysics(substeps=self.env.substeps), graph=graph)  # fmt: skip
+                               physics=self.env.physics, graph=graph)  # fmt: skip
 
     def ppo_cfg(self) -> dict:
         c = self.cfg

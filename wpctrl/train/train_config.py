@@ -144,8 +144,10 @@ class TrainConfig:
             return f"{name('target_success')}: needs {name('eval_every')} N (the evaluations that decide when to stop)"
         if self.randomize is not None:
             from ..config import ConfigError
+            from ..tasks.factory import task_physics
             from ..tasks.physics import TaskPhysics
             from ..tasks.randomization import from_spec
+            from ..tasks.registry import TASKS
 
             if not isinstance(self.randomize, str):
                 return f"{name('randomize')}: expected 'off', 'on' or name=low:high,..., got {self.randomize!r}"
@@ -153,7 +155,8 @@ class TrainConfig:
                 spec = from_spec(self.randomize)
             except ConfigError as e:
                 return f"{name('randomize')}: {str(e).removeprefix('randomize: ')}"
-            physics = TaskPhysics() if self.substeps is None else TaskPhysics(substeps=self.substeps)
+            steps = {} if self.substeps is None else {"substeps": self.substeps}
+            physics = task_physics(self.task, **steps) if self.task in TASKS else TaskPhysics(**steps)
             shortest = min(physics.contact_solref[0], (physics.finger_solref or physics.contact_solref)[0])
             if spec is not None and (why := spec.contact_time_problem(shortest, 0.01 / physics.substeps)):
                 return f"{name('randomize')}: {why} (with {name('substeps')} {physics.substeps})"

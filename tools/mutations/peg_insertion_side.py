@@ -4,8 +4,33 @@
 from .model import M
 
 _TESTS = ("tests/test_task_peg_insertion_side.py",)
+_PHYSICS = ("tests/test_tasks.py", "tests/test_task_peg_insertion_side.py")
 
 MUTATIONS = [
+    M(
+        "task_physics_ignored_by_make",
+        "wpctrl/tasks/factory.py",
+        "        physics = task_physics(env_id)\n",
+        "        physics = TaskPhysics()\n",
+        "make without physics runs the common defaults, not the task's own (PegInsertionSide's grip lost)",
+        _PHYSICS,
+    ),
+    M(
+        "task_physics_changes_drop_the_tasks",
+        "wpctrl/tasks/factory.py",
+        "    settings = {**TASKS[env_id].physics, **changes}\n",
+        "    settings = dict(changes)\n",
+        "task_physics(env_id, substeps=8) forgets the task's departures (training at 8 substeps loses the grip)",
+        _PHYSICS,
+    ),
+    M(
+        "task_physics_unchecked_at_registration",
+        "wpctrl/tasks/registry.py",
+        "    unknown = sorted(set(cls.physics) - set(physics_fields()))\n    if unknown:\n",
+        "    unknown = sorted(set(cls.physics) - set(physics_fields()))\n    if False:\n",
+        "a task declaring a field TaskPhysics does not have is registered (and fails only when built)",
+        _PHYSICS,
+    ),
     M(
         "peg_insertion_depth",
         "wpctrl/tasks/peg_insertion_side.py",

@@ -38,8 +38,8 @@ differ where a task touches them. What :class:`TaskPhysics` sets, and why:
 - **Finger torsion** (``finger_torsion``, off by default): PhysX's patch friction on the fingers (ManiSkill's
   ``patch_radius`` 0.1 m) also resists a twist about the contact normal, which MuJoCo's condim-3 contacts do not;
   ``finger_torsion`` > 0 gives the finger shapes condim 4 and that torsional coefficient. PegInsertionSide's demos need
-  it, and its task's physics has it (0.1 m with 2.5 ms contacts and stiff finger contacts: 4 / 4 insert, 0 / 4 with
-  these defaults); LiftPegUpright's need the peg to turn in the fingers and replay further off with it.
+  it, and its task's physics has it (0.2 m: 3 / 4 insert, the peg within 0.3 cm of PhysX's, 0 / 4 with these
+  defaults); LiftPegUpright's need the peg to turn in the fingers and replay further off with it.
 - **Friction**: PhysX averages, MuJoCo takes the larger coefficient. With the scene's two materials (default 0.3,
   the Panda's finger pads 2.0), giving the finger shapes the average (1.15) reproduces every pair: finger-cube and
   finger-table 1.15, everything else 0.3 (:func:`mujoco_friction`).
@@ -106,8 +106,8 @@ class TaskPhysics:
     other shape a torsional coefficient of 0, so every finger contact resists a twist about its normal with up to this
     coefficient times its normal force. It stands in for PhysX's torsional patch friction on ManiSkill's finger
     material (``patch_radius`` / ``min_patch_radius`` 0.1 m), which MuJoCo's elliptic cone lacks. PegInsertionSide's
-    physics sets 0.1 (with ``contact_solref=(0.0025, 1.0)``, ``finger_solimp=None``: its demos replay 4 / 4, 0 / 4
-    without). It is not the default: LiftPegUpright's demos need the peg to turn in the fingers, and with it they
+    physics sets 0.2 (its demos replay 3 / 4, the peg within 0.3 cm of PhysX's, 0 / 4 without). It is not the
+    default: LiftPegUpright's demos need the peg to turn in the fingers, and with it they
     replay 0 / 4 instead of 4 / 4 (``docs/tasks.md``). Values between 0 and 1e-4 are refused (MuJoCo warns of NaN
     under 1e-5)."""
 

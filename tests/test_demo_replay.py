@@ -143,12 +143,12 @@ def assert_demo_replays(path: Path):
 
 
 # With their tasks' physics two tasks' demos miss their goals (measured in docs/tasks.md and the tasks' own tests):
-# PegInsertionSide's grasp leaves one demo's peg squared up where PhysX's leaves it turned, and MuJoCo's contacts hand
+# PegInsertionSide's grip squares one demo's peg up where PhysX's keeps it turned, and MuJoCo's contacts hand
 # part of an impact back where PhysX's restitution is 0 (PlaceSphere's ball rolls off its landing in the bin and comes
 # to rest after the demo's end).
 _DEFAULT_PHYSICS_MISSES = {
-    "PegInsertionSide-v1": "3 / 4 insert: seed 104's grasp leaves its peg turned 32 mrad on PhysX and squared up on "
-    "Newton, and the insertion planned for PhysX's twist misses the 3 mm clearance "
+    "PegInsertionSide-v1": "3 / 4 insert: after seed 104's grasp PhysX keeps its peg turned 32 mrad, Newton's grip "
+    "squares it up, and the insertion planned for PhysX's twist misses the 3 mm clearance "
     "(tests/test_task_peg_insertion_side.py)",
     "PlaceSphere-v1": "the ball lands in the bin at PhysX's step (0.3 cm off) but rolls off its landing and rests 4-10 "
     "steps after PhysX's, past the demo's end (overdamped contacts: 4 / 4, tests/test_task_place_sphere.py)",

@@ -241,9 +241,9 @@ def test_success_flips_at_the_edges_of_the_hole(axis, edge):
 
 _SEED_104 = (
     "3 of the 4 public demos insert (measured 2026-11-29): seed 104's grasp leaves its peg turned 32 mrad about the "
-    "fingers' axis and 1 mm off-centre on PhysX, whose fingers sink 1.4 mm into it, where Newton's grip squares it up; "
-    "the plan's insertion, made for PhysX's twist, then misses the 3 mm clearance and the peg ends 11 cm off. At 8 "
-    "substeps all four insert (docs/tasks.md, PegInsertionSide-v1)"
+    "fingers' axis and 1.1 mm off-centre on both simulators, but PhysX keeps it so while Newton's soft contacts push "
+    "it back to the centre and square it up within 15 steps; the plan's insertion, made for PhysX's twist, then misses "
+    "the 3 mm clearance and the peg ends 11 cm off. At 8 substeps all four insert (docs/tasks.md, PegInsertionSide-v1)"
 )
 
 

@@ -340,6 +340,21 @@ def measure_interleaved(
     return out
 
 
+def capture_graph(fn, device):
+    """``fn`` called once (kernels loaded, buffers allocated), then captured into a graph, which is returned."""
+    fn()
+    with wp.ScopedCapture(device=device) as cap:
+        fn()
+    return cap.graph
+
+
+def solver_load(env) -> dict:
+    """MuJoCo-Warp's contacts and constraint rows over all worlds of a task env after its last step: the physics'
+    cost follows them, so two timings compare only under the same load."""
+    d = env.solver.mjw_data
+    return {"contacts": int(d.nacon.numpy().sum()), "constraint_rows": int(d.nefc.numpy().sum())}
+
+
 def task_step_parts(env):
     """Two callables that split one control step of a :func:`wpctrl.tasks.make` env the way ``TaskEnv`` runs it:
     ``physics`` (the K x substeps MuJoCo-Warp steps, the contacts and the contact sensor of the last one, no

@@ -239,6 +239,12 @@ def test_success_flips_at_the_edges_of_the_hole(axis, edge):
         assert bool(env.evaluate()["success"][0]) == inside, (axis, offset)
 
 
+@pytest.fixture(scope="module")
+def demo_replay():
+    """The public demos replayed once with the task's physics, for the tests that read the report."""
+    return T.replay(DEMOS if DEMOS.is_file() else _demos())
+
+
 _SEED_104 = (
     "3 of the 4 public demos insert (measured 2026-11-29): seed 104's grasp leaves its peg turned 32 mrad about the "
     "fingers' axis and 1.1 mm off-centre on both simulators, but PhysX keeps it so while Newton's soft contacts push "
@@ -248,22 +254,22 @@ _SEED_104 = (
 
 
 @pytest.mark.xfail(strict=True, reason=_SEED_104)
-def test_maniskills_motion_planning_demos_replay_to_insertion():
+def test_maniskills_motion_planning_demos_replay_to_insertion(demo_replay):
     """Every public demo (``pd_joint_pos``, 134-200 steps) open-loop from its state dict, one env each, each env
     reconfigured from its episode's seed, with the task's physics (``T.task_physics``): success at the end in >= 90 %
     of ManiSkill's successes and the peg's final position within 2 cm of PhysX's in the median."""
-    report = T.replay(DEMOS if DEMOS.is_file() else _demos())
+    report = demo_replay
     ok = [e.success_at_end for e in report.episodes if e.success_at_end_recorded]
     err = [e.cube_error[-1] for e in report.episodes]
     assert np.mean(ok) >= 0.9 and np.median(err) <= 0.02, (ok, np.round(err, 4).tolist())
 
 
-def test_the_demos_carry_the_peg_in_the_grip_as_physx_does_and_insert_it():
+def test_the_demos_carry_the_peg_in_the_grip_as_physx_does_and_insert_it(demo_replay):
     """With the task's physics the grip holds the peg as PhysX's does: up to the grasp the peg follows PhysX's within
     1 mm (measured 0.36 mm at most), carried to the box within 5 mm until the insertion, the plan's last 25 steps
     (measured 1.6-2.9 mm), and three of the four demos insert it, ending within 5 mm of PhysX's peg (measured 1.6 /
     1.6 / 3.2 mm; the fourth, seed 104: the expected failure above)."""
-    report = T.replay(DEMOS if DEMOS.is_file() else _demos())
+    report = demo_replay
     for ep, res in zip(_demos()["episodes"], report.episodes):
         grasp = next(k for k, a in enumerate(ep["actions"]) if a[7] < 0)
         err = np.asarray(res.cube_error)

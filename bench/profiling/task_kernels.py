@@ -28,20 +28,17 @@ import warp as wp  # noqa: E402
 from bench.common import (  # noqa: E402
     DEFAULT_OUT,
     Sync,
+    capture_graph,
     fmt_envs,
     machine_info,
     md_table,
     measure_interleaved,
     meta_markdown,
     parse_envs,
+    solver_load,
     task_step_parts,
     write_results,
 )
-
-
-def _load(env) -> dict:
-    d = env.solver.mjw_data
-    return {"contacts": int(d.nacon.numpy().sum()), "constraint_rows": int(d.nefc.numpy().sum())}
 
 
 def _kernel_times(fn, calls: int, device) -> dict[str, float]:
@@ -58,29 +55,22 @@ def _kernel_times(fn, calls: int, device) -> dict[str, float]:
     return dict(out)
 
 
-def _capture(fn, device):
-    fn()
-    with wp.ScopedCapture(device=device) as cap:
-        fn()
-    return cap.graph
-
-
 def profile(task: str, n: int, device, substeps: int, control_mode: str, calls: int) -> dict:
     import wpctrl.tasks as T
 
     env = T.make(task, num_envs=n, device=device, control_mode=control_mode, graph=False,
-                 physics=T.TaskPhysics(substeps=substeps))  # fmt: skip
+                 physics=T.task_physics(task, substeps))  # fmt: skip
     env.reset(seed=0)
     action = torch.zeros((n, env.ctrl.action_dim), device=env.device)
     action[:, -1] = 1.0
     physics, _ = task_step_parts(env)
     for _ in range(3):
         env.step(action)
-    step = {"kernels": _kernel_times(lambda: env.step(action), calls, device), "load": _load(env)}
-    bare = {"kernels": _kernel_times(physics, calls, device), "load": _load(env)}
+    step = {"kernels": _kernel_times(lambda: env.step(action), calls, device), "load": solver_load(env)}
+    bare = {"kernels": _kernel_times(physics, calls, device), "load": solver_load(env)}
     # the two as captured graphs, interleaved from the same (drifting) state
-    env_graph = _capture(env._step_impl, device)
-    bare_graph = _capture(physics, device)
+    env_graph = capture_graph(env._step_impl, device)
+    bare_graph = capture_graph(physics, device)
     sync = Sync(device)
     timed = measure_interleaved({"env step": lambda: wp.capture_launch(env_graph),
                                  "physics": lambda: wp.capture_launch(bare_graph)}, sync)  # fmt: skip

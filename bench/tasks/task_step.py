@@ -29,6 +29,7 @@ import warp as wp  # noqa: E402
 from bench.common import (  # noqa: E402
     DEFAULT_OUT,
     Sync,
+    capture_graph,
     fmt_envs,
     fmt_us,
     machine_info,
@@ -37,23 +38,10 @@ from bench.common import (  # noqa: E402
     measure_interleaved,
     meta_markdown,
     parse_envs,
+    solver_load,
     task_step_parts,
     write_results,
 )
-
-
-def _capture(fn, device):
-    fn()
-    with wp.ScopedCapture(device=device) as cap:
-        fn()
-    return cap.graph
-
-
-def _contacts(env) -> dict:
-    """MuJoCo-Warp's contacts and constraint rows (all worlds) of the last step timed: the physics' cost follows
-    them, so the env step and its bare physics are compared on the same load."""
-    d = env.solver.mjw_data
-    return {"contacts": int(d.nacon.numpy().sum()), "constraint_rows": int(d.nefc.numpy().sum())}
 
 
 def bench_one(task: str, n: int, device, substeps: int, control_mode: str) -> dict:
@@ -71,7 +59,7 @@ def bench_one(task: str, n: int, device, substeps: int, control_mode: str) -> di
     def task_kernels():
         env._bookkeep()
 
-    graphs = {name: _capture(fn, dev) for name, fn in (("physics", physics), ("controller", controller),
+    graphs = {name: capture_graph(fn, dev) for name, fn in (("physics", physics), ("controller", controller),
                                                          ("task kernels", task_kernels))}  # fmt: skip
     env.reset(seed=0)
     row = {"task": task, "envs": n, "substeps": substeps, "control_mode": control_mode}
@@ -80,7 +68,7 @@ def bench_one(task: str, n: int, device, substeps: int, control_mode: str) -> di
     timed = measure_interleaved({"env step": lambda: env.step(action),
                                  "physics": lambda: wp.capture_launch(graphs["physics"])}, sync)  # fmt: skip
     row["env step"], row["physics"] = timed["env step"]["median_s"], timed["physics"]["median_s"]
-    row["contacts"] = _contacts(env)
+    row["contacts"] = solver_load(env)
     for name in ("controller", "task kernels"):
         row[name] = measure(lambda g=graphs[name]: wp.capture_launch(g), sync)["median_s"]
     row["env_steps_per_s"] = n / row["env step"]

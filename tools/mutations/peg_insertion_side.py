@@ -26,9 +26,9 @@ MUTATIONS = [
     M(
         "task_physics_unchecked_at_registration",
         "wpctrl/tasks/registry.py",
-        "    unknown = sorted(set(cls.physics) - set(physics_fields()))\n    if unknown:\n",
-        "    unknown = sorted(set(cls.physics) - set(physics_fields()))\n    if False:\n",
-        "a task declaring a field TaskPhysics does not have is registered (and fails only when built)",
+        '    physics_from(cls.physics, f"{where}: physics")\n',
+        "",
+        "a task declaring a field TaskPhysics does not have, or a bad value, is registered (and fails only when built)",
         _PHYSICS,
     ),
     M(

@@ -42,7 +42,7 @@ def run(args) -> dict:
     from wpctrl.tasks.scripted import policy_for
 
     device = "cuda:0" if args.device == "cuda" else args.device
-    physics = T.task_physics(args.task, **({} if args.substeps is None else {"substeps": args.substeps}))
+    physics = T.task_physics(args.task, args.substeps)
     from ..console import compile_notice
 
     t0 = time.perf_counter()

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from ..config import ConfigError
 from .names import CONTROL_MODES, OBS_MODES
-from .physics import TaskPhysics, physics_fields
+from .physics import TaskPhysics, physics_from
 from .randomization import TaskRandomization
 from .registry import TASKS, unknown_task
 
@@ -13,20 +13,19 @@ CONTROLLER_SEMANTICS = ("physx_cpu", "physx_cuda")
 __all__ = ["CONTROLLER_SEMANTICS", "CONTROL_MODES", "OBS_MODES", "SIM_BACKENDS", "make", "task_physics"]
 
 
-def task_physics(env_id: str, **changes) -> TaskPhysics:
+def task_physics(env_id: str, substeps: int | None = None, **changes) -> TaskPhysics:
     """The physics a task's env runs with by default: :class:`TaskPhysics`'s defaults with the task's own departures
-    (:attr:`Task.physics <wpctrl.tasks.Task.physics>`: PegInsertionSide-v1's fingers, for one), then ``changes``
-    (TaskPhysics fields, e.g. ``substeps=8``). ``make(env_id, physics=None)`` uses ``task_physics(env_id)``.
+    (:attr:`Task.physics <wpctrl.tasks.Task.physics>`: PegInsertionSide-v1's fingers, for one), then ``substeps``
+    (None: the task's) and ``changes`` (other TaskPhysics fields). ``make(env_id, physics=None)`` uses
+    ``task_physics(env_id)``.
 
     An unknown task id is refused with the known ones; an unknown field or a bad value names the field."""
     if env_id not in TASKS:
         raise ConfigError(f"task_physics: env_id: {unknown_task(env_id)}")
+    if substeps is not None:
+        changes["substeps"] = substeps
     settings = {**TASKS[env_id].physics, **changes}
-    unknown = sorted(set(changes) - set(physics_fields()))
-    if unknown:
-        raise ConfigError(f"task_physics: {unknown} are not TaskPhysics fields (expected some of "
-                          f"{list(physics_fields())})")  # fmt: skip
-    return TaskPhysics(**settings)
+    return physics_from(settings, "task_physics")
 
 
 def make(

@@ -53,11 +53,12 @@ differ where a task touches them. What :class:`TaskPhysics` sets, and why:
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, fields
 
 from ..config import ConfigError
 
-__all__ = ["TaskPhysics", "mujoco_friction", "physics_fields"]
+__all__ = ["TaskPhysics", "mujoco_friction", "physics_fields", "physics_from"]
 
 _INTEGRATORS = ("discrete", "implicitfast", "implicit", "euler")
 _CONES = ("elliptic", "pyramidal")
@@ -184,6 +185,20 @@ class TaskPhysics:
 def physics_fields() -> tuple[str, ...]:
     """The names of :class:`TaskPhysics`'s fields."""
     return tuple(f.name for f in fields(TaskPhysics))
+
+
+def physics_from(settings, where: str) -> TaskPhysics:
+    """``TaskPhysics(**settings)``, refusing with a :class:`ConfigError` prefixed by ``where``: a ``settings`` that
+    is not a mapping, a field TaskPhysics does not have (named, with the fields it has), a value out of its range."""
+    if not isinstance(settings, Mapping):
+        raise ConfigError(f"{where} expected a mapping of TaskPhysics fields to values, got {settings!r}")
+    unknown = sorted(set(settings) - set(physics_fields()))
+    if unknown:
+        raise ConfigError(f"{where}: {unknown} are not TaskPhysics fields (expected some of {list(physics_fields())})")
+    try:
+        return TaskPhysics(**settings)
+    except ConfigError as e:
+        raise ConfigError(f"{where}: {e}") from e
 
 
 def mujoco_friction(materials: dict[str, float], rule: str = "average") -> dict[str, float]:

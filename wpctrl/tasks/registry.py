@@ -22,7 +22,7 @@ import numpy as np
 from ..config import ConfigError
 from .definitions import PANDA_DOF, PANDA_REST_QPOS, Actor, Box, Marker, ObsField
 from .names import TASK_MODULES
-from .physics import TaskPhysics, physics_fields
+from .physics import physics_from
 
 __all__ = ["TASKS", "Task", "get_task", "register_task"]
 
@@ -156,16 +156,7 @@ def _check(cls: type[Task]) -> None:
     for f in cls.obs_extra:
         if f.func is None:
             raise ConfigError(f"{where}: observation field {f.group}/{f.name} has no device function")
-    if not isinstance(cls.physics, Mapping):
-        raise ConfigError(f"{where}: physics expected a mapping of TaskPhysics fields to values, got {cls.physics!r}")
-    unknown = sorted(set(cls.physics) - set(physics_fields()))
-    if unknown:
-        raise ConfigError(f"{where}: physics: {unknown} are not TaskPhysics fields (expected some of "
-                          f"{list(physics_fields())})")  # fmt: skip
-    try:
-        TaskPhysics(**cls.physics)
-    except ConfigError as e:
-        raise ConfigError(f"{where}: physics: {e}") from e
+    physics_from(cls.physics, f"{where}: physics")
 
 
 class _Registry(Mapping):

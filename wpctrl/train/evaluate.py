@@ -206,7 +206,7 @@ def evaluate(policy, sim: str = "newton", episodes: int = 100, seed: int = 0, ta
         from .video import open_recorder
 
         substeps = substeps or meta.get("substeps")
-        physics = T.task_physics(task, **({"substeps": substeps} if substeps else {}))
+        physics = T.task_physics(task, substeps or None)
         with console.compile_notice(f"Warp kernels for {task} on {device}"):
             env = T.make(task, num_envs=envs or min(episodes, 256), device=device, control_mode=control_mode,
                          seed=seed, auto_reset=False, ignore_terminations=True, physics=physics,

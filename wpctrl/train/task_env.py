@@ -64,7 +64,7 @@ class TaskVecEnv(VecEnv):
         from .actor import HiddenInputs
         from .hidden_inputs import DEFAULT_HIDE_OBS, hidden_columns
 
-        physics = T.task_physics(task, **({} if substeps is None else {"substeps": substeps}))
+        physics = T.task_physics(task, substeps)
         self.env = T.make(task, num_envs=num_envs, device=device, control_mode=control_mode, obs_mode="state",
                           reward_mode=reward_mode, seed=seed, auto_reset=True,
                           ignore_terminations=not partial_reset, physics=physics, asset_dir=asset_dir,

@@ -155,8 +155,10 @@ class TrainConfig:
                 spec = from_spec(self.randomize)
             except ConfigError as e:
                 return f"{name('randomize')}: {str(e).removeprefix('randomize: ')}"
-            steps = {} if self.substeps is None else {"substeps": self.substeps}
-            physics = task_physics(self.task, **steps) if self.task in TASKS else TaskPhysics(**steps)
+            if self.task in TASKS:
+                physics = task_physics(self.task, self.substeps)
+            else:
+                physics = TaskPhysics() if self.substeps is None else TaskPhysics(substeps=self.substeps)
             shortest = min(physics.contact_solref[0], (physics.finger_solref or physics.contact_solref)[0])
             if spec is not None and (why := spec.contact_time_problem(shortest, 0.01 / physics.substeps)):
                 return f"{name('randomize')}: {why} (with {name('substeps')} {physics.substeps})"

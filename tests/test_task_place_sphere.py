@@ -5,13 +5,13 @@ observations and rewards along ManiSkill's motion-planning demos, the demos repl
 slow, the real ManiSkill side by side (PhysX CPU, rendering stubbed out: its constants and PhysX shapes, the same state
 giving the same observation, flags and rewards, the reset distributions).
 
-Replay (measured 2026-11-28, the 4 public demos, default TaskPhysics): the ball follows PhysX's within 0.6 cm all the
-way (0.29 cm at the end in the median) and lands on the bin's floor at PhysX's step, but it is still rolling when the
-demo ends. The bin's 4 cm inside leaves a 2 cm ball 2.7 mm of play below the walls' top edges, and the ball, dropped
-at 35 cm/s, lands on the floor and an edge at once. PhysX's contacts take the impact without giving any back
-(restitution 0) and the ball rests within one to four steps; MuJoCo's soft contacts give part of it back along the
-edge's slanted normal, and the ball rolls off its landing at 1.4-17 cm/s, crosses the bin and rests 4-10 steps after
-PhysX's, past the demo's end (1-4 steps after PhysX's success). Overdamped contacts (damping ratio 4) replay 4 / 4.
+Replay (the 4 public demos): the ball, let go above the bin, lands at 35 cm/s on the floor and a wall's top edge at
+once (the bin's 4 cm inside leaves a 2 cm ball 2.7 mm of play below the edges). PhysX's contacts take the impact
+without giving any back (restitution 0) and the ball rests within one to four steps. With the common defaults MuJoCo's
+critically damped contacts give part of it back along the edge's slanted normal: the ball rolls off its landing at
+1.4-17 cm/s and rests 4-10 steps after PhysX's, past every demo's end (0 / 4). The task's own physics
+(``PlaceSphere.physics``: the same stiffness, twice the damping) rests it no later than PhysX's in 3 / 4 (measured
+2026-11-29); the fourth ball, let go 0.9 mm from PhysX's near a corner, lands on other edges (an expected failure).
 """
 
 from __future__ import annotations
@@ -257,27 +257,55 @@ def test_recorded_states_give_the_recorded_observation_and_reward():
 # -- ManiSkill's motion-planning demos replayed on Newton ----------------------------------------------------------
 
 
-BALL_STOPS = T.TaskPhysics(contact_solref=(0.005, 4.0))
-"""Overdamped contacts (damping ratio 4): an impact gives nothing back, as PhysX's restitution 0."""
+@pytest.fixture(scope="module")
+def demo_replay():
+    """The public demos replayed once with the task's physics (``T.task_physics``), for the tests that read it."""
+    return T.replay(_demos())
 
 
-def test_the_demos_carry_the_ball_into_the_bin_as_physx_does():
-    """With the default physics: the ball follows PhysX's within 1 cm at every step and ends within 0.5 cm of it in
-    the median; it is still rolling when the demo ends (the module docstring), so ManiSkill's success is not
-    reproduced (tests/test_demo_replay.py holds that as an expected failure)."""
-    report = T.replay(_demos())
-    for res in report.episodes:
+def test_the_demos_carry_the_ball_into_the_bin_as_physx_does(demo_replay):
+    """With the task's physics the ball follows PhysX's within 1 cm at every step (measured 0.16-0.67 cm at most) and
+    ends within 0.6 cm of it in the median (measured 0.44 cm); it lands on the bin's floor at PhysX's step."""
+    for res in demo_replay.episodes:
         assert max(res.cube_error) < 0.01, (res.seed, max(res.cube_error))
-    assert np.median([e.cube_error[-1] for e in report.episodes]) < 0.005
+        assert res.flags["is_obj_on_bin"] == res.flags_recorded["is_obj_on_bin"], res.seed
+    assert np.median([e.cube_error[-1] for e in demo_replay.episodes]) < 0.006
 
 
-def test_past_the_demos_end_the_ball_comes_to_rest_in_the_bin():
-    """The four demos in one env, each held at its last action for 15 steps more: the ball lands on the bin's floor at
-    PhysX's step in every demo and, after rolling off its landing, rests there and succeeds within 12 steps of PhysX's
-    first success (measured 2026-11-28: 4, 10, 7 and 10 steps after it, where the demos end 1-4 steps after it)."""
+_SEED_104 = (
+    "3 of the 4 public demos succeed (measured 2026-11-29): seed 104's ball is let go 0.9 mm from where PhysX's is, "
+    "near a corner of the bin, lands on other edges and rolls away where PhysX's bounces into the opposite corner and "
+    "stops there at once; Newton's rests 4 steps after the demo's end (docs/tasks.md, PlaceSphere-v1)"
+)
+
+
+@pytest.mark.xfail(strict=True, reason=_SEED_104)
+def test_maniskills_motion_planning_demos_replay_to_success(demo_replay):
+    """Every public demo (``pd_joint_pos``, 103-132 steps) open-loop from its state dict, with the task's physics:
+    success at the end in >= 90 % of ManiSkill's successes."""
+    ok = [e.success_at_end for e in demo_replay.episodes if e.success_at_end_recorded]
+    assert np.mean(ok) >= 0.9, demo_replay.format()
+
+
+def test_the_ball_rests_in_the_bin_as_soon_as_on_physx(demo_replay):
+    """With the task's physics the impact gives nothing back: three of the four demos end in success, each first
+    succeeding no later than PhysX's (measured 2026-11-29: 4, 1 and 0 steps before it; seed 104 the expected failure
+    above)."""
+    rested = [e for e in demo_replay.episodes if e.success_at_end and e.success_at_end_recorded]
+    assert len(rested) >= 3, demo_replay.format()
+    for e in rested:
+        assert e.success.index(True) <= e.success_recorded.index(True), (e.seed, demo_replay.format())
+
+
+def test_the_common_defaults_let_the_ball_roll_past_the_demos_end():
+    """Why the task departs from :class:`~wpctrl.tasks.TaskPhysics`'s defaults (``PlaceSphere.physics``): with them
+    the ball lands on the bin's floor at PhysX's step in every demo but rolls off its landing and is still rolling when
+    the demo ends (0 / 4); the four demos in one env, each held at its last action 15 steps more, show it then rests
+    and succeeds within 12 steps of PhysX's first success (measured 2026-11-28: 4, 10, 7 and 10 steps after it, where
+    the demos end 1-4 steps after it)."""
     eps = _demos()["episodes"]
     env = T.make(ENV_ID, num_envs=len(eps), control_mode="pd_joint_pos", max_episode_steps=300, auto_reset=False,
-                 ignore_terminations=True)  # fmt: skip
+                 ignore_terminations=True, physics=T.TaskPhysics())  # fmt: skip
     env.reset(seed=[ep["seed"] for ep in eps])
     env.set_state_dict({g: {k: torch.tensor(np.array([ep["init_state_dict"][g][k] for ep in eps]), dtype=torch.float32)
                             for k in eps[0]["init_state_dict"][g]} for g in ("actors", "articulations")})  # fmt: skip
@@ -291,16 +319,9 @@ def test_past_the_demos_end_the_ball_comes_to_rest_in_the_bin():
         physx_on = ep["info"]["is_obj_on_bin"].index(True) - 1  # info[0] is the reset's
         physx_success = ep["info"]["success"].index(True) - 1
         assert on[:, e].argmax() == physx_on, (ep["seed"], on[:, e].argmax(), physx_on)
+        assert not success[len(ep["actions"]) - 1, e], ep["seed"]  # still rolling at the demo's end
         assert success[:, e].any(), ep["seed"]
         assert success[:, e].argmax() - physx_success <= 12, (ep["seed"], success[:, e].argmax(), physx_success)
-
-
-def test_the_demos_succeed_when_an_impact_gives_nothing_back():
-    """With :data:`BALL_STOPS` the ball comes to rest against the bin's edge as on PhysX: ManiSkill's successes are
-    kept (>= 90 %) and the ball ends within 1 cm of PhysX's in the median (measured 2026-11-28: 4 / 4, 0.31 cm)."""
-    report = T.replay(_demos(), physics=BALL_STOPS)
-    ok = [e.success_at_end for e in report.episodes if e.success_at_end_recorded]
-    assert np.mean(ok) >= 0.9 and np.median([e.cube_error[-1] for e in report.episodes]) <= 0.01, report.format()
 
 
 NEWTON_POLICY = Path(__file__).parent / "data" / "tasks" / "PlaceSphere-v1__pd_joint_delta_pos__newton_policy.json.gz"
@@ -316,9 +337,10 @@ def newton_policy_replay():
 
 
 def test_a_newton_policys_maniskill_episodes_move_the_ball_as_physx_does(newton_policy_replay):
-    """Replayed open loop on Newton (default physics), ManiSkill's episodes of the Newton-trained policy keep the
-    ball's path: it ends within 2.5 cm of PhysX's in the median (measured 2026-11-28: 1.5 cm), and the success at
-    the end agrees in at least 18 of the 20 (measured 19; PhysX: 2 successes once, 1 at the end)."""
+    """Replayed open loop on Newton (the task's physics), ManiSkill's episodes of the Newton-trained policy keep the
+    ball's path: it ends within 2.5 cm of PhysX's in the median (measured 2026-11-29: 1.6 cm; 1.5 cm with the common
+    defaults), and the success at the end agrees in at least 18 of the 20 (measured 19; PhysX: 2 successes once, 1 at
+    the end)."""
     report = newton_policy_replay
     assert len(report.episodes) == 20
     assert sum(e.success_once_recorded for e in report.episodes) == 2
@@ -328,31 +350,34 @@ def test_a_newton_policys_maniskill_episodes_move_the_ball_as_physx_does(newton_
 
 def test_the_replay_report_names_the_flag_where_the_simulators_part(newton_policy_replay):
     """The report carries every flag of the task both sides computed: ManiSkill's are the file's ``info`` (read here
-    directly), Newton's follow the ball. Where success once differs, the grasp flag parts first: it drops on Newton at
-    or before Newton's first success while PhysX still holds the ball (measured: 1-11 steps before, in all 10)."""
+    directly), Newton's follow the ball, and ``first_parting`` is the first step where the two differ. Where Newton
+    succeeds and PhysX does not, the grasp flag mostly parts first: it drops on Newton at or before Newton's first
+    success while PhysX still holds the ball (measured 2026-11-29: in 10 of the 12 such episodes, 1-13 steps before;
+    with the common defaults in all 10)."""
     raw = json.loads(gzip.open(NEWTON_POLICY).read())["episodes"]
     report = newton_policy_replay
     assert set(report.flag_agreement) == {"is_obj_grasped", "is_obj_on_bin", "is_obj_static"}
-    parted = 0
+    differ, dropped_first = 0, 0
     for res, ep in zip(report.episodes, raw):
         for name, rec in res.flags_recorded.items():
             assert rec == [bool(f) for f in ep["info"][name][1:]], (res.seed, name)
             assert len(res.flags[name]) == len(rec)
+            apart = [t + 1 for t, (a, b) in enumerate(zip(res.flags[name], rec)) if a != b]
+            assert res.first_parting.get(name) == (apart[0] if apart else None), (res.seed, name)
         if res.success_once and not res.success_once_recorded:
-            first_success = res.success.index(True) + 1
+            differ += 1
             step = res.first_parting["is_obj_grasped"]
-            assert step <= first_success, (res.seed, step, first_success)
-            assert res.flags_recorded["is_obj_grasped"][step - 1] and not res.flags["is_obj_grasped"][step - 1]
-            parted += 1
-    assert parted >= 1
+            dropped_first += (step <= res.success.index(True) + 1 and res.flags_recorded["is_obj_grasped"][step - 1]
+                              and not res.flags["is_obj_grasped"][step - 1])  # fmt: skip
+    assert differ >= 1 and dropped_first >= 0.75 * differ, (differ, dropped_first)
     assert "is_obj_grasped parts at step" in report.format()
 
 
 _NEWTON_POLICY_PARTS = (
-    "measured 2026-11-28: success once agrees in 9 / 20 (Newton 11 successes, PhysX 2): a ball held in closed "
-    "fingers and pressed into the bin slips out of Newton's grasp (one finger loses the ball, is_obj_grasped "
-    "drops) and stays in PhysX's (a fingertip sinks 12.8 mm into the 33 g ball); stiff finger contacts 14 / 20 "
-    "(with 1.25 ms contacts 15 / 20), impratio 100 or finger torsion 9-10 / 20"
+    "measured 2026-11-29: success once agrees in 8 / 20 (9 with the common defaults; PhysX 2 successes): a "
+    "ball held in closed fingers and pressed into the bin slips out of Newton's grasp (one finger loses the ball, "
+    "is_obj_grasped drops) and stays in PhysX's (a fingertip sinks 12.8 mm into the 33 g ball); stiff finger "
+    "contacts 14 / 20 (with 1.25 ms contacts 15 / 20), impratio 100 or finger torsion 9-10 / 20"
 )
 
 

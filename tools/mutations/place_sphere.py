@@ -6,6 +6,15 @@ _TESTS = ("tests/test_task_place_sphere.py",)
 
 MUTATIONS = [
     M(
+        "place_sphere_physics_undamped",
+        "wpctrl/tasks/place_sphere.py",
+        'PHYSICS = {"contact_solref": (0.0025, 2.0)}\n',
+        'PHYSICS = {"contact_solref": (0.0035, 1.43)}\n',
+        "PlaceSphere's contacts damped less than twice the defaults at the same stiffness (the ball rolls off its "
+        "landing)",
+        _TESTS,
+    ),
+    M(
         "place_success_while_grasped",
         "wpctrl/tasks/place_sphere.py",
         "    s.info[e, SUCCESS] = on_bin and static and not grasped\n",

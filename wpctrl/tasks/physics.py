@@ -20,6 +20,8 @@ differ where a task touches them. What :class:`TaskPhysics` sets, and why:
   grasps closer (PickCube's public episodes 0.49 -> 0.34 cm, StackCube's demos 0.45 -> 0.05 cm), but a cube struck by
   the fingers then leaves them otherwise than PhysX's: PushCube's ``pd_ee_delta_pos`` replays land 1.2 -> 5.5 cm off
   (32 fresh episodes: 1.2 -> 4.7 cm), so 5 ms stays (``docs/tasks.md``; measured with stiff finger contacts).
+  PlaceSphere's physics halves the time constant and doubles the damping ratio (the same stiffness, twice the
+  damping), so that a ball landing in its bin rests as PhysX's does (restitution 0) instead of rolling off.
 - **Finger contacts** (``finger_solimp``, impedance 0.7 on the finger shapes, 0.85 once MuJoCo mixes it with the
   other shape's): under load PhysX's fingertips sink into what they press, about 0.03 mm per newton (15 position
   iterations leave that overlap between a driven link and a light body), where the other shapes' impedance let a
@@ -72,8 +74,8 @@ class TaskPhysics:
     """MuJoCo-Warp settings of a task's scene (see the module docstring for what each one reproduces).
 
     ``TaskPhysics()`` is the common default. A task may depart from it where its contacts need other settings
-    (``Task.physics``: PegInsertionSide-v1's grip); ``wpctrl.tasks.task_physics(env_id, **changes)`` is a task's own,
-    and what ``make`` uses when given no physics."""
+    (``Task.physics``: PegInsertionSide-v1's grip, PlaceSphere-v1's damped impacts);
+    ``wpctrl.tasks.task_physics(env_id, **changes)`` is a task's own, and what ``make`` uses when given no physics."""
 
     substeps: int = 16
     """MuJoCo-Warp steps per physics step (the physics step is ManiSkill's 1 / ``sim_freq`` = 10 ms)."""

@@ -7,7 +7,9 @@ corner) deep in the cube on PhysX and 1.3 / 1.2 / 1.1 mm on Newton, within 0.35 
 contacts as stiff as the others' (``finger_solimp=None``) Newton's sank 0.15-0.3 mm, 0.7-1.1 mm short. The press
 tolerance, 0.45 mm, fails both that and the 2-3 mm corner sink a learned PushCube policy met. Where the tip reaches
 1-3 mm onto a corner, PhysX's slides off it at 22 / 39 / 54 N; Newton's stays on up to 85 N, creeping inward instead
-(a strict expected failure below).
+(a strict expected failure below). The two finger joints set 20 mm apart close on the gripper's one target on both,
+but PhysX's fixed tendon (ManiSkill's build of the URDF mimic) levels them within a control step and Newton's
+mimic equality leaves 11 mm (another strict expected failure).
 """
 
 from __future__ import annotations
@@ -116,3 +118,61 @@ def test_target_a_still_grip_reports_the_finger_velocities_physx_reports(probe):
     for before, px, nw in zip(physx, physx[1:], newton[1:]):
         assert np.abs(px["finger_q"] - before["finger_q"]).max() < 1e-4  # PhysX's fingers are still
         assert np.abs(nw["finger_qd"] - px["finger_qd"]).max() < 0.02, (px["finger_qd"], nw["finger_qd"])
+
+
+def _fingers_levelling(env_id: str = "PushCube-v1", steps: int = 3) -> dict:
+    """The two finger joints set 20 mm apart (30 and 10 mm open), the arm held where it is and the gripper's target
+    20 mm, on both simulators from the same state dict: each joint's opening [m] after every control step."""
+    import torch
+
+    import wpctrl.tasks as T
+    from wpctrl.tasks.maniskill_side import make_maniskill
+
+    ms = make_maniskill(env_id, "pd_joint_pos")
+    ms.reset(seed=0)
+    state = ms.unwrapped.get_state_dict()
+    name = next(iter(state["articulations"]))
+    robot = state["articulations"][name].clone()
+    robot[0, 20], robot[0, 21] = 0.030, 0.010  # qpos columns 13..21: the fingers last
+    state["articulations"][name] = robot
+    ms.unwrapped.set_state_dict(state)
+    action = torch.cat([robot[0, 13:20], torch.tensor([0.2])])[None].float()  # gripper: -1..1 -> -0.01..0.04 m
+    physx = []
+    for _ in range(steps):
+        ms.step(action)
+        physx.append(ms.unwrapped.agent.robot.get_qpos()[0, 7:9].numpy().copy())
+    env = T.make(env_id, num_envs=1, control_mode="pd_joint_pos", auto_reset=False)
+    env.reset(seed=0)
+    env.set_state_dict({"actors": {k: v.clone() for k, v in state["actors"].items()},
+                        "articulations": {"panda": robot.clone()}})  # fmt: skip
+    newton = []
+    for _ in range(steps):
+        env.step(action)
+        newton.append(env.get_state_dict()["articulations"]["panda"][0, 20:22].numpy().copy())
+    return {"physx": np.array(physx), "newton": np.array(newton)}
+
+
+@pytest.fixture(scope="module")
+def levelling():
+    return _fingers_levelling()
+
+
+def test_the_fingers_close_on_their_common_target_on_both(levelling):
+    """Both simulators take the two finger joints to the gripper's one target (20 mm): their mean opening is within
+    0.3 mm of it after the first control step on both, and the joints' gap shrinks at every step."""
+    for sim, q in levelling.items():
+        assert abs(q[0].mean() - 0.020) <= 3e-4, (sim, q[0])
+        gap = np.abs(q[:, 0] - q[:, 1])
+        assert np.all(np.diff(gap) <= 1e-6), (sim, gap)
+    assert abs(levelling["physx"][0, 0] - levelling["physx"][0, 1]) <= 5e-5, levelling["physx"][0]
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "measured 2026-11-29: ManiSkill builds the fingers' URDF mimic as a PhysX fixed tendon of stiffness 1e5 N/m, which "
+    "levels the joints within one control step (0.0 mm of the 20 mm left); Newton's mimic is a MuJoCo joint equality "
+    "at MuJoCo's default 20 ms, which leaves 11.2 mm after one step and 5.0 after two. A stiffer equality (1.25 ms) "
+    "levels them as PhysX does but replays the pushes further off, so it is not the default (docs/tasks.md)"
+))  # fmt: skip
+def test_target_the_fingers_level_with_each_other_within_a_step_as_on_physx(levelling):
+    gap = np.abs(levelling["newton"][0, 0] - levelling["newton"][0, 1])
+    assert gap <= 5e-4, levelling["newton"][0]

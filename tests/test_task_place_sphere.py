@@ -289,12 +289,12 @@ def test_maniskills_motion_planning_demos_replay_to_success(demo_replay):
 
 def test_the_ball_rests_in_the_bin_as_soon_as_on_physx(demo_replay):
     """With the task's physics the impact gives nothing back: three of the four demos end in success, each first
-    succeeding no later than PhysX's (measured 2026-11-29: 4, 1 and 0 steps before it; seed 104 the expected failure
-    above)."""
+    succeeding within a step of PhysX's or before it (measured 2026-11-29: 4, 1 and 0 steps before it; seed 104 the
+    expected failure above), where the common defaults' ball rests 4-10 steps after it (the next test)."""
     rested = [e for e in demo_replay.episodes if e.success_at_end and e.success_at_end_recorded]
     assert len(rested) >= 3, demo_replay.format()
     for e in rested:
-        assert e.success.index(True) <= e.success_recorded.index(True), (e.seed, demo_replay.format())
+        assert e.success.index(True) <= e.success_recorded.index(True) + 1, (e.seed, demo_replay.format())
 
 
 def test_the_common_defaults_let_the_ball_roll_past_the_demos_end():

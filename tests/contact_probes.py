@@ -75,6 +75,7 @@ def reading(raw: dict) -> dict:
         "cube_in_tcp": Rotation.from_quat(_xyzw(tcp[3:])).inv().apply(cube[:3] - tcp[:3]),
         "finger_q": np.asarray(raw["qpos"], float)[7:9],
         "finger_qd": np.asarray(raw["qvel"], float)[7:9],
+        "grasped": bool(raw["grasped"]),
     }
 
 
@@ -85,7 +86,8 @@ def _maniskill_raw(base) -> dict:
              + scene.get_pairwise_contact_forces(a.finger2_link, base.cube))[0].numpy()  # fmt: skip
     return {"f1": a.finger1_link.pose.raw_pose[0].numpy(), "f2": a.finger2_link.pose.raw_pose[0].numpy(),
             "cube": base.cube.pose.raw_pose[0].numpy(), "tcp": a.tcp.pose.raw_pose[0].numpy(),
-            "force": -force, "qpos": a.robot.get_qpos()[0].numpy(), "qvel": a.robot.get_qvel()[0].numpy()}  # fmt: skip
+            "force": -force, "qpos": a.robot.get_qpos()[0].numpy(), "qvel": a.robot.get_qvel()[0].numpy(),
+            "grasped": bool(a.is_grasping(base.cube)[0])}  # fmt: skip
 
 
 def _newton_raw(env) -> dict:
@@ -96,12 +98,14 @@ def _newton_raw(env) -> dict:
         p = body_q[b]
         return np.concatenate([p[:3], [p[6], p[3], p[4], p[5]]])
 
-    force = env._sensor.force_matrix.numpy()  # (2, actors): the force on each finger from the cube
+    # (2, actors): the normal force on each finger from the cube (PhysX reports the normal impulses only)
+    force = env._sensor.force_matrix.numpy() - env._sensor.force_matrix_friction.numpy()
     q0, qd0 = sc.robot_coord0, sc.robot_dof0
     return {"f1": pose(sc.finger_bodies0[0]), "f2": pose(sc.finger_bodies0[1]), "cube": pose(sc.actor_body0["cube"]),
             "tcp": pose(sc.tcp_body0), "force": -(force[0, 0] + force[1, 0]),
             "qpos": env.state.joint_q.numpy()[q0 : q0 + 9],
-            "qvel": env.state.joint_qd.numpy()[qd0 : qd0 + 9]}  # fmt: skip
+            "qvel": env.state.joint_qd.numpy()[qd0 : qd0 + 9],
+            "grasped": bool(env.evaluate()["is_grasped"].numpy()[0])}  # fmt: skip
 
 
 class Probe:
@@ -184,6 +188,18 @@ class Probe:
         z0 = 2 * CUBE_HALF + g["tip_below_tcp"] + 0.004
         ramp = [min(1.0, k / (0.75 * steps)) for k in range(1, steps + 1)]
         return self.run([*xy, z0], [([*xy, z0 - depth * r], -1.0) for r in ramp])
+
+    def close_on_top(self, opening: float = 0.004, depth: float = 0.015, press: int = 20, close: int = 15) -> dict:
+        """The fingertips, each ``opening`` [m] from the TCP (both on the cube's top face), pressed down on its centre
+        by a TCP target ramped ``depth`` below the touch over ``press`` steps, then the gripper closed for ``close``
+        steps with the target held: the tips slide inward over the face, the face's friction pushing them apart."""
+        g = self.geometry()
+        xy = CUBE_AT[:2]
+        z0 = 2 * CUBE_HALF + g["tip_below_tcp"] + 0.004
+        half_open = 2.0 * (opening + 0.01) / 0.05 - 1.0  # the gripper's pd_joint_pos range [-0.01, 0.04] m
+        targets = [([*xy, z0 - (depth + 0.004) * k / press], half_open) for k in range(1, press + 1)]
+        targets += [(targets[-1][0], -1.0)] * close
+        return self.run([*xy, z0], targets, gripper_start=half_open)
 
     def hold(self, lift: float = 0.1, lift_steps: int = 4, still: int = 10, grip_steps: int = 10) -> dict:
         """The open gripper lowered around the cube's centre (the TCP 5 mm below the cube's top), closed for

@@ -20,11 +20,13 @@ def finger_axes(env) -> np.ndarray:
 
 
 def write_finger_forces(env, forces: np.ndarray, column: int = 0) -> None:
-    """Put (N, 2, 3) contact forces from contact actor ``column`` on the fingers into the sensor's matrix."""
+    """Put (N, 2, 3) contact forces from contact actor ``column`` on the fingers into the sensor's matrix, all of them
+    normal force (no friction part)."""
     fm = env._sensor.force_matrix
     values = fm.numpy()
     values[:, column] = forces.reshape(2 * env.num_envs, 3)
     fm.assign(wp.array(values, dtype=wp.vec3, device=fm.device))
+    env._sensor.force_matrix_friction.zero_()  # all of it normal force, as PhysX reports it
 
 
 def ref_is_grasping(forces: np.ndarray, directions: np.ndarray, max_angle: float = 85.0) -> np.ndarray:

@@ -9,7 +9,8 @@ tolerance, 0.45 mm, fails both that and the 2-3 mm corner sink a learned PushCub
 1-3 mm onto a corner, PhysX's slides off it at 22 / 39 / 54 N; Newton's stays on up to 85 N, creeping inward instead
 (a strict expected failure below). The two finger joints set 20 mm apart close on the gripper's one target on both,
 but PhysX's fixed tendon (ManiSkill's build of the URDF mimic) levels them within a control step and Newton's
-mimic equality leaves 11 mm (another strict expected failure).
+mimic equality leaves 11 mm (another strict expected failure). The grasp flag counts the fingers' push on the cube, not
+their friction, on both.
 """
 
 from __future__ import annotations
@@ -93,6 +94,20 @@ def test_a_gripped_cube_stays_in_the_fingers_as_on_physx(probe):
         assert np.abs(nw["cube_in_tcp"] - px["cube_in_tcp"]).max() < 1e-3, (px["cube_in_tcp"], nw["cube_in_tcp"])
     for side in ("physx", "newton"):
         assert out[side][-1]["cube"][2] > CUBE_AT[2] + 0.09, (side, out[side][-1]["cube"])
+
+
+def test_the_grasp_flag_counts_the_push_and_not_the_friction_as_on_physx(probe):
+    """``is_grasped`` on both simulators, step by step: fingertips closed over the cube's top face (their friction
+    pushing them apart while they slide inward) are no grasp on PhysX, whose contact reports hold the normal
+    impulses only, and none on Newton, whose grasp test takes the normal part of its contact force (with the friction
+    in, measured: three flagged steps while the tips slide); a cube gripped and lifted is one on both."""
+    top, held = probe.close_on_top(), probe.hold()
+    for out in (top, held):
+        flags = [[r["grasped"] for r in out[side]] for side in ("physx", "newton")]
+        assert flags[0] == flags[1], flags
+    assert not any(r["grasped"] for r in top["physx"])
+    assert top["newton"][-1]["finger_q"].max() < 1e-3 < top["newton"][0]["finger_q"].min()  # they slid inward
+    assert sum(r["grasped"] for r in held["physx"]) >= 20
 
 
 @pytest.mark.parametrize("height", [0.005, 0.015, 0.025])

@@ -38,10 +38,18 @@ MUTATIONS = [
     M(
         "tasks_right_finger_direction",
         "wpctrl/tasks/funcs.py",
-        "rflag = _finger_grasps(s.finger_force[2 * e + 1, j], -wp.quat_rotate(",
-        "rflag = _finger_grasps(s.finger_force[2 * e + 1, j], wp.quat_rotate(",
+        "rflag = _finger_grasps(finger_normal_force(s, 2 * e + 1, j), -wp.quat_rotate(",
+        "rflag = _finger_grasps(finger_normal_force(s, 2 * e + 1, j), wp.quat_rotate(",
         "is_grasped tests the right finger's force against +y instead of its opening direction -y",
         ("tests/test_tasks.py", "tests/test_tasks_replay.py"),
+    ),
+    M(
+        "tasks_grasp_counts_friction",
+        "wpctrl/tasks/funcs.py",
+        "    return s.finger_force[row, j] - s.finger_friction[row, j]\n",
+        "    return s.finger_force[row, j]\n",
+        "is_grasped tests the fingers' whole contact force, friction included, where PhysX reports the normal part",
+        ("tests/test_contact_probes.py",),
     ),
     M(
         "tasks_obs_quaternion_xyzw",
@@ -110,8 +118,7 @@ MUTATIONS = [
     M(
         "tasks_state_dict_forces_not_zeroed",
         "wpctrl/tasks/env.py",
-        "        wp.launch(_zero_forces, dim=self.num_envs, inputs=[mask, self._sim.finger_force], "
-        "device=self.wp_device)\n",
+        "        wp.launch(_zero_forces, dim=self.num_envs, inputs=[mask, *forces], device=self.wp_device)\n",
         "",
         "a state just set keeps the previous contact forces (stale is_grasped)",
         ("tests/test_tasks.py",),

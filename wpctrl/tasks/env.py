@@ -119,7 +119,7 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
             model, rigid_contact_max=self.solver.get_max_contact_count(), soft_contact_max=0
         ).contacts()
         z = lambda dtype, *shape: wp.zeros(shape if len(shape) > 1 else shape[0], dtype=dtype, device=dev)  # noqa: E731
-        finger_force = self._contact_sensor(task)
+        finger_force, finger_friction = self._contact_sensor(task)
         self.info_keys = ("success",) + tuple(task.info_keys)
         """The columns of :attr:`info_buf`: ``evaluate()``'s keys, ``success`` first."""
         m = max(len(task.markers), 1)
@@ -152,7 +152,7 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
         self.randomization = randomization
         self._randomizer = Randomizer(self, randomization) if randomization is not None else None
 
-        self._sim = self._sim_struct(task, finger_force)
+        self._sim = self._sim_struct(task, finger_force, finger_friction)
         self._reset_kernel, self._observe_kernel = task_kernels(task)
 
         self.single_action_space = self.ctrl.single_action_space
@@ -175,13 +175,13 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
 
     # -- device work ------------------------------------------------------------------------------------------------
 
-    def _contact_sensor(self, task: Task) -> wp.array:
+    def _contact_sensor(self, task: Task) -> tuple[wp.array, wp.array]:
         """Newton's contact sensor between every env's fingers and its task's ``contact_actors`` (none without them);
-        the (2 num_envs, actors) force matrix the device functions read."""
+        the (2 num_envs, actors) force matrix the device functions read and its friction part."""
         sc, n = self.scene, self.num_envs
         self._sensor = self._observables = None
         if not task.contact_actors:
-            return wp.zeros((2 * n, 1), dtype=wp.vec3, device=self.wp_device)
+            return tuple(wp.zeros((2 * n, 1), dtype=wp.vec3, device=self.wp_device) for _ in range(2))
         fingers = [b + e * sc.bodies_per_env for e in range(n) for b in sc.finger_bodies0]
         touched = [sc.actor_body0[a] + e * sc.bodies_per_env for e in range(n) for a in task.contact_actors]
         self._sensor = newton.sensors.SensorContact(
@@ -189,9 +189,9 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
             request_contact_attributes=False,
         )  # fmt: skip
         self._observables = self.solver.observables(self._sensor.solver_observable_kinds, contacts=self._contacts)
-        return self._sensor.force_matrix
+        return self._sensor.force_matrix, self._sensor.force_matrix_friction
 
-    def _sim_struct(self, task: Task, finger_force: wp.array) -> Sim:
+    def _sim_struct(self, task: Task, finger_force: wp.array, finger_friction: wp.array) -> Sim:
         """The :class:`~wpctrl.tasks.funcs.Sim` the kernels get: the scene's layout and the env's arrays (the same
         arrays for the env's life: a captured graph binds them)."""
         sc, S = self.scene, Sim()
@@ -202,7 +202,8 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
                                        device=self.wp_device)  # fmt: skip
         S.actor_q0, S.actor_qd0, S.actor_body0 = index(sc.actor_coord0), index(sc.actor_dof0), index(sc.actor_body0)
         S.joint_q, S.joint_qd, S.body_q = self.state.joint_q, self.state.joint_qd, self.state.body_q
-        S.finger_force, S.marker_pos, S.marker_quat = finger_force, self.marker_pos, self.marker_quat
+        S.finger_force, S.finger_friction = finger_force, finger_friction
+        S.marker_pos, S.marker_quat = self.marker_pos, self.marker_quat
         S.info, S.param = self.info_buf, self.param_buf
         return S
 
@@ -233,7 +234,8 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
 
     def _after_state_write(self, mask: wp.array) -> None:
         """The envs of ``mask`` hold a new state: no contact force yet, drive targets at their qpos, fresh obs."""
-        wp.launch(_zero_forces, dim=self.num_envs, inputs=[mask, self._sim.finger_force], device=self.wp_device)
+        forces = [self._sim.finger_force, self._sim.finger_friction]
+        wp.launch(_zero_forces, dim=self.num_envs, inputs=[mask, *forces], device=self.wp_device)
         newton.eval_fk(self.model, self.state.joint_q, self.state.joint_qd, self.state)
         self.ctrl.reset(self.state, mask, control=self.control)
         self._observe()
@@ -458,9 +460,10 @@ def per_env_seeds(seed, num_envs: int) -> np.ndarray:
 
 
 @wp.kernel
-def _zero_forces(mask: wp.array[wp.bool], force: wp.array2d[wp.vec3]):
+def _zero_forces(mask: wp.array[wp.bool], force: wp.array2d[wp.vec3], friction: wp.array2d[wp.vec3]):
     e = wp.tid()
     if mask[e]:
         for i in range(2):
             for j in range(force.shape[1]):
                 force[2 * e + i, j] = wp.vec3(0.0)
+                friction[2 * e + i, j] = wp.vec3(0.0)

@@ -58,6 +58,9 @@ class Sim:
     rfinger_body0: int
     finger_force: wp.array2d[wp.vec3]
     """``[2e + i, j]``: the contact force on env e's finger i (0 left, 1 right) from its contact actor j."""
+    finger_friction: wp.array2d[wp.vec3]
+    """The same entries' friction (tangential) part. ManiSkill's pairwise contact forces are PhysX's reported contact
+    impulses, which hold the normal part only: ``finger_force - finger_friction``."""
     marker_pos: wp.array2d[wp.vec3]
     """(num_envs, markers) the goal markers' positions."""
     marker_quat: wp.array2d[wp.vec4]
@@ -230,14 +233,23 @@ def _finger_grasps(force: wp.vec3, direction: wp.vec3, cos_max_angle: float) -> 
 
 
 @wp.func
+def finger_normal_force(s: Sim, row: int, j: int) -> wp.vec3:
+    """The normal part of the contact force on finger ``row`` (``2e + i``) from contact actor j: what ManiSkill's
+    ``scene.get_pairwise_contact_forces`` reports. PhysX's contact reports carry the normal impulses only, so a
+    fingertip dragged across a face reports its push and not its friction."""
+    return s.finger_force[row, j] - s.finger_friction[row, j]
+
+
+@wp.func
 def is_grasping_within(s: Sim, e: int, j: int, cos_max_angle: float) -> bool:
     """``Panda.is_grasping(actor, max_angle=a)`` for contact actor j, ``cos_max_angle = cos(a)``: both fingers push it
     with at least the minimum force, within ``a`` of their opening directions (+y of the left finger, -y of the right
     one)."""
     lf = wp.transform_get_rotation(s.body_q[s.lfinger_body0 + e * s.nb])
     rf = wp.transform_get_rotation(s.body_q[s.rfinger_body0 + e * s.nb])
-    lflag = _finger_grasps(s.finger_force[2 * e, j], wp.quat_rotate(lf, wp.vec3(0.0, 1.0, 0.0)), cos_max_angle)
-    rflag = _finger_grasps(s.finger_force[2 * e + 1, j], -wp.quat_rotate(rf, wp.vec3(0.0, 1.0, 0.0)), cos_max_angle)
+    lflag = _finger_grasps(finger_normal_force(s, 2 * e, j), wp.quat_rotate(lf, wp.vec3(0.0, 1.0, 0.0)), cos_max_angle)
+    rflag = _finger_grasps(finger_normal_force(s, 2 * e + 1, j), -wp.quat_rotate(rf, wp.vec3(0.0, 1.0, 0.0)),
+                           cos_max_angle)  # fmt: skip
     return lflag and rflag
 
 

@@ -77,17 +77,21 @@ def load_policy(path, task: str | None = None, device="cpu"):
 
 def evaluate_maniskill(policy, task: str, control_mode: str, episodes: int, seed: int = 0, progress=None,
                        recorder=None) -> dict:  # fmt: skip
-    """``policy`` on ``episodes`` episodes of the real ManiSkill (PhysX CPU, one env); metrics as
+    """``policy`` on ``episodes`` episodes of the real ManiSkill (PhysX CPU, one env, the ``panda`` robot wpctrl's tasks
+    build, also where ManiSkill's task defaults to ``panda_wristcam``); metrics as
     :func:`wpctrl.train.policy_eval.evaluate_policy`, plus per-episode records. ``recorder``: a
     :class:`.record.EpisodeRecorder` that is shown every episode and writes its file once all have run."""
     from wpctrl import console
     from wpctrl.tasks import TASKS
+    from wpctrl.tasks._validate import STATE_ROBOT
     from wpctrl.tasks.maniskill_side import make_maniskill, no_visuals
 
     with warnings.catch_warnings():
         if not console.VERBOSE:  # SAPIEN's note on import; the env renders nothing (render_backend="none")
             warnings.filterwarnings("ignore", message=SAPIEN_VULKAN_NOTE, category=UserWarning)
-        env = make_maniskill(task, control_mode, reward_mode="normalized_dense")
+        # the robot wpctrl's tasks build (ManiSkill's StackCube-v1 and PegInsertionSide-v1 default to panda_wristcam:
+        # a 0.56 kg camera on the hand, which the policy never learned with)
+        env = make_maniskill(task, control_mode, reward_mode="normalized_dense", robot_uids=STATE_ROBOT)
     # the registry's episode length (ManiSkill's @register_env value: the tasks' tests keep them equal); gym.make's
     # spec carries none for ManiSkill's envs, whose own TimeLimitWrapper holds it
     steps = TASKS[task].max_episode_steps

@@ -584,9 +584,10 @@ def test_a_video_of_a_task_without_a_goal_marker(tmp_path_factory, tmp_path, cap
 
 @pytest.mark.slow  # a short PPO run and the real ManiSkill (CI runs it)
 def test_evaluate_in_the_real_maniskill_runs_a_new_task(tmp_path_factory, tmp_path):
-    """``wpctrl evaluate --sim maniskill`` builds StackCube-v1's real ManiSkill env (rendering stubbed out) and runs
-    the exported policy for one episode of the registry's length, its return that of the same episode rolled by hand
-    (reset inside the stub, as the evaluation resets)."""
+    """``wpctrl evaluate --sim maniskill`` builds StackCube-v1's real ManiSkill env (rendering stubbed out, ManiSkill's
+    ``panda``: the robot the task builds, where ManiSkill's default is ``panda_wristcam``) and runs the exported policy
+    for one episode of the registry's length, its return that of the same episode rolled by hand (reset inside the
+    stub, as the evaluation resets)."""
     pytest.importorskip("mani_skill")
     from wpctrl.__main__ import main
     from wpctrl.tasks.maniskill_side import make_maniskill, no_visuals
@@ -600,7 +601,7 @@ def test_evaluate_in_the_real_maniskill_runs_a_new_task(tmp_path_factory, tmp_pa
     r = json.loads(result.read_text())
     assert (r["task"], r["sim"], r["episodes"], [e["seed"] for e in r["records"]]) == (task, "maniskill", 1, [3])
     policy = torch.jit.load(exported["policy.ts"])
-    env = make_maniskill(task, "pd_joint_delta_pos", reward_mode="normalized_dense")
+    env = make_maniskill(task, "pd_joint_delta_pos", reward_mode="normalized_dense", robot_uids="panda")
     ret = 0.0
     with torch.inference_mode():
         with no_visuals():

@@ -4,7 +4,8 @@ ManiSkill builds visual shapes and render materials for every actor and robot li
 device. :func:`no_visuals` skips exactly that side while an env is built: the actor builders' ``add_*_visual*``
 calls, the URDF loader's link visuals, the MJCF loader's visual bodies and the render materials and textures.
 Physics, collision shapes, physical materials, controllers, observations, rewards and evaluation stay ManiSkill's own.
-:func:`make_maniskill` builds one env that way (``sim_backend="physx_cpu"``, ``render_backend="none"``, one env).
+:func:`make_maniskill` builds one env that way (``sim_backend="physx_cpu"``, ``render_backend="none"``, one env,
+the tasks' ``panda``).
 
 Needs the ``maniskill`` extra (mani-skill 3.0.1); nothing here is imported by ``wpctrl.tasks`` itself.
 """
@@ -93,7 +94,12 @@ def no_visuals():
 
 def make_maniskill(env_id: str, control_mode: str, **kwargs):
     """The real ManiSkill env (``gym.make``: PhysX CPU, one env, ``obs_mode="state"``, rendering stubbed out), reset
-    once with seed 0. ``kwargs`` go to ``gym.make`` (e.g. ``reward_mode``, ``robot_init_qpos_noise``)."""
+    once with seed 0, on ManiSkill's ``panda``, the robot wpctrl's tasks build (StackCube-v1 and PegInsertionSide-v1
+    default to ``panda_wristcam`` there: a 0.56 kg camera on the hand). ``kwargs`` go to ``gym.make`` (e.g.
+    ``reward_mode``, ``robot_init_qpos_noise``, another ``robot_uids``)."""
+    from ._validate import STATE_ROBOT
+
+    kwargs.setdefault("robot_uids", STATE_ROBOT)
     try:
         import gymnasium as gym
         import mani_skill.envs  # noqa: F401  (registers the tasks)

@@ -83,15 +83,12 @@ def evaluate_maniskill(policy, task: str, control_mode: str, episodes: int, seed
     :class:`.record.EpisodeRecorder` that is shown every episode and writes its file once all have run."""
     from wpctrl import console
     from wpctrl.tasks import TASKS
-    from wpctrl.tasks._validate import STATE_ROBOT
     from wpctrl.tasks.maniskill_side import make_maniskill, no_visuals
 
     with warnings.catch_warnings():
         if not console.VERBOSE:  # SAPIEN's note on import; the env renders nothing (render_backend="none")
             warnings.filterwarnings("ignore", message=SAPIEN_VULKAN_NOTE, category=UserWarning)
-        # the robot wpctrl's tasks build (ManiSkill's StackCube-v1 and PegInsertionSide-v1 default to panda_wristcam:
-        # a 0.56 kg camera on the hand, which the policy never learned with)
-        env = make_maniskill(task, control_mode, reward_mode="normalized_dense", robot_uids=STATE_ROBOT)
+        env = make_maniskill(task, control_mode, reward_mode="normalized_dense")  # on the robot the policy learned with
     # the registry's episode length (ManiSkill's @register_env value: the tasks' tests keep them equal); gym.make's
     # spec carries none for ManiSkill's envs, whose own TimeLimitWrapper holds it
     steps = TASKS[task].max_episode_steps

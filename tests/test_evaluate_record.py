@@ -25,8 +25,9 @@ SEED = 7
 """Episodes ``SEED`` and ``SEED + 1``."""
 
 
-def _export_policy(folder, task: str = TASK, mode: str = MODE, actions: int = ACTIONS):
-    """A ``task`` policy as ``wpctrl export`` writes it, from a checkpoint with random weights (nothing trained)."""
+def _export_policy(folder, task: str = TASK, mode: str = MODE, actions: int = ACTIONS, robot: str | None = None):
+    """A ``task`` policy as ``wpctrl export`` writes it, from a checkpoint with random weights (nothing trained);
+    ``robot``: the checkpoint's ``robot_uids`` (None: none recorded, as before the robot was)."""
     from wpctrl.tasks import TASKS
     from wpctrl.train.actor import PolicyActor
     from wpctrl.train.export import export
@@ -40,6 +41,8 @@ def _export_policy(folder, task: str = TASK, mode: str = MODE, actions: int = AC
     infos = {"format": "wpctrl-task-policy-1", "task": task, "control_mode": mode, "obs_dim": obs_dim,
              "num_actions": actions, "action_low": [-1.0] * actions, "action_high": [1.0] * actions,
              "obs_fields": [["agent", "qpos", 9]], "substeps": 4, "partial_reset": True, "actor": cfg}  # fmt: skip
+    if robot is not None:
+        infos["robot_uids"] = robot
     folder.mkdir(parents=True)
     torch.save({"actor_state_dict": weights, "infos": infos}, folder / "policy.pt")
     return export(folder, onnx=False)["policy.ts"]
@@ -164,7 +167,8 @@ def test_wpctrl_replay_runs_the_recording_on_newton(recorded, tmp_path, capsys):
     other = {**recorded["data"], "header": {**recorded["data"]["header"], "task": "PushCube-v1"}}
     with pytest.raises(ConfigError, match=r"init_state_dict\.actors\['goal_site'\] is not part of PushCube-v1"):
         replay(other, env=env)
-    with pytest.raises(ConfigError, match=f"env is {TASK} / {MODE} / 3 envs, the file {TASK} / {MODE} / 2 episodes"):
+    refusal = f"env is {TASK} / panda / {MODE} / 3 envs, the file {TASK} / panda / {MODE} / 2 episodes"
+    with pytest.raises(ConfigError, match=refusal):
         replay(recorded["data"], env=env)
     env.close()
 
@@ -230,20 +234,25 @@ def test_record_is_refused_with_sim_newton_and_for_a_name_it_cannot_write(tmp_pa
         evaluate(policy, sim="maniskill", record=tmp_path / "x.txt")
 
 
-@pytest.mark.slow  # the real ManiSkill and a Newton replay
-def test_a_task_whose_maniskill_default_robot_is_another_is_evaluated_on_the_tasks_robot(tmp_path, capsys):
+@pytest.mark.slow  # the real ManiSkill and Newton replays
+@pytest.mark.parametrize("robot", [None, "panda_wristcam"])
+def test_a_policy_is_evaluated_on_the_robot_it_learned_on(tmp_path, capsys, robot):
     """ManiSkill's StackCube-v1 defaults to ``panda_wristcam`` (``panda_v3.urdf``: a 0.56 kg camera and its collision
-    box on the hand); wpctrl's task builds ``panda``, so ``wpctrl evaluate --sim maniskill`` asks ManiSkill for the same
-    robot (measured with a StackCube policy trained on Newton: cube A grasped in 75 % of the steps on ManiSkill's
-    ``panda``, 20 % on ``panda_wristcam``, 82 % on Newton), records it, and ``wpctrl replay`` takes the recording."""
-    policy = _export_policy(tmp_path / "run", "StackCube-v1", "pd_joint_delta_pos", 8)
-    path = tmp_path / "stack.json.gz"
+    box on the hand). ``wpctrl evaluate --sim maniskill`` asks ManiSkill for the robot the policy's ``policy.json``
+    names (``panda`` where it names none: every policy exported before the robot was recorded learned on ``panda``;
+    measured with such a StackCube policy: cube A grasped in 75 % of the steps on ManiSkill's ``panda``, 20 % on
+    ``panda_wristcam``, 82 % on Newton), records it, and ``wpctrl replay`` builds it to replay the recording."""
+    want = robot or "panda"
+    policy = _export_policy(tmp_path / "run", "StackCube-v1", "pd_joint_delta_pos", 8, robot)
+    assert json.loads((tmp_path / "run" / "policy.json").read_text())["robot_uids"] == want
+    path, out = tmp_path / "stack.json.gz", tmp_path / "result.json"
     argv = ["evaluate", "--policy", policy, "--sim", "maniskill", "--episodes", "1", "--seed", str(SEED),
-            "--record", str(path), "--no-progress"]  # fmt: skip
+            "--record", str(path), "--out", str(out), "--no-progress"]  # fmt: skip
     assert main(argv) == 0
+    assert json.loads(out.read_text())["robot_uids"] == want
     data = json.loads(gzip.decompress(path.read_bytes()))
-    assert data["header"]["env_kwargs"]["robot_uids"] == "panda"
-    assert list(data["episodes"][0]["init_state_dict"]["articulations"]) == ["panda"]
+    assert data["header"]["env_kwargs"]["robot_uids"] == want
+    assert list(data["episodes"][0]["init_state_dict"]["articulations"]) == [want]
     capsys.readouterr()
     assert main(["replay", str(path), "--no-progress"]) == 0
     assert "StackCube-v1" in capsys.readouterr().out

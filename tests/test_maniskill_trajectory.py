@@ -119,7 +119,14 @@ def _all_modes(mode):
 BAD = {
     "other task": (dict(meta=_set("env_id", "PlugCharger-v1")), "env_info.env_id 'PlugCharger-v1'.*PushCube-v1"),
     "no env_info": (dict(meta=lambda m: m.update(env_info=None)), "'env_info' expected an object"),
-    "other robot": (dict(meta=_set("env_kwargs.robot_uids", "fetch")), "env_kwargs.robot_uids expected 'panda'"),
+    "other robot": (
+        dict(meta=_set("env_kwargs.robot_uids", "fetch")),
+        r"env_kwargs.robot_uids expected one of \['panda', 'panda_wristcam'\].*got 'fetch'",
+    ),
+    "states of another robot": (
+        dict(meta=_set("env_kwargs.robot_uids", "panda_wristcam")),
+        r"traj_0/env_states/articulations/panda_wristcam is missing",
+    ),
     "other control mode": (dict(meta=_all_modes("pd_base_vel")), "control_mode 'pd_base_vel' is not one"),
     "mixed control modes": (dict(meta=_set("control_mode", "pd_joint_pos", 1)), r"episodes\[1\].control_mode"),
     "env_kwargs mode": (dict(meta=_set("env_kwargs.control_mode", "pd_joint_pos")), "env_kwargs.control_mode"),

@@ -132,12 +132,19 @@ REPLAY_BAD = {
     "panda missing": (
         EE,
         _ep(lambda ep: ep["init_state_dict"]["articulations"].pop("panda")),
-        rf"{ISD}\.articulations has no 'panda' entry, which PushCube-v1 needs",
+        rf"{ISD}\.articulations expected one robot of \['panda', 'panda_wristcam'\], got \[\]",
     ),
     "another robot": (
         EE,
         _ep(lambda ep: ep["init_state_dict"]["articulations"].__setitem__("fetch", [0.0] * 31)),
-        rf"{ISD}\.articulations\['fetch'\] is not part of PushCube-v1 \(its articulations: \['panda'\]",
+        rf"{ISD}\.articulations expected one robot of \['panda', 'panda_wristcam'\], got \['fetch', 'panda'\]",
+    ),
+    "robots of two episodes": (
+        EE,
+        lambda d: d["episodes"][1]["init_state_dict"].update(
+            articulations={"panda_wristcam": d["episodes"][1]["init_state_dict"]["articulations"]["panda"]}),
+        r"episodes\[1\]\.init_state_dict\.articulations\['panda_wristcam'\] is a state of the robot 'panda_wristcam', "
+        r"expected 'panda'",
     ),
     "actor width": (
         EE,
@@ -292,6 +299,12 @@ STATE_BAD = {
         r"'goal_region'\], got \['goal_region', 'table-workspace'\]\)",
     ),
     "panda missing": (_state_edit(lambda s: s["articulations"].pop("panda")), None, rf"{SR} has no 'panda' entry"),
+    "the other robot's state": (
+        _state_edit(lambda s: s["articulations"].__setitem__("panda_wristcam", s["articulations"].pop("panda"))),
+        None,
+        rf"{SR}\['panda_wristcam'\] is a state of the robot 'panda_wristcam', expected 'panda' \(PushCube-v1 on "
+        r"'panda'; make\(\.\.\., robot_uids='panda_wristcam'\) builds the other\)",
+    ),
     "another robot": (
         _state_edit(lambda s: s["articulations"].__setitem__("fetch", torch.zeros(N, 31))),
         None,

@@ -27,6 +27,9 @@ from wpctrl.config import ConfigError  # noqa: E402
 from wpctrl.tasks import peg_insertion_side as P  # noqa: E402
 
 ENV_ID = "PegInsertionSide-v1"
+ROBOT = "panda"
+"""The robot of ManiSkill's motion-planning demos (the public sample): ManiSkill's default for the task is
+``panda_wristcam``, tested in ``tests/test_wristcam.py``."""
 DEMOS = Path("/work/shared/tasks/PegInsertionSide-v1__pd_joint_pos.json.gz")
 FAST = T.TaskPhysics(substeps=2)
 """The bookkeeping and definitions, not the physics' fidelity: 2 MuJoCo steps per physics step."""
@@ -45,8 +48,8 @@ def _state(ep: dict, k: int | None = None) -> dict:
     if k is not None:
         st["actors"]["peg"][0, :7] = torch.tensor(ep["actor_poses"]["peg"][k])
         st["actors"]["peg"][0, 7:] = 0.0
-        st["articulations"]["panda"][0, 13:22] = torch.tensor(ep["qpos"][k])
-        st["articulations"]["panda"][0, 22:31] = torch.tensor(ep["qvel"][k])
+        st["articulations"][ROBOT][0, 13:22] = torch.tensor(ep["qpos"][k])
+        st["articulations"][ROBOT][0, 22:31] = torch.tensor(ep["qvel"][k])
     return st
 
 
@@ -119,7 +122,7 @@ def test_the_drawn_geometry_is_what_collides():
     """Two envs reconfigured to two seeds: MuJoCo-Warp's boxes of each world are that seed's peg and box with a hole,
     the peg's mass is its box's at density 1000; after steps the peg rests on the table at its own half width and the
     kinematic box has not moved. Reconfigured to two other seeds, all of it follows (the solver was told)."""
-    env = T.make(ENV_ID, num_envs=2, control_mode="pd_joint_pos", physics=FAST, auto_reset=False)
+    env = T.make(ENV_ID, robot_uids=ROBOT, num_envs=2, control_mode="pd_joint_pos", physics=FAST, auto_reset=False)
     assert env.reconfiguration_freq == 0
     task, sc = T.TASKS[ENV_ID], env.scene
     for seeds in ([100, 102], [103, 104]):
@@ -140,7 +143,7 @@ def test_the_drawn_geometry_is_what_collides():
             mass = env.model.body_mass.numpy()[sc.actor_body0["peg"] + e * sc.bodies_per_env]
             assert mass == pytest.approx(1000 * 8 * length * radius**2, rel=1e-5)
         start = env.get_state_dict()["actors"]
-        hold = torch.cat([env.get_state_dict()["articulations"]["panda"][:, 13:20], torch.ones(2, 1)], dim=1)
+        hold = torch.cat([env.get_state_dict()["articulations"][ROBOT][:, 13:20], torch.ones(2, 1)], dim=1)
         for _ in range(10):
             env.step(hold)
         end = env.get_state_dict()["actors"]
@@ -153,7 +156,7 @@ def test_reconfiguration_follows_maniskills_frequency():
     """One env: every reset draws its scene from the reset's seed (``reconfiguration_freq`` 1, ManiSkill's default
     there); several envs: only ``options["reconfigure"]``; a partial reset cannot reconfigure; a bad frequency is
     refused naming it."""
-    one = T.make(ENV_ID, num_envs=1, physics=FAST, auto_reset=False)
+    one = T.make(ENV_ID, robot_uids=ROBOT, num_envs=1, physics=FAST, auto_reset=False)
     assert one.reconfiguration_freq == 1
     task = T.TASKS[ENV_ID]
     for seed in (100, 7):
@@ -161,7 +164,7 @@ def test_reconfiguration_follows_maniskills_frequency():
         np.testing.assert_allclose(one.episode_params, task.draw_episode_params(np.array([seed])))
         obs = one.get_obs()[0].numpy()
         assert obs[32:35] == pytest.approx(one.episode_params[0, [P.LENGTH, P.RADIUS, P.RADIUS]], rel=1e-6)
-    two = T.make(ENV_ID, num_envs=2, physics=FAST, auto_reset=False, seed=5)
+    two = T.make(ENV_ID, robot_uids=ROBOT, num_envs=2, physics=FAST, auto_reset=False, seed=5)
     before = two.episode_params.copy()
     two.reset(seed=[100, 102])
     np.testing.assert_array_equal(two.episode_params, before)
@@ -169,7 +172,7 @@ def test_reconfiguration_follows_maniskills_frequency():
         two.reset(seed=[100, 102], options={"reconfigure": True, "env_idx": [0]})
     np.testing.assert_array_equal(two.episode_params, before)
     with pytest.raises(ConfigError, match="reconfiguration_freq"):
-        T.make(ENV_ID, num_envs=1, reconfiguration_freq=-1)
+        T.make(ENV_ID, robot_uids=ROBOT, num_envs=1, reconfiguration_freq=-1)
 
 
 def test_recorded_states_give_the_recorded_observation_and_the_rederived_rewards():
@@ -179,7 +182,7 @@ def test_recorded_states_give_the_recorded_observation_and_the_rederived_rewards
     forces written along / against their opening directions), and the recorded reward is the re-derivation's for
     one of the two grasps. The state dict comes back as loaded."""
     eps = _demos()["episodes"][:2]
-    env = T.make(ENV_ID, num_envs=1, control_mode="pd_joint_pos", physics=FAST, auto_reset=False)
+    env = T.make(ENV_ID, robot_uids=ROBOT, num_envs=1, control_mode="pd_joint_pos", physics=FAST, auto_reset=False)
     checked = {"success": 0, "grasp-dependent": 0}
     for ep in eps:
         env.reset(seed=ep["seed"])
@@ -217,7 +220,7 @@ def test_success_flips_at_the_edges_of_the_hole(axis, edge):
     """A demo's inserted peg moved (in the hole's frame) so that its head sits 0.5 mm inside, then 0.5 mm outside, an
     edge of ``has_peg_inserted``: 1.5 cm before the hole's centre along its axis, the hole's half width sideways."""
     ep = _demos()["episodes"][0]
-    env = T.make(ENV_ID, num_envs=1, control_mode="pd_joint_pos", physics=FAST, auto_reset=False)
+    env = T.make(ENV_ID, robot_uids=ROBOT, num_envs=1, control_mode="pd_joint_pos", physics=FAST, auto_reset=False)
     env.reset(seed=ep["seed"])
     g = ep["episode_geometry"]
     box7 = ep["init_state_dict"]["actors"]["box_with_hole"][:7]
@@ -303,7 +306,7 @@ def test_the_tasks_physics_is_its_declared_departures():
     assert own.finger_torsion > 0.0 and own == T.TaskPhysics(finger_torsion=own.finger_torsion)
     assert T.task_physics(ENV_ID, substeps=8) == T.TaskPhysics(**PHYSICS, substeps=8)
     assert T.task_physics("PushCube-v1") == T.TaskPhysics()
-    env = T.make(ENV_ID, num_envs=1, auto_reset=False)
+    env = T.make(ENV_ID, robot_uids=ROBOT, num_envs=1, auto_reset=False)
     assert env.physics == own
 
 
@@ -315,7 +318,7 @@ def maniskill():
     pytest.importorskip("mani_skill")
     from maniskill_tasks_side import make_maniskill
 
-    return make_maniskill(ENV_ID, "pd_joint_pos", robot_uids="panda", max_episode_steps=500)
+    return make_maniskill(ENV_ID, "pd_joint_pos", robot_uids=ROBOT, max_episode_steps=500)
 
 
 def _reset(ms, seed: int):
@@ -376,7 +379,7 @@ def test_same_state_gives_maniskills_obs_success_and_rewards(maniskill):
     within 1e-5, success as ManiSkill's ``evaluate()``, dense and normalized reward as its ``compute_dense_reward``
     with the grasp set either way (ManiSkill: ``is_grasping`` patched to answer it)."""
     base = maniskill.unwrapped
-    nw = T.make(ENV_ID, num_envs=1, control_mode="pd_joint_pos", physics=FAST, auto_reset=False)
+    nw = T.make(ENV_ID, robot_uids=ROBOT, num_envs=1, control_mode="pd_joint_pos", physics=FAST, auto_reset=False)
     seen = {"success": 0, "pre_inserted": 0}
     for ep in _demos()["episodes"][:2]:
         _reset(maniskill, ep["seed"])
@@ -420,14 +423,14 @@ def test_reset_distribution_is_maniskills(maniskill):
     def draws(states):
         peg = np.concatenate([s["actors"]["peg"].numpy() for s in states])
         box = np.concatenate([s["actors"]["box_with_hole"].numpy() for s in states])
-        arm = np.concatenate([s["articulations"]["panda"][:, 13:20].numpy() for s in states])
+        arm = np.concatenate([s["articulations"][ROBOT][:, 13:20].numpy() for s in states])
         return peg, box, arm
 
     theirs = []
     for seed in range(25):
         _reset(maniskill, seed)
         theirs.append(maniskill.unwrapped.get_state_dict())
-    env = T.make(ENV_ID, num_envs=4, physics=FAST, auto_reset=False)
+    env = T.make(ENV_ID, robot_uids=ROBOT, num_envs=4, physics=FAST, auto_reset=False)
     ours = []
     for seed in range(25):
         env.reset(seed=seed, options={"reconfigure": True})

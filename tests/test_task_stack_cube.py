@@ -39,6 +39,9 @@ import wpctrl.tasks as T  # noqa: E402
 from wpctrl.tasks.definitions import PANDA_GRIPPER_WIDTH, PANDA_REST_QPOS  # noqa: E402
 
 ENV_ID = "StackCube-v1"
+ROBOT = "panda"
+"""The robot of ManiSkill's motion-planning demos (the public sample): ManiSkill's default for the task is
+``panda_wristcam``, tested in ``tests/test_wristcam.py``."""
 DEMOS = Path("/work/shared/tasks/StackCube-v1__pd_joint_pos.json.gz")
 N = 4
 FAST = T.TaskPhysics(substeps=2)
@@ -94,7 +97,7 @@ def ref_dense(tcp_p, a, b, finger_qpos, flags):
 def ref_obs(state, tcp_pose):
     """The flattened ``obs_mode="state"`` vector: qpos, qvel, tcp_pose, cubeA_pose, cubeB_pose, tcp_to_cubeA_pos,
     tcp_to_cubeB_pos, cubeA_to_cubeB_pos."""
-    robot = np.asarray(state["articulations"]["panda"], np.float64)
+    robot = np.asarray(state["articulations"][ROBOT], np.float64)
     a = np.asarray(state["actors"]["cubeA"], np.float64)
     b = np.asarray(state["actors"]["cubeB"], np.float64)
     tcp = tcp_pose[:, :3]
@@ -112,7 +115,7 @@ def tcp_pose(env) -> np.ndarray:  # checked against ManiSkill's in the side-by-s
 
 @pytest.fixture(scope="module")
 def env():
-    return T.make(ENV_ID, num_envs=N, control_mode="pd_joint_pos", physics=FAST, auto_reset=False)
+    return T.make(ENV_ID, robot_uids=ROBOT, num_envs=N, control_mode="pd_joint_pos", physics=FAST, auto_reset=False)
 
 
 # -- the declaration -----------------------------------------------------------------------------------------------
@@ -154,7 +157,7 @@ def test_reset_draws_follow_maniskills_placement_sampler(env):
         s = env.get_state_dict()
         a.append(s["actors"]["cubeA"].numpy())
         b.append(s["actors"]["cubeB"].numpy())
-        noise.append(s["articulations"]["panda"][:, 13:20].numpy() - np.asarray(PANDA_REST_QPOS[:7]))
+        noise.append(s["articulations"][ROBOT][:, 13:20].numpy() - np.asarray(PANDA_REST_QPOS[:7]))
     a, b, noise = np.concatenate(a), np.concatenate(b), np.concatenate(noise)
     assert len({tuple(r) for r in a[:, :2].round(6)}) == len(a)  # every env of every reset its own draw
     for c in (a, b):
@@ -198,7 +201,7 @@ def _stack_states(env, seed: int) -> dict:
         a[e, 7:10] = torch.tensor([0.6, 0.0, 0.8]) * v
         a[e, 10:13] = torch.tensor([0.0, 0.6, 0.8]) * w
     s["actors"]["cubeA"] = a
-    s["articulations"]["panda"][:, 20:22] = torch.tensor([0.012, 0.011])
+    s["articulations"][ROBOT][:, 20:22] = torch.tensor([0.012, 0.011])
     return s
 
 
@@ -221,7 +224,7 @@ def test_flags_reward_and_observation_are_the_numpy_rederivation(env, grasp):
         assert flags[2].tolist() == [True, False, True, False] and flags[3].tolist() == [True, True, False, False]
         if grasp:
             assert flags[1].tolist() == [True, True, True, False]
-        fingers = s["articulations"]["panda"][:, 20:22].numpy()
+        fingers = s["articulations"][ROBOT][:, 20:22].numpy()
         dense = ref_dense(tcp_pose(env)[:, :3], a, b, fingers, flags)
         np.testing.assert_allclose(env.reward_dense.numpy(), dense, atol=1e-5)
         obs = env.get_obs().numpy()
@@ -239,8 +242,8 @@ def test_maniskills_motion_planning_demos_replay_to_the_same_stack():
     data = _demos()
     eps = data["episodes"]
     n, steps = len(eps), max(len(e["actions"]) for e in eps)
-    env = T.make(ENV_ID, num_envs=n, control_mode="pd_joint_pos", auto_reset=False, ignore_terminations=True,
-                 max_episode_steps=steps)  # fmt: skip
+    env = T.make(ENV_ID, robot_uids=ROBOT, num_envs=n, control_mode="pd_joint_pos", auto_reset=False,
+                 ignore_terminations=True, max_episode_steps=steps)  # fmt: skip
     state = {g: {k: torch.tensor([e["init_state_dict"][g][k] for e in eps]) for k in eps[0]["init_state_dict"][g]}
              for g in ("actors", "articulations")}  # fmt: skip
     env.set_state_dict(state)
@@ -273,7 +276,7 @@ def maniskill():
     pytest.importorskip("mani_skill")
     from maniskill_tasks_side import make_maniskill
 
-    return make_maniskill(ENV_ID, "pd_joint_pos", robot_uids="panda", max_episode_steps=500)
+    return make_maniskill(ENV_ID, "pd_joint_pos", robot_uids=ROBOT, max_episode_steps=500)
 
 
 @pytest.mark.slow
@@ -304,7 +307,7 @@ def test_definitions_are_maniskills(maniskill):
     maniskill.reset(seed=0)
     assert float(base.agent.robot.get_qlimits()[0, -1, 1] * 2) == pytest.approx(PANDA_GRIPPER_WIDTH)
     assert base.cube_half_size.tolist() == pytest.approx([S.CUBE_HALF_SIZE] * 3)
-    newton_env = T.make(ENV_ID, num_envs=1, physics=FAST)
+    newton_env = T.make(ENV_ID, robot_uids=ROBOT, num_envs=1, physics=FAST)
     mass = newton_env.model.body_mass.numpy()
     for name in ("cubeA", "cubeB"):
         body = getattr(base, name)._objs[0].find_component_by_type(sapien.physx.PhysxRigidDynamicComponent)
@@ -324,7 +327,7 @@ def test_same_state_gives_maniskills_obs_flags_and_rewards(maniskill):
     fingers' contact forces on cube A written along / against their opening directions). The state dict round trip."""
     eps = _demos()["episodes"][:2]
     states = maniskill_demo_states(maniskill, eps, every=4)
-    nw = T.make(ENV_ID, num_envs=1, control_mode="pd_joint_pos", physics=FAST, auto_reset=False)
+    nw = T.make(ENV_ID, robot_uids=ROBOT, num_envs=1, control_mode="pd_joint_pos", physics=FAST, auto_reset=False)
     flags = ("is_cubeA_grasped", "is_cubeA_on_cubeB", "is_cubeA_static")
     seen = check_same_state_flags_and_rewards(maniskill, nw, states, flags, 8.0)
     assert seen["on"] >= 4 and seen["success"] >= 2, seen  # the demos' stacked states are among them
@@ -342,7 +345,7 @@ def test_reset_distribution_is_maniskills(maniskill, env):
             s = get()
             a.append(s["actors"]["cubeA"][:, :2].numpy())
             b.append(s["actors"]["cubeB"][:, :2].numpy())
-            noise.append(s["articulations"]["panda"][:, 13:20].numpy() - np.asarray(PANDA_REST_QPOS[:7]))
+            noise.append(s["articulations"][ROBOT][:, 13:20].numpy() - np.asarray(PANDA_REST_QPOS[:7]))
         return np.concatenate(a), np.concatenate(b), np.concatenate(noise)
 
     ta, tb, tn = draws(lambda s: maniskill.reset(seed=s), maniskill.unwrapped.get_state_dict)
@@ -360,8 +363,8 @@ def test_one_control_step_along_the_demos_lands_where_maniskills_does(maniskill)
     """From every state of two demos, one ``pd_joint_pos`` step on both simulators: the arm's joints, cube A and
     ``is_cubeA_grasped`` (the contact forces of the step)."""
     base = maniskill.unwrapped
-    nw = T.make(ENV_ID, num_envs=1, control_mode="pd_joint_pos", auto_reset=False, ignore_terminations=True,
-                max_episode_steps=500)  # fmt: skip
+    nw = T.make(ENV_ID, robot_uids=ROBOT, num_envs=1, control_mode="pd_joint_pos", auto_reset=False,
+                ignore_terminations=True, max_episode_steps=500)  # fmt: skip
     arm, cube, grasp = [], [], []
     for ep in _demos()["episodes"][:2]:
         maniskill.reset(seed=ep["seed"])
@@ -372,7 +375,7 @@ def test_one_control_step_along_the_demos_lands_where_maniskills_does(maniskill)
             _, _, _, _, ours = nw.step(act)
             _, _, _, _, theirs = maniskill.step(act)
             a, b = base.get_state_dict(), nw.get_state_dict()
-            qa, qb = a["articulations"]["panda"][0, 13:20], b["articulations"]["panda"][0, 13:20]
+            qa, qb = a["articulations"][ROBOT][0, 13:20], b["articulations"][ROBOT][0, 13:20]
             arm.append(float((qa - qb).abs().max()))
             cube.append(float((a["actors"]["cubeA"][0, :3] - b["actors"]["cubeA"][0, :3]).norm()))
             grasp.append(bool(theirs["is_cubeA_grasped"][0]) == bool(ours["is_cubeA_grasped"][0]))

@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -553,12 +554,13 @@ def test_every_registered_task_trains_exports_and_evaluates_on_newton(task, tmp_
     assert module.task == task and tuple(module(torch.zeros(3, spec.obs_dim)).shape) == (3, 8)
     meta = json.loads((run / "policy.json").read_text())
     assert (meta["task"], meta["obs_dim"], meta["max_episode_steps"]) == (task, spec.obs_dim, spec.max_episode_steps)
+    assert summary["robot_uids"] == infos["robot_uids"] == meta["robot_uids"] == spec.robot_uids  # the task's default
     result = run / "newton.json"
     argv = ["evaluate", "--policy", exported["policy.ts"], "--sim", "newton", "--episodes", "2", "--seed", "4",
             "--no-progress", "--out", str(result)]  # fmt: skip
     assert main(argv) == 0
     r = json.loads(result.read_text())
-    assert (r["task"], r["episodes"], r["substeps"]) == (task, 2, 2)
+    assert (r["task"], r["episodes"], r["substeps"], r["robot_uids"]) == (task, 2, 2, spec.robot_uids)
     assert 0.0 <= r["success_rate"] <= 1.0 and r["mean_episode_reward"] > 0.0
     assert f"{task} on newton: success" in capsys.readouterr().out
 
@@ -584,10 +586,10 @@ def test_a_video_of_a_task_without_a_goal_marker(tmp_path_factory, tmp_path, cap
 
 @pytest.mark.slow  # a short PPO run and the real ManiSkill (CI runs it)
 def test_evaluate_in_the_real_maniskill_runs_a_new_task(tmp_path_factory, tmp_path):
-    """``wpctrl evaluate --sim maniskill`` builds StackCube-v1's real ManiSkill env (rendering stubbed out, ManiSkill's
-    ``panda``: the robot the task builds, where ManiSkill's default is ``panda_wristcam``) and runs the exported policy
-    for one episode of the registry's length, its return that of the same episode rolled by hand (reset inside the
-    stub, as the evaluation resets)."""
+    """``wpctrl evaluate --sim maniskill`` builds StackCube-v1's real ManiSkill env (rendering stubbed out, on the
+    robot the policy learned on: the task's default, ManiSkill's ``panda_wristcam``, recorded in ``policy.json``) and
+    runs the exported policy for one episode of the registry's length, its return that of the same episode rolled by
+    hand (reset inside the stub, as the evaluation resets)."""
     pytest.importorskip("mani_skill")
     from wpctrl.__main__ import main
     from wpctrl.tasks.maniskill_side import make_maniskill, no_visuals
@@ -600,8 +602,9 @@ def test_evaluate_in_the_real_maniskill_runs_a_new_task(tmp_path_factory, tmp_pa
     assert main(argv) == 0
     r = json.loads(result.read_text())
     assert (r["task"], r["sim"], r["episodes"], [e["seed"] for e in r["records"]]) == (task, "maniskill", 1, [3])
+    assert r["robot_uids"] == json.loads(Path(exported["policy.json"]).read_text())["robot_uids"] == "panda_wristcam"
     policy = torch.jit.load(exported["policy.ts"])
-    env = make_maniskill(task, "pd_joint_delta_pos", reward_mode="normalized_dense", robot_uids="panda")
+    env = make_maniskill(task, "pd_joint_delta_pos", reward_mode="normalized_dense", robot_uids="panda_wristcam")
     ret = 0.0
     with torch.inference_mode():
         with no_visuals():

@@ -9,10 +9,10 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from ..config import ConfigError
+from .names import ROBOTS
 
 __all__ = [
     "STATE_ACTOR_WIDTH",
-    "STATE_ROBOT",
     "STATE_ROBOT_WIDTH",
     "action_tensor",
     "env_mask",
@@ -20,14 +20,13 @@ __all__ = [
     "seed_value",
     "state_dict_arrays",
     "state_field",
+    "state_robot",
 ]
 
 STATE_ACTOR_WIDTH = 13
 """An actor's entry of ManiSkill's state dict: p (3), q wxyz (4), linear velocity (3), angular velocity (3)."""
-STATE_ROBOT = "panda"
-"""The one articulation of the tasks' state dicts."""
 STATE_ROBOT_WIDTH = 31
-"""The Panda's entry: root pose (7), root velocity (6), qpos (9), qvel (9)."""
+"""The robot's entry (``panda`` or ``panda_wristcam``): root pose (7), root velocity (6), qpos (9), qvel (9)."""
 
 
 def action_tensor(action, num_envs: int, action_dim: int, device):
@@ -92,6 +91,11 @@ def reset_options(options, known: tuple[str, ...]) -> dict:
     return options
 
 
+def state_robot(state: dict) -> str:
+    """The robot of a state dict checked by :func:`state_dict_arrays`: its one articulation's name."""
+    return next(iter(state["articulations"]))
+
+
 def state_field(root: str, dotted: bool = False) -> Callable[..., str]:
     """How the refusals of :func:`state_dict_arrays` name a field: ``field(group)`` and ``field(group, name)``, as
     Python indexing (``state['actors']['cube']``: a dict the caller holds) or, ``dotted``, as a path into a file
@@ -105,8 +109,8 @@ def state_field(root: str, dotted: bool = False) -> Callable[..., str]:
 
 
 def state_dict_arrays(state, actors: Sequence[str] | None, task: str, who: str, root: str = "state",
-                      dotted: bool = False, rows: int | None = None,
-                      robot_width: int = STATE_ROBOT_WIDTH) -> dict[str, np.ndarray]:  # fmt: skip
+                      dotted: bool = False, rows: int | None = None, robot_width: int = STATE_ROBOT_WIDTH,
+                      robot: str | None = None) -> dict[str, np.ndarray]:  # fmt: skip
     """The entries of a state dict in ManiSkill's layout (``{"actors": {name: (.., 13)}, "articulations": {"panda":
     (.., 31)}}``) as float32 numpy arrays by name, checked for what a task's env loads: exactly the task's ``actors``
     (``None``: any names; an actor of another task or one missing is refused, naming it), the ``panda``
@@ -118,11 +122,21 @@ def state_dict_arrays(state, actors: Sequence[str] | None, task: str, who: str, 
     if not isinstance(state, dict) or "actors" not in state or "articulations" not in state:
         got = sorted(state, key=str) if isinstance(state, dict) else type(state).__name__
         raise ConfigError(f"{who}{root} expected a dict with 'actors' and 'articulations', got {got}")
-    wanted = {"actors": None if actors is None else list(actors), "articulations": [STATE_ROBOT]}
     for group in ("actors", "articulations"):
         if not isinstance(state[group], dict):
             raise ConfigError(f"{who}{field(group)} expected a dict of {group} by name, got "
                               f"{type(state[group]).__name__}")  # fmt: skip
+    arms = sorted(state["articulations"], key=str)
+    if robot is None:
+        if len(arms) != 1 or arms[0] not in ROBOTS:
+            raise ConfigError(f"{who}{field('articulations')} expected one robot of {list(ROBOTS)}, got {arms}")
+        robot = arms[0]
+    elif robot not in state["articulations"] and len(arms) == 1 and arms[0] in ROBOTS:
+        raise ConfigError(f"{who}{field('articulations', arms[0])} is a state of the robot {arms[0]!r}, expected "
+                          f"{robot!r} ({task} on {robot!r}; make(..., robot_uids={arms[0]!r}) builds the "
+                          f"other)")  # fmt: skip
+    wanted = {"actors": None if actors is None else list(actors), "articulations": [robot]}
+    for group in ("actors", "articulations"):
         ours = wanted[group]
         theirs = sorted(state[group], key=str)
         extra = [name for name in theirs if ours is not None and name not in ours]
@@ -136,7 +150,7 @@ def state_dict_arrays(state, actors: Sequence[str] | None, task: str, who: str, 
     names = sorted(state["actors"], key=str) if actors is None else wanted["actors"]
     need = [("actors", name, STATE_ACTOR_WIDTH) for name in names]
     out = {}
-    for group, name, width in [*need, ("articulations", STATE_ROBOT, robot_width)]:
+    for group, name, width in [*need, ("articulations", robot, robot_width)]:
         v = state[group][name]
         v = v.detach().to("cpu") if hasattr(v, "detach") else v
         try:

@@ -18,6 +18,7 @@ __all__ = [
     "PANDA_REST_QPOS",
     "PANDA_ROOT_POSE",
     "TABLE",
+    "TABLE_REST_QPOS",
     "Actor",
     "Box",
     "Capsule",
@@ -59,6 +60,12 @@ PANDA_REST_QPOS: tuple[float, ...] = (0.0, math.pi / 8, 0.0, -5 * math.pi / 8, 0
                                       0.04, 0.04)  # fmt: skip
 """``TableSceneBuilder.initialize`` for ``panda``: the rest qpos; N(0, ``robot_init_qpos_noise``) is added to every
 joint, then the fingers are set to 0.04 [m] again."""
+TABLE_REST_QPOS: dict[str, tuple[float, ...]] = {
+    "panda": PANDA_REST_QPOS,
+    "panda_wristcam": PANDA_REST_QPOS[:6] + (-math.pi / 4,) + PANDA_REST_QPOS[7:],
+}
+"""``TableSceneBuilder.initialize``'s rest qpos by robot: ``panda_wristcam``'s hand is turned the other way (joint 7
+at -pi/4), so its camera faces forward."""
 ROBOT_INIT_QPOS_NOISE = 0.02
 """The tasks' default ``robot_init_qpos_noise`` [rad]."""
 PANDA_ARM_DOF = 7

@@ -63,6 +63,7 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
         max_episode_steps: int | None = None,
         reconfiguration_freq: int | None = None,
         randomization: TaskRandomization | None = None,
+        robot_uids: str | None = None,
     ):
         import torch
 
@@ -70,6 +71,8 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
         from wpctrl.robots import panda_control_modes
 
         self.task_spec = task
+        self.robot_uids = robot_uids or task.robot_uids
+        """The robot built (:data:`wpctrl.tasks.names.ROBOTS`), the state dict's articulation."""
         self.physics = physics
         self.control_mode = control_mode
         self.obs_mode = obs_mode
@@ -89,7 +92,7 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
             torch.cuda.set_stream(self._torch_stream)
             wp.set_stream(wp.stream_from_torch(self._torch_stream), dev)
 
-        self.scene = sc = build_scene(task, n, dev, physics, asset_dir)
+        self.scene = sc = build_scene(task, n, dev, physics, asset_dir, self.robot_uids)
         self.model = model = sc.model
         seeds = episode_seeds(seed, n)
         self.reconfiguration_freq = int(task.reconfiguration_freq(n) if reconfiguration_freq is None
@@ -129,7 +132,8 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
         self.marker_pos = z(wp.vec3, n, m)
         quats = [mk.quat for mk in task.markers] + [(1.0, 0.0, 0.0, 0.0)] * (m - len(task.markers))
         self.marker_quat = wp.array(np.tile(np.asarray(quats, np.float32), (n, 1, 1)), dtype=wp.vec4, device=dev)
-        self.rest_qpos = wp.array(np.asarray(task.rest_qpos, np.float32), dtype=wp.float32, device=dev)
+        self.rest_qpos = wp.array(np.asarray(task.robot_rest_qpos(self.robot_uids), np.float32), dtype=wp.float32,
+                                  device=dev)  # fmt: skip
         self.param_buf = wp.array(_param_rows(self.episode_params), dtype=wp.float32, device=dev)
         self.seed_buf = wp.array(seeds, dtype=wp.int32, device=dev)
         """(num_envs,) each env's episode seed (:meth:`reset`)."""
@@ -289,7 +293,8 @@ class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
     def __repr__(self) -> str:
         return (
             f"TaskEnv({self.task_spec.env_id}, num_envs={self.num_envs}, device={self.wp_device.alias}, "
-            f"control_mode={self.control_mode}, obs_mode={self.obs_mode}, reward_mode={self.reward_mode})"
+            f"robot_uids={self.robot_uids}, control_mode={self.control_mode}, obs_mode={self.obs_mode}, "
+            f"reward_mode={self.reward_mode})"
         )
 
     @property

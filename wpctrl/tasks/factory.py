@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from ..config import ConfigError
-from .names import CONTROL_MODES, OBS_MODES
+from .names import CONTROL_MODES, OBS_MODES, ROBOTS
 from .physics import TaskPhysics, physics_from
 from .randomization import TaskRandomization
 from .registry import TASKS, unknown_task
@@ -48,6 +48,7 @@ def make(
     max_episode_steps: int | None = None,
     reconfiguration_freq: int | None = None,
     randomization: TaskRandomization | None = None,
+    robot_uids: str | None = None,
 ):
     """A ManiSkill task on Newton (:class:`~wpctrl.tasks.env.TaskEnv`), ``num_envs`` copies on ``device``.
 
@@ -81,6 +82,10 @@ def make(
             PegInsertionSide-v1 with one env, else 0, never). Only tasks whose geometry comes from the seed change.
         randomization: Per-env friction, contact softness and object mass drawn at every reset
             (:class:`~wpctrl.tasks.randomization.TaskRandomization`; None, the default: none).
+        robot_uids: The robot (ManiSkill's argument): ``"panda"`` or ``"panda_wristcam"``, the Panda with
+            ManiSkill's wrist camera on its hand (:data:`wpctrl.tasks.names.ROBOTS`); None: the task's default, as
+            ManiSkill's (``panda_wristcam`` for StackCube-v1 and PegInsertionSide-v1, else ``panda``). The state
+            dict's articulation carries its name.
         verbose: Let Warp print what it does while the env is built: its start-up banner and a
             ``Module ... load on device ...`` line per kernel module. By default (``False``) ``make`` prints nothing:
             for the duration of the call it raises ``warp.config.log_level`` to ``warp.LOG_WARNING`` (and puts your
@@ -116,6 +121,9 @@ def make(
                                              or not isinstance(reconfiguration_freq, int) or reconfiguration_freq < 0):
         raise ConfigError(f"make: reconfiguration_freq expected an int >= 0 (or None: the task's default), got "
                           f"{reconfiguration_freq!r}")  # fmt: skip
+    if robot_uids is not None and robot_uids not in ROBOTS:
+        raise ConfigError(f"make: robot_uids expected one of {list(ROBOTS)} (or None: the task's "
+                          f"{TASKS[env_id].robot_uids!r}), got {robot_uids!r}")  # fmt: skip
     if physics is None:
         physics = task_physics(env_id)
     elif not isinstance(physics, TaskPhysics):
@@ -136,6 +144,6 @@ def make(
     with quiet_warp(verbose):  # the banner, the CUDA-driver line and the module-load lines: only when asked for
         device = check_device(device, "make: device")
         options = (bool(auto_reset), bool(ignore_terminations), physics, controller_semantics, asset_dir, graph,
-                   max_episode_steps, reconfiguration_freq, randomization)  # fmt: skip
+                   max_episode_steps, reconfiguration_freq, randomization, robot_uids)  # fmt: skip
         return TaskEnv(TASKS[env_id], num_envs, device, control_mode, obs_mode, reward_mode, seed_value(seed),
                        *options)  # fmt: skip

@@ -1,11 +1,10 @@
-"""The real ManiSkill's ``PushCube-v1`` / ``PickCube-v1`` on its CPU PhysX without a rendering device.
+"""The real ManiSkill's table-top tasks on its CPU PhysX without a rendering device.
 
 ManiSkill builds visual shapes and render materials for every actor and robot link, and those need a rendering
 device. :func:`no_visuals` skips exactly that side while an env is built: the actor builders' ``add_*_visual*``
 calls, the URDF loader's link visuals, the MJCF loader's visual bodies and the render materials and textures.
 Physics, collision shapes, physical materials, controllers, observations, rewards and evaluation stay ManiSkill's own.
-:func:`make_maniskill` builds one env that way (``sim_backend="physx_cpu"``, ``render_backend="none"``, one env,
-the tasks' ``panda``).
+:func:`make_maniskill` builds one env that way (``sim_backend="physx_cpu"``, ``render_backend="none"``, one env).
 
 Needs the ``maniskill`` extra (mani-skill 3.0.1); nothing here is imported by ``wpctrl.tasks`` itself.
 """
@@ -94,12 +93,8 @@ def no_visuals():
 
 def make_maniskill(env_id: str, control_mode: str, **kwargs):
     """The real ManiSkill env (``gym.make``: PhysX CPU, one env, ``obs_mode="state"``, rendering stubbed out), reset
-    once with seed 0, on ManiSkill's ``panda``, the robot wpctrl's tasks build (StackCube-v1 and PegInsertionSide-v1
-    default to ``panda_wristcam`` there: a 0.56 kg camera on the hand). ``kwargs`` go to ``gym.make`` (e.g.
-    ``reward_mode``, ``robot_init_qpos_noise``, another ``robot_uids``)."""
-    from ._validate import STATE_ROBOT
-
-    kwargs.setdefault("robot_uids", STATE_ROBOT)
+    once with seed 0. ``kwargs`` go to ``gym.make`` (e.g. ``reward_mode``, ``robot_init_qpos_noise``, ``robot_uids``:
+    without it, the task's default robot, as :func:`wpctrl.tasks.make`'s)."""
     try:
         import gymnasium as gym
         import mani_skill.envs  # noqa: F401  (registers the tasks)

@@ -30,8 +30,8 @@ from pathlib import Path
 import numpy as np
 
 from ..config import ConfigError
-from ._validate import STATE_ACTOR_WIDTH, STATE_ROBOT, STATE_ROBOT_WIDTH
-from .names import CONTROL_MODES, TASK_ACTORS, TASK_IDS, main_object
+from ._validate import STATE_ACTOR_WIDTH, STATE_ROBOT_WIDTH
+from .names import CONTROL_MODES, ROBOTS, TASK_ACTORS, TASK_IDS, default_robot, main_object
 
 __all__ = ["MAIN_OBJECT", "STATE_ACTORS", "by_length", "is_trajectory", "is_trajectory_metadata", "read_trajectory"]
 
@@ -39,11 +39,9 @@ MAIN_OBJECT = "cube"
 """The actor a replay follows when a task names none (:func:`wpctrl.tasks.names.main_object`)."""
 
 STATE_ACTORS: dict[str, tuple[str, ...]] = {task: actors.state for task, actors in TASK_ACTORS.items()}
-"""The actors of each task's ManiSkill state dict (besides the ``panda`` articulation), from
+"""The actors of each task's ManiSkill state dict (besides the robot's articulation), from
 :data:`wpctrl.tasks.names.TASK_ACTORS`: a trajectory's ``env_states`` must hold them all, since the replay loads them
 as the initial state."""
-
-_ROBOT = (STATE_ROBOT, STATE_ROBOT_WIDTH)
 
 
 def is_trajectory_metadata(data) -> bool:
@@ -75,8 +73,8 @@ def _load_json(path: Path) -> dict:
         raise ConfigError(f"replay: {str(path)!r} is not ManiSkill's trajectory metadata (not JSON text: {e})") from e
 
 
-def _check_metadata(meta, where: str) -> tuple[str, str, list]:
-    """The task, the control mode and the episodes of ManiSkill's trajectory metadata, checked."""
+def _check_metadata(meta, where: str) -> tuple[str, str, str, list]:
+    """The task, the robot, the control mode and the episodes of ManiSkill's trajectory metadata, checked."""
     env_info = meta.get("env_info")
     if not isinstance(env_info, dict) or "env_id" not in env_info:
         raise ConfigError(f"replay: {where}'env_info' expected an object with 'env_id' (ManiSkill writes null when the "
@@ -87,10 +85,10 @@ def _check_metadata(meta, where: str) -> tuple[str, str, list]:
         raise ConfigError(f"replay: {where}env_info.env_id {task!r} is not a task whose trajectories wpctrl replays; "
                           f"expected one of {known}")  # fmt: skip
     kwargs = env_info.get("env_kwargs") or {}
-    robot = kwargs.get("robot_uids", "panda")
-    if robot != "panda":
-        raise ConfigError(f"replay: {where}env_info.env_kwargs.robot_uids expected 'panda' (wpctrl's tasks use the "
-                          f"Panda), got {robot!r}")  # fmt: skip
+    robot = kwargs.get("robot_uids", default_robot(task))  # absent: the env's default robot
+    if robot not in ROBOTS:
+        raise ConfigError(f"replay: {where}env_info.env_kwargs.robot_uids expected one of {list(ROBOTS)} (the robots "
+                          f"wpctrl's tasks build), got {robot!r}")  # fmt: skip
     episodes = meta.get("episodes")
     if not isinstance(episodes, list) or not episodes:
         raise ConfigError(f"replay: {where}'episodes' expected a non-empty list, got {episodes!r}")
@@ -117,7 +115,7 @@ def _check_metadata(meta, where: str) -> tuple[str, str, list]:
     ids = [ep["episode_id"] for ep in episodes]
     if len(set(ids)) != len(ids):
         raise ConfigError(f"replay: {where}episodes[].episode_id expected distinct ids, got {ids}")
-    return task, mode, episodes
+    return task, robot, mode, episodes
 
 
 def _seed(ep: dict, i: int) -> int:
@@ -147,7 +145,7 @@ def _array(group, key: str, where: str, shape: tuple) -> np.ndarray:
     return a
 
 
-def _episode(traj, ep: dict, i: int, task: str, where: str) -> dict:
+def _episode(traj, ep: dict, i: int, task: str, robot: str, where: str) -> dict:
     """One ``traj_<id>`` group and its metadata as the project's episode structure."""
     steps = int(ep["elapsed_steps"])
     name = traj.name.lstrip("/")
@@ -163,10 +161,10 @@ def _episode(traj, ep: dict, i: int, task: str, where: str) -> dict:
     init: dict[str, dict[str, list]] = {"actors": {}, "articulations": {}}
     poses = None
     main = main_object(task)
-    for group, key, dim in [*need, ("articulations", *_ROBOT)]:
+    for group, key, dim in [*need, ("articulations", robot, STATE_ROBOT_WIDTH)]:
         if group not in states:
             raise ConfigError(f"replay: {where}{name}/env_states/{group} is missing (the {task} state has "
-                              f"{[k for _, k, _ in need]} and 'panda')")  # fmt: skip
+                              f"{[k for _, k, _ in need]} and {robot!r})")  # fmt: skip
         a = _array(states[group], key, where, (steps + 1, dim))
         init[group][key] = a[0].tolist()
         if key == main:
@@ -225,7 +223,7 @@ def read_trajectory(path, metadata: dict | None = None) -> dict:
     if not is_trajectory_metadata(meta):
         raise ConfigError(f"replay: {where}expected ManiSkill's trajectory metadata (an object with 'env_info' and "
                           f"'episodes')")  # fmt: skip
-    task, mode, meta_episodes = _check_metadata(meta, where)
+    task, robot, mode, meta_episodes = _check_metadata(meta, where)
     h5py = _h5py()
     where = f"{str(h5_path)!r}: "
     try:
@@ -238,7 +236,7 @@ def read_trajectory(path, metadata: dict | None = None) -> dict:
             if groups != wanted:
                 raise ConfigError(f"replay: {where}trajectories {groups} do not match the episode_id of "
                                   f"{str(meta_path)!r}'s episodes ({wanted})")  # fmt: skip
-            episodes = [_episode(f[f"traj_{ep['episode_id']}"], ep, i, task, where)
+            episodes = [_episode(f[f"traj_{ep['episode_id']}"], ep, i, task, robot, where)
                         for i, ep in enumerate(meta_episodes)]  # fmt: skip
     except (OSError, KeyError, RuntimeError) as e:  # h5py: a truncated or corrupt file, an unreadable object
         raise ConfigError(

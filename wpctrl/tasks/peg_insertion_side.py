@@ -196,6 +196,7 @@ def obs_box_hole_radius(s: Sim, e: int) -> vec1:
 
 @register_task("PegInsertionSide-v1", max_episode_steps=100)
 class PegInsertionSide(Task):
+    robot_uids = "panda_wristcam"  # __init__(robot_uids="panda_wristcam"): the Panda with its wrist camera
     clearance = CLEARANCE
     actors = (
         Actor("peg", (Box((_MID_L, _MID_R, _MID_R)),), PEG_DENSITY, None, _MID_R),

@@ -20,7 +20,7 @@ from . import maniskill_trajectory as trajectory
 from . import policy_episodes
 from .names import CONTROL_MODES, TASK_ACTORS, TASK_IDS, main_object
 
-__all__ = ["EXPECTED", "action_width", "load_episodes", "main_poses", "replayed_object"]
+__all__ = ["EXPECTED", "action_width", "load_episodes", "main_poses", "recorded_robot", "replayed_object"]
 
 
 EXPECTED = (
@@ -80,11 +80,12 @@ def _checked(data, where: str) -> dict:
     or any state written: the header's task and control mode; per episode its actions (numbers, finite, one row of
     the control mode's action width per step), ``n_steps``, the ``info`` flags the replay reads (one per step and
     one for the reset), the seed, ``init_state_dict`` (the task's actors of :data:`wpctrl.tasks.names.TASK_ACTORS`,
-    the ``panda`` articulation, widths 13 and 31, finite: :func:`wpctrl.tasks._validate.state_dict_arrays`, the
+    one robot's articulation, ``panda`` or ``panda_wristcam``, the same in every episode, widths 13 and 31,
+    finite: :func:`wpctrl.tasks._validate.state_dict_arrays`, the
     checks ``set_state_dict`` makes) and the main object's poses. The action width is the last check (it reads the
     control mode's controller configs, which loads the robot's description): a file refused for anything else is
     refused before Warp or Newton loads."""
-    from ._validate import state_dict_arrays
+    from ._validate import state_dict_arrays, state_robot
 
     if not isinstance(data, dict) or "header" not in data or "episodes" not in data:
         raise ConfigError(f"replay: {where}expected ManiSkill's episode format: a dict with 'header' and 'episodes' "
@@ -109,6 +110,7 @@ def _checked(data, where: str) -> dict:
         raise ConfigError(f"replay: {where}the file holds no episodes")
     main = replayed_object(header)
     declared = TASK_ACTORS.get(task)
+    robot = None  # either robot, until the first episode names it
     actions = []
     for i, ep in enumerate(data["episodes"]):
         if not isinstance(ep, dict):
@@ -129,7 +131,9 @@ def _checked(data, where: str) -> dict:
             raise ConfigError(f"replay: {where}episodes[{i}].seed expected a non-negative integer (the reset's seed), "
                               f"got {seed!r}")  # fmt: skip
         state_dict_arrays(ep["init_state_dict"], None if declared is None else declared.state, task,
-                          f"replay: {where}", root=f"episodes[{i}].init_state_dict", dotted=True)  # fmt: skip
+                          f"replay: {where}", root=f"episodes[{i}].init_state_dict", dotted=True,
+                          robot=robot)  # fmt: skip
+        robot = state_robot(ep["init_state_dict"])  # one robot per file: the first episode's
         if main not in ep["init_state_dict"]["actors"]:
             have = sorted(ep["init_state_dict"]["actors"])
             raise ConfigError(f"replay: {where}episode {i}: the main object {main!r} is not an actor of its "
@@ -207,6 +211,12 @@ def action_width(control_mode: str) -> int:
     configs = panda_control_modes()[control_mode]
     unlimited = lambda c: np.tile(np.float32([[-np.inf, np.inf]]), (len(c.joint_names), 1))  # noqa: E731
     return sum(config_rows(c, unlimited(c)).action_dim for c in configs.values())
+
+
+def recorded_robot(data: dict) -> str:
+    """The robot a checked recording (:func:`load_episodes`) was made on: its episodes' articulation (``panda`` or
+    ``panda_wristcam``), the robot its replay builds."""
+    return next(iter(data["episodes"][0]["init_state_dict"]["articulations"]))
 
 
 def replayed_object(header: dict) -> str:

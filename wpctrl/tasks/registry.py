@@ -20,8 +20,8 @@ from types import MappingProxyType
 import numpy as np
 
 from ..config import ConfigError
-from .definitions import PANDA_DOF, PANDA_REST_QPOS, Actor, Box, Marker, ObsField
-from .names import TASK_MODULES
+from .definitions import PANDA_DOF, TABLE_REST_QPOS, Actor, Box, Marker, ObsField
+from .names import ROBOTS, TASK_MODULES
 from .physics import physics_from
 
 __all__ = ["TASKS", "Task", "get_task", "register_task"]
@@ -55,9 +55,12 @@ class Task:
     """``@wp.func (Sim, env)``: write ``success`` and the ``info_keys`` flags into ``sim.info[env]``."""
     dense_reward = None
     """``@wp.func (Sim, env) -> float``: ``compute_dense_reward`` before success sets it to ``max_reward``."""
-    rest_qpos: tuple[float, ...] = PANDA_REST_QPOS
-    """The Panda's qpos before the initialisation noise (``TableSceneBuilder.initialize``'s, unless the task's
-    ``_initialize_episode`` sets its own)."""
+    robot_uids: str = "panda"
+    """ManiSkill's default robot of the task (its env's ``__init__(robot_uids=...)``), one of
+    :data:`wpctrl.tasks.names.ROBOTS`: what :func:`wpctrl.tasks.make` builds unless given ``robot_uids``."""
+    rest_qpos: tuple[float, ...] | None = None
+    """The Panda's qpos before the initialisation noise, where the task's ``_initialize_episode`` sets its own; None:
+    ``TableSceneBuilder.initialize``'s for the robot built (:meth:`robot_rest_qpos`)."""
     physics: Mapping[str, object] = MappingProxyType({})
     """Where the task's contacts need MuJoCo settings other than :class:`~wpctrl.tasks.TaskPhysics`'s defaults:
     field -> value. The task's default physics (:func:`wpctrl.tasks.task_physics`) is ``TaskPhysics(**physics)``;
@@ -82,6 +85,11 @@ class Task:
         """ManiSkill's default ``reconfiguration_freq`` for ``num_envs``: every how many ``reset()`` calls the scene is
         drawn again (0: only when asked, ``options={"reconfigure": True}``)."""
         return 0
+
+    def robot_rest_qpos(self, robot_uids: str) -> tuple[float, ...]:
+        """The qpos a reset draws the noise around for the robot ``robot_uids``: :attr:`rest_qpos`, else the table
+        scene's for that robot (:data:`~wpctrl.tasks.definitions.TABLE_REST_QPOS`)."""
+        return self.rest_qpos if self.rest_qpos is not None else TABLE_REST_QPOS[robot_uids]
 
     @property
     def obs_fields(self) -> tuple[ObsField, ...]:
@@ -147,7 +155,9 @@ def _check(cls: type[Task]) -> None:
     order = [a.name for a in cls.actors if isinstance(a, Actor) and a.name in cls.contact_actors]
     if list(cls.contact_actors) != order:  # the contact sensor's columns follow the bodies' order in each world
         raise ConfigError(f"{where}: contact_actors must be distinct and in the actors' declared order: {order}")
-    if len(cls.rest_qpos) != PANDA_DOF:
+    if cls.robot_uids not in ROBOTS:
+        raise ConfigError(f"{where}: robot_uids expected one of {list(ROBOTS)}, got {cls.robot_uids!r}")
+    if cls.rest_qpos is not None and len(cls.rest_qpos) != PANDA_DOF:
         raise ConfigError(f"{where}: rest_qpos expected {PANDA_DOF} values (the Panda's qpos), got "
                           f"{len(cls.rest_qpos)}")
     for hook in ("initialize", "evaluate", "dense_reward"):

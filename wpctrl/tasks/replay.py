@@ -28,7 +28,7 @@ import numpy as np
 
 from ..config import ConfigError
 from .names import TASK_IDS
-from .recording import load_episodes, main_poses, replayed_object
+from .recording import load_episodes, main_poses, recorded_robot, replayed_object
 
 __all__ = ["FIRST_ACTIONS", "EpisodeResult", "ReplayReport", "load_episodes", "main", "replay"]
 
@@ -186,10 +186,11 @@ def replay(source, device="cpu", physics=None, asset_dir: str | None = None, env
     so a task whose scene comes from the seed is rebuilt as ManiSkill's was. Episodes of different lengths step
     together: an episode that has ended repeats its last action, and its results are read up to its own last step.
 
-    ``env``: an env of :func:`wpctrl.tasks.make` to reuse (its task, control mode and number of envs must match; with
-    ``auto_reset`` its ``max_episode_steps`` must cover the longest episode); otherwise one is built with
-    ``auto_reset=False``, ``ignore_terminations=True`` (the recorded episodes keep stepping after success) and
-    ``max_episode_steps`` at least the longest episode's length, ``verbose`` passed to ``make``. ``progress``: an
+    ``env``: an env of :func:`wpctrl.tasks.make` to reuse (its task, robot, control mode and number of envs must
+    match; with ``auto_reset`` its ``max_episode_steps`` must cover the longest episode); otherwise one is built with
+    ``auto_reset=False``, ``ignore_terminations=True`` (the recorded episodes keep stepping after success),
+    ``max_episode_steps`` at least the longest episode's length and the recording's robot (its state dicts'
+    articulation), ``verbose`` passed to ``make``. ``progress``: an
     object with ``update(n)`` (a tqdm bar, say), advanced by one after every step of the episodes.
 
     ``policy``: run it closed-loop from the recorded initial states instead of replaying the actions: a callable
@@ -214,13 +215,16 @@ def replay(source, device="cpu", physics=None, asset_dir: str | None = None, env
     main = replayed_object(header)
     lengths = [len(ep["actions"]) for ep in episodes]
     steps = max(lengths)
+    robot = recorded_robot(data)
     if env is None:
         env = make(header["task"], num_envs=n, device=device, control_mode=header["control_mode"],
                    auto_reset=False, ignore_terminations=True, physics=physics, asset_dir=asset_dir,
-                   verbose=verbose, max_episode_steps=_max_steps(header["task"], steps))  # fmt: skip
-    elif (env.task_spec.env_id, env.control_mode, env.num_envs) != (header["task"], header["control_mode"], n):
-        raise ConfigError(f"replay: env is {env.task_spec.env_id} / {env.control_mode} / {env.num_envs} envs, the file "
-                          f"{header['task']} / {header['control_mode']} / {n} episodes")  # fmt: skip
+                   verbose=verbose, max_episode_steps=_max_steps(header["task"], steps), robot_uids=robot)  # fmt: skip
+    elif (env.task_spec.env_id, env.robot_uids, env.control_mode, env.num_envs) != (header["task"], robot,
+                                                                                    header["control_mode"], n):
+        raise ConfigError(f"replay: env is {env.task_spec.env_id} / {env.robot_uids} / {env.control_mode} / "
+                          f"{env.num_envs} envs, the file {header['task']} / {robot} / {header['control_mode']} / "
+                          f"{n} episodes")  # fmt: skip
     elif env.auto_reset and env.max_episode_steps < steps:
         raise ConfigError(f"replay: env resets its episodes after {env.max_episode_steps} steps, the longest episode "
                           f"has {steps} actions (make it with max_episode_steps={steps} or "
@@ -326,8 +330,9 @@ def main(argv=None) -> int:
             from .factory import make
 
             env = make(header["task"], num_envs=n, device=args.device, control_mode=header["control_mode"],
-                       auto_reset=False, ignore_terminations=True, asset_dir=args.asset_dir,
-                       verbose=args.verbose, max_episode_steps=_max_steps(header["task"], steps))  # fmt: skip
+                       auto_reset=False, ignore_terminations=True, asset_dir=args.asset_dir, verbose=args.verbose,
+                       max_episode_steps=_max_steps(header["task"], steps),
+                       robot_uids=recorded_robot(data))  # fmt: skip
         bar = progress(steps, f"{Path(path).name} ({n} episodes)", "step", args.progress)
         try:
             report = replay(data, env=env, progress=bar)

@@ -1,11 +1,11 @@
-"""The tasks' scene on Newton: ManiSkill's Panda (its own ``panda_v2.urdf``: collision meshes, finger pads, SRDF
-pairs), the table box, the ground and the task's actors (free bodies of boxes and capsules), ``num_envs`` times in
-separate worlds at the same place (as ManiSkill's GPU sim keeps its sub-scenes), with the contact, friction and
-joint-limit settings of :class:`~wpctrl.tasks.physics.TaskPhysics`.
+"""The tasks' scene on Newton: ManiSkill's Panda (its own ``panda_v2.urdf``, or ``panda_v3.urdf`` with the wrist
+camera: collision meshes, SRDF pairs), the table box, the ground and the task's actors (free bodies of boxes and
+capsules), ``num_envs`` times in separate worlds at the same place (as ManiSkill's GPU sim keeps its sub-scenes),
+with the contact, friction and joint-limit settings of :class:`~wpctrl.tasks.physics.TaskPhysics`.
 
-The Panda's asset is read from the installed mani-skill package (found without importing it) or from
-``asset_dir`` / the ``WPCTRL_MANISKILL_ASSETS`` variable (a copy of ``mani_skill/assets``). Only the collision
-geometry is loaded: the URDF's visual elements are dropped before Newton reads it.
+The Panda's asset is read from the installed mani-skill package (found without importing it) or from ``asset_dir`` /
+the ``WPCTRL_MANISKILL_ASSETS`` variable (a copy of ``mani_skill/assets``). Only the collision geometry is loaded:
+the URDF's visual elements are dropped before Newton reads it.
 """
 
 from __future__ import annotations
@@ -21,7 +21,8 @@ import numpy as np
 import warp as wp
 
 from ..maniskill.collision import filter_srdf_pairs
-from .definitions import PANDA_DOF, PANDA_REST_QPOS, PANDA_ROOT_POSE, TABLE, Actor, Box, Capsule, Sphere
+from .definitions import PANDA_DOF, PANDA_ROOT_POSE, TABLE, TABLE_REST_QPOS, Actor, Box, Capsule, Sphere
+from .names import ROBOTS
 from .physics import TaskPhysics, mujoco_friction
 from .registry import Task
 
@@ -33,12 +34,12 @@ PANDA_FINGER_MATERIAL = {"static_friction": 2.0, "dynamic_friction": 2.0, "resti
 ``TaskPhysics.finger_torsion`` adds MuJoCo's torsional friction on the fingers instead (off by default)."""
 FINGER_LINKS = ("panda_leftfinger", "panda_rightfinger")
 TCP_LINK = "panda_hand_tcp"
-_URDF = os.path.join("robots", "panda", "panda_v2.urdf")
 
 
-def panda_urdf_path(asset_dir: str | None = None) -> str:
-    """ManiSkill's ``panda_v2.urdf``: under ``asset_dir``, else ``$WPCTRL_MANISKILL_ASSETS``, else the installed
-    mani-skill package's ``assets`` folder."""
+def panda_urdf_path(asset_dir: str | None = None, robot_uids: str = "panda") -> str:
+    """ManiSkill's URDF of ``robot_uids`` (:data:`~wpctrl.tasks.names.ROBOTS`: ``panda_v2.urdf`` for ``panda``):
+    under ``asset_dir``, else ``$WPCTRL_MANISKILL_ASSETS``, else the installed mani-skill package's ``assets``
+    folder."""
     root = asset_dir or os.environ.get("WPCTRL_MANISKILL_ASSETS")
     if root is None:
         spec = importlib.util.find_spec("mani_skill")
@@ -50,7 +51,7 @@ def panda_urdf_path(asset_dir: str | None = None) -> str:
                 " or point asset_dir / WPCTRL_MANISKILL_ASSETS at a copy of mani_skill/assets"
             )
         root = os.path.join(list(spec.submodule_search_locations)[0], "assets")
-    path = os.path.join(root, _URDF)
+    path = os.path.join(root, "robots", "panda", ROBOTS[robot_uids])
     if not os.path.isfile(path):
         raise FileNotFoundError(f"wpctrl.tasks: ManiSkill's Panda asset {path} does not exist")
     return path
@@ -97,7 +98,7 @@ class Scene:
     after the combination rule."""
 
 
-def _panda_builder(urdf: str, physics: TaskPhysics) -> newton.ModelBuilder:
+def _panda_builder(urdf: str, physics: TaskPhysics, qpos: tuple[float, ...]) -> newton.ModelBuilder:
     robot = newton.ModelBuilder()
     robot.rigid_gap = float(physics.contact_gap)
     newton.solvers.SolverMuJoCo.register_custom_attributes(robot)
@@ -110,22 +111,24 @@ def _panda_builder(urdf: str, physics: TaskPhysics) -> newton.ModelBuilder:
     )
     filter_srdf_pairs(robot, urdf)
     for name, q in zip([f"panda_joint{i}" for i in range(1, 8)] + ["panda_finger_joint1", "panda_finger_joint2"],
-                       PANDA_REST_QPOS):  # fmt: skip
+                       qpos):  # fmt: skip
         j = next(i for i, lb in enumerate(robot.joint_label) if lb.rsplit("/", 1)[-1] == name)
         robot.joint_q[robot.joint_q_start[j]] = q
     return robot
 
 
-def build_scene(task: Task, num_envs: int, device, physics: TaskPhysics, asset_dir: str | None = None) -> Scene:
-    """``num_envs`` worlds of ``task``'s scene (the Panda, the table, the task's actors), finalized on ``device``."""
-    urdf = panda_urdf_path(asset_dir)
+def build_scene(task: Task, num_envs: int, device, physics: TaskPhysics, asset_dir: str | None = None,
+                robot_uids: str = "panda") -> Scene:  # fmt: skip
+    """``num_envs`` worlds of ``task``'s scene (the robot ``robot_uids``, the table, the task's actors), finalized on
+    ``device``."""
+    urdf = panda_urdf_path(asset_dir, robot_uids)
     materials = {"default": TABLE.static_friction, "gripper": PANDA_FINGER_MATERIAL["static_friction"]}
     materials.update({a.name: a.static_friction for a in task.bodies if a.static_friction is not None})
     mu = mujoco_friction(materials, physics.friction_combine)
     env = newton.ModelBuilder()
     env.rigid_gap = float(physics.contact_gap)
     newton.solvers.SolverMuJoCo.register_custom_attributes(env)
-    env.add_builder(_panda_builder(urdf, physics))
+    env.add_builder(_panda_builder(urdf, physics, TABLE_REST_QPOS[robot_uids]))
     bodies = [lb.rsplit("/", 1)[-1] for lb in env.body_label]
     for s, b in enumerate(env.shape_body):
         env.shape_material_mu[s] = mu["gripper"] if b >= 0 and bodies[b] in FINGER_LINKS else mu["default"]

@@ -153,6 +153,7 @@ def obs_cube_a_to_cube_b_pos(s: Sim, e: int) -> wp.vec3:
 
 @register_task("StackCube-v1", max_episode_steps=50)
 class StackCube(Task):
+    robot_uids = "panda_wristcam"  # __init__(robot_uids="panda_wristcam"): the Panda with its wrist camera
     cube_half_size = CUBE_HALF_SIZE
     actors = (
         Actor("cubeA", (Box((CUBE_HALF_SIZE,) * 3),), build_height=CUBE_HALF_SIZE),

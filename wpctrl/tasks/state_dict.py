@@ -4,11 +4,12 @@ state, and back.
 
 ``{"actors": {name: (N, 13)}, "articulations": {"panda": (N, 31)}}``: an actor's ``[p (3), q wxyz (4), linear
 velocity (3), angular velocity (3)]`` (world frame, the actor's frame origin), the Panda's ``[root pose (7), root
-velocity (6), qpos (9), qvel (9)]``. The actors are the table and the task's declared ones, in that order. The table
-(kinematic on PhysX) and the robot's root are fixed on Newton: a state whose table pose or robot root differs from
-the scene's is refused. A goal marker (kinematic, no collision) is a per-env pose. A state dict of another task (an
-actor missing or one the task does not have) is refused, naming the actor. A ManiSkill state dict's
-``"controller"`` entry (controller state of ``use_target`` modes) is restored with ``ctrl.set_state``.
+velocity (6), qpos (9), qvel (9)]`` under the robot's name (``env.robot_uids``: ``panda`` or ``panda_wristcam``; a
+state dict of the other robot is refused, naming both). The actors are the table and the task's declared ones, in
+that order. The table (kinematic on PhysX) and the robot's root are fixed on Newton: a state whose table pose or
+robot root differs from the scene's is refused. A goal marker (kinematic, no collision) is a per-env pose. A state
+dict of another task (an actor missing or one the task does not have) is refused, naming the actor. A ManiSkill
+state dict's ``"controller"`` entry (controller state of ``use_target`` modes) is restored with ``ctrl.set_state``.
 """
 
 from __future__ import annotations
@@ -70,7 +71,7 @@ class StateDictMixin:
         robot = torch.cat([root, zeros6, q[:, r : r + PANDA_DOF], qd[:, rd : rd + PANDA_DOF]], dim=1)
         out = {
             "actors": {name: actors[name] for name in self.actor_names},
-            "articulations": {"panda": robot.clone()},
+            "articulations": {self.robot_uids: robot.clone()},
         }
         controller = self.ctrl.get_state()
         if controller:
@@ -104,7 +105,7 @@ class StateDictMixin:
         for k, mk in enumerate(self.task_spec.markers):
             mpos[idx, k] = entries[mk.name][:, 0:3]
             mquat[idx, k] = entries[mk.name][:, 3:7]
-        r, rd, robot = sc.robot_coord0, sc.robot_dof0, entries["panda"]
+        r, rd, robot = sc.robot_coord0, sc.robot_dof0, entries[self.robot_uids]
         q[idx, r : r + PANDA_DOF] = robot[:, 13 : 13 + PANDA_DOF]
         qd[idx, rd : rd + PANDA_DOF] = robot[:, 13 + PANDA_DOF :]
         self._after_state_write(mask)
@@ -119,7 +120,7 @@ class StateDictMixin:
 
         torch = self._torch
         out = state_dict_arrays(state, self.actor_names, self.task_spec.env_id, "set_state_dict: ", rows=rows,
-                                robot_width=_ROBOT_DIM)  # fmt: skip
+                                robot_width=_ROBOT_DIM, robot=self.robot_uids)  # fmt: skip
         table = table_state()
         if np.abs(out[TABLE.name][:, :7] - table[:7]).max(initial=0.0) > _TOL:
             bad = int(np.abs(out[TABLE.name][:, :7] - table[:7]).max(axis=1).argmax())
@@ -127,10 +128,11 @@ class StateDictMixin:
                               f"{out[TABLE.name][bad, :7].tolist()} (row {bad}); the table is fixed on Newton at "
                               f"{table[:7].tolist()}")  # fmt: skip
         root = np.asarray(PANDA_ROOT_POSE, np.float32)
-        if np.abs(out["panda"][:, :7] - root).max(initial=0.0) > _TOL:
-            bad = int(np.abs(out["panda"][:, :7] - root).max(axis=1).argmax())
-            raise ConfigError(f"set_state_dict: state['articulations']['panda'] has the root pose "
-                              f"{out['panda'][bad, :7].tolist()} (row {bad}); the Panda's root is fixed at "
+        arm = out[self.robot_uids]
+        if np.abs(arm[:, :7] - root).max(initial=0.0) > _TOL:
+            bad = int(np.abs(arm[:, :7] - root).max(axis=1).argmax())
+            raise ConfigError(f"set_state_dict: state['articulations'][{self.robot_uids!r}] has the root pose "
+                              f"{arm[bad, :7].tolist()} (row {bad}); the Panda's root is fixed at "
                               f"{root.tolist()}")  # fmt: skip
         entries = {k: torch.as_tensor(np.ascontiguousarray(a), device=self.device) for k, a in out.items()}
         return entries, self._checked_controller_state(state.get("controller"), rows, idx)

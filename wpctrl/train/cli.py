@@ -12,6 +12,7 @@ import sys
 import time
 
 from ..console import add_output_options
+from ..tasks.names import ROBOTS
 from .command_args import command_parser, given_flags, missing_train_extra
 from .hidden_inputs import HIDE_OBS
 from .logger import LOGGERS
@@ -138,6 +139,13 @@ def parser() -> argparse.ArgumentParser:
         help="ManiSkill tasks: observation entries the policy does not read: 'finger_qvel' (the default) hides the "
         "finger joints' velocities, which PhysX reports non-zero in a still grip (its solver's artefact) where "
         "Newton reports the fingers' motion; the exported policy zeroes them itself. 'none' hides nothing",
+    )
+    p.add_argument(
+        "--robot-uids",
+        choices=ROBOTS,
+        default=None,
+        help="ManiSkill tasks: the robot: 'panda', or 'panda_wristcam', the Panda with ManiSkill's wrist camera on its "
+        "hand (default: the task's, as ManiSkill's: panda_wristcam for StackCube-v1 and PegInsertionSide-v1)",
     )
     p.add_argument(
         "--randomize",

@@ -75,10 +75,16 @@ def load_policy(path, task: str | None = None, device="cpu"):
     return module, dict(meta, task=task)
 
 
+def policy_robot(meta: dict) -> str:
+    """The robot a policy learned on: its ``policy.json``'s ``robot_uids``; ``panda`` for a policy exported before
+    the robot was recorded (every such policy learned on ``panda``) or a foreign module."""
+    return meta.get("robot_uids", "panda")
+
+
 def evaluate_maniskill(policy, task: str, control_mode: str, episodes: int, seed: int = 0, progress=None,
-                       recorder=None) -> dict:  # fmt: skip
-    """``policy`` on ``episodes`` episodes of the real ManiSkill (PhysX CPU, one env, the ``panda`` robot wpctrl's tasks
-    build, also where ManiSkill's task defaults to ``panda_wristcam``); metrics as
+                       recorder=None, robot_uids: str = "panda") -> dict:  # fmt: skip
+    """``policy`` on ``episodes`` episodes of the real ManiSkill (PhysX CPU, one env, the robot ``robot_uids``: the
+    one the policy learned on, :func:`policy_robot`); metrics as
     :func:`wpctrl.train.policy_eval.evaluate_policy`, plus per-episode records. ``recorder``: a
     :class:`.record.EpisodeRecorder` that is shown every episode and writes its file once all have run."""
     from wpctrl import console
@@ -88,7 +94,7 @@ def evaluate_maniskill(policy, task: str, control_mode: str, episodes: int, seed
     with warnings.catch_warnings():
         if not console.VERBOSE:  # SAPIEN's note on import; the env renders nothing (render_backend="none")
             warnings.filterwarnings("ignore", message=SAPIEN_VULKAN_NOTE, category=UserWarning)
-        env = make_maniskill(task, control_mode, reward_mode="normalized_dense")  # on the robot the policy learned with
+        env = make_maniskill(task, control_mode, reward_mode="normalized_dense", robot_uids=robot_uids)
     # the registry's episode length (ManiSkill's @register_env value: the tasks' tests keep them equal); gym.make's
     # spec carries none for ManiSkill's envs, whose own TimeLimitWrapper holds it
     steps = TASKS[task].max_episode_steps
@@ -199,7 +205,7 @@ def evaluate(policy, sim: str = "newton", episodes: int = 100, seed: int = 0, ta
         from .record import EpisodeRecorder
 
         recorder = EpisodeRecorder(record, policy, meta) if record else None
-        result = evaluate_maniskill(model, task, control_mode, episodes, seed, report, recorder)
+        result = evaluate_maniskill(model, task, control_mode, episodes, seed, report, recorder, policy_robot(meta))
     else:
         import wpctrl.tasks as T
 
@@ -211,7 +217,7 @@ def evaluate(policy, sim: str = "newton", episodes: int = 100, seed: int = 0, ta
         with console.compile_notice(f"Warp kernels for {task} on {device}"):
             env = T.make(task, num_envs=envs or min(episodes, 256), device=device, control_mode=control_mode,
                          seed=seed, auto_reset=False, ignore_terminations=True, physics=physics,
-                         verbose=verbose)  # fmt: skip
+                         verbose=verbose, robot_uids=policy_robot(meta))  # fmt: skip
         bar = console.progress(episodes, f"{task} on Newton", "episode", progress)
         rec = open_recorder(env, video) if video else None  # None, saying why, where no renderer works
         result = evaluate_policy(model, _CountEpisodes(rec or env, bar, episodes), episodes, seed=seed)
@@ -220,7 +226,8 @@ def evaluate(policy, sim: str = "newton", episodes: int = 100, seed: int = 0, ta
         result["substeps"] = physics.substeps
         env.close()
     bar.close()
-    return {"task": task, "sim": sim, "control_mode": control_mode, "policy": str(policy), "seed": seed, **result}
+    return {"task": task, "sim": sim, "control_mode": control_mode, "robot_uids": policy_robot(meta),
+            "policy": str(policy), "seed": seed, **result}
 
 
 def main(argv=None) -> int:

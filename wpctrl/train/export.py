@@ -83,6 +83,7 @@ def _metadata(infos: dict) -> dict:
         "format": "wpctrl-exported-policy-1",
         **{k: infos[k] for k in keys},
         **({"max_episode_steps": infos["max_episode_steps"]} if "max_episode_steps" in infos else {}),
+        "robot_uids": infos.get("robot_uids", "panda"),  # a checkpoint from before the robot was recorded: panda
         "hidden_obs": list(infos.get("hidden_obs", [])),
         "input": "ManiSkill's flattened obs_mode='state' observation (batch, obs_dim), float32; the columns of "
                  "hidden_obs are not read (the policy zeroes them, as training did)",

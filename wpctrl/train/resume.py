@@ -54,6 +54,7 @@ def recorded_config(summary: dict) -> dict:
             obs_normalization="on" if summary["ppo"]["actor"].get("obs_normalization") else "off",
             hide_obs=summary.get("hide_obs", "none"),  # a run recorded before the option hid nothing
             randomize=summary.get("randomize", "off"),
+            robot_uids=summary.get("robot_uids", "panda"),  # a run recorded before the option trained on panda
         )
     return cfg
 

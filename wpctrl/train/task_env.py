@@ -57,6 +57,7 @@ class TaskVecEnv(VecEnv):
         asset_dir: str | None = None,
         hide_obs: str | None = None,
         randomize: str | None = None,
+        robot_uids: str | None = None,
     ):
         import wpctrl.tasks as T
         from wpctrl.tasks.randomization import from_spec
@@ -68,7 +69,7 @@ class TaskVecEnv(VecEnv):
         self.env = T.make(task, num_envs=num_envs, device=device, control_mode=control_mode, obs_mode="state",
                           reward_mode=reward_mode, seed=seed, auto_reset=True,
                           ignore_terminations=not partial_reset, physics=physics, asset_dir=asset_dir,
-                          graph=graph, randomization=from_spec(randomize or "off"))  # fmt: skip
+                          graph=graph, randomization=from_spec(randomize or "off"), robot_uids=robot_uids)  # fmt: skip
         self.task = task
         self.num_envs = self.env.num_envs
         self.num_actions = int(self.env.single_action_space.shape[0])
@@ -83,7 +84,8 @@ class TaskVecEnv(VecEnv):
         self.hidden_columns = hidden_columns(task, self.hide_obs)
         self.cfg = {"task": task, "num_envs": self.num_envs, "control_mode": control_mode, "reward_mode": reward_mode,
                     "partial_reset": self.partial_reset, "substeps": physics.substeps,
-                    "hide_obs": self.hide_obs, "randomize": randomize or "off"}  # fmt: skip
+                    "hide_obs": self.hide_obs, "randomize": randomize or "off",
+                    "robot_uids": self.env.robot_uids}  # fmt: skip
         self.action_low = torch.as_tensor(self.env.single_action_space.low, device=self.device)
         self.action_high = torch.as_tensor(self.env.single_action_space.high, device=self.device)
         n = self.num_envs

@@ -127,6 +127,7 @@ def checkpoint_infos(env: TaskVecEnv, cfg: dict) -> dict:
         "format": "wpctrl-task-policy-1",
         "task": env.task,
         "control_mode": env.cfg["control_mode"],
+        "robot_uids": env.env.robot_uids,
         "obs_dim": env.num_obs,
         "num_actions": env.num_actions,
         "action_low": env.action_low.cpu().tolist(),
@@ -166,10 +167,10 @@ class ManiSkillTraining:
         graph = not c.no_graph
         self.env = TaskVecEnv(c.task, c.envs, device=c.device, control_mode=c.control_mode, seed=c.seed,
                               partial_reset=not c.no_partial_reset, substeps=c.substeps, graph=graph,
-                              hide_obs=c.hide_obs, randomize=c.randomize)  # fmt: skip
+                              hide_obs=c.hide_obs, randomize=c.randomize, robot_uids=c.robot_uids)  # fmt: skip
         self.eval_env = T.make(c.task, num_envs=c.eval_envs, device=c.device, control_mode=c.control_mode,
                                seed=c.seed + EVAL_SEED, auto_reset=False, ignore_terminations=True,
-                               physics=self.env.physics, graph=graph)  # fmt: skip
+                               physics=self.env.physics, graph=graph, robot_uids=self.env.env.robot_uids)  # fmt: skip
 
     def ppo_cfg(self) -> dict:
         c = self.cfg
@@ -192,7 +193,8 @@ class ManiSkillTraining:
     def describe(self) -> str:
         c = self.cfg
         return (f"{c.task}, {c.envs} envs on {c.device} ({self.env.substeps} MuJoCo steps per physics step), "
-                f"{c.control_mode}, hiding {c.hide_obs}, randomising {c.randomize}, evaluation on {c.eval_envs} envs, "
+                f"{c.control_mode} on {self.env.env.robot_uids}, "
+                f"hiding {c.hide_obs}, randomising {c.randomize}, evaluation on {c.eval_envs} envs, "
                 f"PPO update {c.ppo_update}, "
                 f"{c.action_sampling} action sampling")  # fmt: skip
 
@@ -219,7 +221,8 @@ class ManiSkillTraining:
         return {"eval_envs": c.eval_envs, "ppo_update": c.ppo_update, "action_sampling": c.action_sampling,
                 "substeps": self.env.substeps, "partial_reset": self.env.partial_reset,
                 "max_episode_steps": self.env.max_episode_length, "obs_dim": self.env.num_obs,
-                "hide_obs": c.hide_obs, "hidden_obs": list(self.env.hidden_columns), "randomize": c.randomize,
+                "robot_uids": self.env.env.robot_uids, "hide_obs": c.hide_obs,
+                "hidden_obs": list(self.env.hidden_columns), "randomize": c.randomize,
                 "recipe": task_recipe(c.task)}  # fmt: skip
 
     def checkpoint_infos(self, ppo: dict) -> dict:

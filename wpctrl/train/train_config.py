@@ -12,7 +12,7 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 
 from ..tasks.names import CONTROL_MODES as PANDA_MODES
-from ..tasks.names import TASK_MODULES
+from ..tasks.names import ROBOTS, TASK_MODULES, default_robot
 from .command_args import flag, unused_option
 from .hidden_inputs import DEFAULT_HIDE_OBS, HIDE_OBS
 from .logger import LOGGERS, logger_error
@@ -35,7 +35,7 @@ REACH_STEPS_PER_ENV = 24
 REACH_MINIBATCHES = 4
 
 TASK_ONLY = ("epochs", "minibatches", "substeps", "eval_envs", "time_limit", "ppo_update", "obs_normalization",
-             "action_sampling", "no_partial_reset", "hide_obs", "randomize")  # fmt: skip
+             "action_sampling", "no_partial_reset", "hide_obs", "randomize", "robot_uids")  # fmt: skip
 """The options only the ManiSkill tasks use (the reach task refuses them)."""
 
 TASK_LIST = ", ".join(MANISKILL_TASKS)
@@ -43,7 +43,7 @@ TASK_LIST = ", ".join(MANISKILL_TASKS)
 
 _POSITIVE = ("envs", "iterations", "steps_per_env", "eval_episodes", "eval_envs", "epochs", "minibatches", "substeps")
 _CHOICES = {"task": TASKS, "logger": LOGGERS, "ppo_update": PPO_UPDATES, "obs_normalization": OBS_NORMALIZATIONS,
-            "action_sampling": SAMPLINGS, "hide_obs": HIDE_OBS}  # fmt: skip
+            "action_sampling": SAMPLINGS, "hide_obs": HIDE_OBS, "robot_uids": ROBOTS}  # fmt: skip
 
 
 class TrainConfigError(ValueError):
@@ -91,6 +91,9 @@ class TrainConfig:
     hide_obs: str | None = None
     """Tasks: observation entries the policy does not read (:mod:`wpctrl.train.hidden_inputs`; None:
     ``finger_qvel``, the finger joints' velocities)."""
+    robot_uids: str | None = None
+    """Tasks: the robot, ``panda`` or ``panda_wristcam`` (None: the task's default, as ManiSkill's:
+    :func:`wpctrl.tasks.make`)."""
     randomize: str | None = None
     """Tasks: per-env physics drawn at every reset of the training envs (``"on"``, ``"friction=0.7:1.3,..."``:
     :func:`wpctrl.tasks.randomization.from_spec`); None / ``"off"``: none. The evaluation envs never randomise."""
@@ -257,6 +260,7 @@ class TrainConfig:
                 action_sampling=self.action_sampling or "sync-free",
                 hide_obs=self.hide_obs or DEFAULT_HIDE_OBS,
                 randomize=self.randomize or "off",
+                robot_uids=self.robot_uids or default_robot(self.task),
             )
         return dataclasses.replace(
             self,

@@ -113,8 +113,9 @@ def state_dict_arrays(state, actors: Sequence[str] | None, task: str, who: str, 
                       robot: str | None = None) -> dict[str, np.ndarray]:  # fmt: skip
     """The entries of a state dict in ManiSkill's layout (``{"actors": {name: (.., 13)}, "articulations": {"panda":
     (.., 31)}}``) as float32 numpy arrays by name, checked for what a task's env loads: exactly the task's ``actors``
-    (``None``: any names; an actor of another task or one missing is refused, naming it), the ``panda``
-    articulation, numbers of the right shape, finite. ``rows``: the number of envs set, each entry ``(rows, D)`` or
+    (``None``: any names; an actor of another task or one missing is refused, naming it), one articulation, the
+    robot ``robot`` (``None``: either of :data:`~wpctrl.tasks.names.ROBOTS`; :func:`state_robot` tells which),
+    numbers of the right shape, finite. ``rows``: the number of envs set, each entry ``(rows, D)`` or
     ``(D,)`` for all (returned as ``(rows, D)``); ``None``: one env's entry, ``(D,)`` (a recording's
     ``init_state_dict``). The refusals (:class:`~wpctrl.ConfigError`) start with ``who``, name the field from
     ``root`` (:func:`state_field`), the expected and the received value, and ``task``. Host only."""

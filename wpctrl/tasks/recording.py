@@ -216,7 +216,9 @@ def action_width(control_mode: str) -> int:
 def recorded_robot(data: dict) -> str:
     """The robot a checked recording (:func:`load_episodes`) was made on: its episodes' articulation (``panda`` or
     ``panda_wristcam``), the robot its replay builds."""
-    return next(iter(data["episodes"][0]["init_state_dict"]["articulations"]))
+    from ._validate import state_robot
+
+    return state_robot(data["episodes"][0]["init_state_dict"])
 
 
 def replayed_object(header: dict) -> str:

@@ -76,18 +76,26 @@ PEG, BOX = 0, 1
 LENGTH, RADIUS, HOLE_RADIUS, CENTER_Y, CENTER_Z = 0, 1, 2, 3, 4
 """The episode parameters' columns (:attr:`PegInsertionSide.episode_params`)."""
 _GRASP_COS = math.cos(math.radians(GRASP_MAX_ANGLE))
-PHYSICS = {"finger_torsion": 0.2}
-"""The task's departure from :class:`~wpctrl.tasks.TaskPhysics`'s defaults: torsional friction on the fingers, so the
-carried peg stays in the grip as on PhysX. ManiSkill's finger material (``patch_radius`` / ``min_patch_radius``
-0.1 m) gives every finger contact PhysX's torsional patch friction, which resists a twist about the contact normal;
-MuJoCo's condim-3 contacts have none. Without it the peg, held 6 cm off its centre under a 0.16 N m moment, turns 34
-degrees in the fingers over a carry where PhysX's turns 0.1 degrees, and reaches the box 1.5-2.9 cm off, five to ten
-times the hole's clearance. ``finger_torsion`` gives the finger shapes MuJoCo's condim 4 with this coefficient. From
-0.2 m the grip holds in every demo, and 0.2 to 0.4 m replay them alike; 0.115-0.16 m (about the pair's friction, 1.15,
-times the 0.1 m radius) do not reliably, MuJoCo's elliptic cone sharing one bound between sliding and twisting, of
-which the held peg's weight takes part. Everything else stays the defaults, the fingers' soft contacts included (the
-peg sinks into them as into PhysX's). The defaults suit the other tasks (LiftPegUpright's demos need its peg to turn
-in the fingers), so this is the task's alone (``docs/tasks.md``)."""
+PHYSICS = {"finger_torsion": 0.2, "finger_solimp": (0.95, 0.95, 0.001)}
+"""The task's departures from :class:`~wpctrl.tasks.TaskPhysics`'s defaults: the fingers' grip on the carried peg.
+
+- ``finger_torsion``: torsional friction on the fingers, so the carried peg stays in the grip as on PhysX. ManiSkill's
+  finger material (``patch_radius`` / ``min_patch_radius`` 0.1 m) gives every finger contact PhysX's torsional patch
+  friction, which resists a twist about the contact normal; MuJoCo's condim-3 contacts have none. Without it the peg,
+  held 6 cm off its centre under a 0.16 N m moment, turns 34 degrees in the fingers over a carry where PhysX's turns
+  0.1 degrees, and reaches the box 1.5-2.9 cm off, five to ten times the hole's clearance. ``finger_torsion`` gives the
+  finger shapes MuJoCo's condim 4 with this coefficient. From 0.2 m the grip holds in every demo; 0.115-0.16 m (about
+  the pair's friction, 1.15, times the 0.1 m radius) do not reliably, MuJoCo's elliptic cone sharing one bound between
+  sliding and twisting, of which the held peg's weight takes part.
+- ``finger_solimp``: finger contacts stiffer than the defaults' 0.7 (which sink a pressed fingertip as far as PhysX's,
+  :class:`~wpctrl.tasks.TaskPhysics`). With the softer contacts in the grip, insertions PhysX made miss
+  the hole's 3 mm clearance: of 26 motion-planned demos recorded in ManiSkill
+  (``bench/tasks/record_demos.py``, ``tests/data/validation``) 13 insert at 0.7, 21 at 0.9, 22 at 0.95 (the peg within
+  0.19 cm of PhysX's in the median), 23 with the contacts as stiff as the other shapes' (1.6 cm off: the peg then
+  slides along its axis in the grip).
+
+The defaults suit the other tasks (LiftPegUpright's demos need its peg to turn in the fingers), so these are the
+task's alone (``docs/tasks.md``)."""
 
 
 def box_with_hole(inner: float, outer: float, depth: float, center: tuple[float, float]) -> tuple[Box, ...]:

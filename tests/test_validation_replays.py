@@ -1,0 +1,77 @@
+"""A validation sample of real ManiSkill episodes, larger than the public one and of the same kinds, replayed open-loop
+on Newton with each task's own physics (``tests/data/validation``, README there):
+
+- ManiSkill's motion-planning demos of PegInsertionSide-v1 (26) and PlaceSphere-v1 (32), recorded in the real
+  ManiSkill by ``bench/tasks/record_demos.py`` from seeds 200 onwards, as ManiSkill's trajectory files;
+- the public PushCube-v1 (``pd_joint_delta_pos``, 40) and PickCube-v1 (``pd_ee_delta_pos``, 30) policies run in the
+  real ManiSkill from seed 20010 (``wpctrl evaluate --sim maniskill --record``).
+
+Each replay's success once must agree with ManiSkill's on at least the measured number of episodes less two (the
+outcomes sit near thresholds: a different CPU's rounding can flip one), and its main object end within the measured
+median error plus a margin. The issues' goal, 90 % episode by episode, is asserted where it holds and a strict
+expected failure, with the measured numbers in its reason, where it does not.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("torch")
+
+import wpctrl.tasks as T  # noqa: E402
+
+DATA = Path(__file__).parent / "data" / "validation"
+
+# measured 2026-11-29, CPU, each task's own physics (16 substeps): episodes, success once agreeing, median final
+# error of the main object [m]
+MEASURED = {
+    "PegInsertionSide-v1.h5": (26, 22, 0.0019),
+    "PlaceSphere-v1.h5": (32, 27, 0.0028),
+    "PushCube-v1__pd_joint_delta_pos__policy_20010.json.gz": (40, 32, 0.078),
+    "PickCube-v1__pd_ee_delta_pos__policy_20010.json.gz": (30, 27, 0.0034),
+}
+GOAL = 0.9
+"""Success once agreeing with ManiSkill's in this share of the episodes (the issues' goal)."""
+SHORT_OF_GOAL = {name for name, (n, agree, _) in MEASURED.items() if agree < GOAL * n}
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def reports():
+    cache = {}
+
+    def get(name):
+        if name not in cache:
+            cache[name] = T.replay(DATA / name)
+        return cache[name]
+
+    return get
+
+
+@pytest.mark.parametrize("name", sorted(MEASURED))
+def test_the_replays_agree_as_measured(reports, name):
+    n, agree, median = MEASURED[name]
+    report = reports(name)
+    assert len(report.episodes) == n
+    got = sum(e.success_once == e.success_once_recorded for e in report.episodes)
+    misses = [(e.seed, e.success_once_recorded, round(e.final_cube_error, 4)) for e in report.episodes
+              if e.success_once != e.success_once_recorded]  # fmt: skip
+    assert got >= agree - 2, (got, misses)
+    assert report.median_final_cube_error <= 1.5 * median + 0.002, report.median_final_cube_error
+
+
+@pytest.mark.parametrize(
+    "name",
+    [pytest.param(name, marks=pytest.mark.xfail(strict=True, reason=(
+        f"measured {MEASURED[name][1]} / {MEASURED[name][0]} episodes agree (2026-11-29); the rest part where "
+        "PhysX's and MuJoCo's contacts differ (docs/tasks.md)"))) if name in SHORT_OF_GOAL else name
+     for name in sorted(MEASURED)],
+)  # fmt: skip
+def test_the_replays_reach_the_goal(reports, name):
+    report = reports(name)
+    agree = np.mean([e.success_once == e.success_once_recorded for e in report.episodes])
+    assert agree >= GOAL, agree

@@ -248,15 +248,6 @@ def demo_replay():
     return T.replay(DEMOS if DEMOS.is_file() else _demos())
 
 
-_SEED_104 = (
-    "3 of the 4 public demos insert (measured 2026-11-29): seed 104's grasp leaves its peg turned 32 mrad about the "
-    "fingers' axis and 1.1 mm off-centre on both simulators, but PhysX keeps it so while Newton's soft contacts push "
-    "it back to the centre and square it up within 15 steps; the plan's insertion, made for PhysX's twist, then misses "
-    "the 3 mm clearance and the peg ends 11 cm off. At 8 substeps all four insert (docs/tasks.md, PegInsertionSide-v1)"
-)
-
-
-@pytest.mark.xfail(strict=True, reason=_SEED_104)
 def test_maniskills_motion_planning_demos_replay_to_insertion(demo_replay):
     """Every public demo (``pd_joint_pos``, 134-200 steps) open-loop from its state dict, one env each, each env
     reconfigured from its episode's seed, with the task's physics (``T.task_physics``): success at the end in >= 90 %
@@ -269,19 +260,20 @@ def test_maniskills_motion_planning_demos_replay_to_insertion(demo_replay):
 
 def test_the_demos_carry_the_peg_in_the_grip_as_physx_does_and_insert_it(demo_replay):
     """With the task's physics the grip holds the peg as PhysX's does: up to the grasp the peg follows PhysX's within
-    1 mm (measured 0.36 mm at most), carried to the box within 5 mm until the insertion, the plan's last 25 steps
-    (measured 1.6-2.9 mm), and three of the four demos insert it, ending within 5 mm of PhysX's peg (measured 1.6 /
-    1.6 / 3.2 mm; the fourth, seed 104: the expected failure above)."""
+    1 mm (measured 0.34 mm at most), carried to the box within 1.5 cm until the insertion, the plan's last 25 steps
+    (measured 5.6-11.0 mm: the pyramidal cone lets it slide along its axis in the grip), and all four demos insert it,
+    ending within 2 cm of PhysX's peg (measured 6.1-15.7 mm; the hole's clearance is 3 mm across the peg, not along
+    it)."""
     report = demo_replay
     for ep, res in zip(_demos()["episodes"], report.episodes):
         grasp = next(k for k, a in enumerate(ep["actions"]) if a[7] < 0)
         err = np.asarray(res.cube_error)
         assert err[: grasp + 1].max() < 1e-3, (ep["seed"], err[: grasp + 1].max())
         carried = len(ep["actions"]) - 25  # the plan's last 25 steps push the peg into the hole
-        assert err[:carried].max() < 5e-3, (ep["seed"], err[:carried].max())
+        assert err[:carried].max() < 1.5e-2, (ep["seed"], err[:carried].max())
     inserted = [e for e in report.episodes if e.success_at_end and e.success_at_end_recorded]
-    assert len(inserted) >= 3, [e.success_at_end for e in report.episodes]
-    assert max(e.cube_error[-1] for e in inserted) < 5e-3, [e.cube_error[-1] for e in inserted]
+    assert len(inserted) == len(report.episodes), [e.success_at_end for e in report.episodes]
+    assert max(e.cube_error[-1] for e in inserted) < 2e-2, [e.cube_error[-1] for e in inserted]
 
 
 def test_the_common_defaults_let_the_peg_turn_in_the_grip_and_miss_the_hole():
@@ -305,7 +297,8 @@ def test_the_tasks_physics_is_its_declared_departures():
     own = T.task_physics(ENV_ID)
     assert own == T.TaskPhysics(**PHYSICS) and own != T.TaskPhysics()
     assert own.finger_torsion > 0.0 and own.finger_solimp[0] > T.TaskPhysics().finger_solimp[0]
-    assert own == T.TaskPhysics(finger_torsion=own.finger_torsion, finger_solimp=own.finger_solimp)
+    assert own.cone == "pyramidal" != T.TaskPhysics().cone
+    assert own == T.TaskPhysics(finger_torsion=own.finger_torsion, finger_solimp=own.finger_solimp, cone=own.cone)
     assert T.task_physics(ENV_ID, substeps=8) == T.TaskPhysics(**PHYSICS, substeps=8)
     assert T.task_physics("PushCube-v1") == T.TaskPhysics()
     env = T.make(ENV_ID, robot_uids=ROBOT, num_envs=1, auto_reset=False)

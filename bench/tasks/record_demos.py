@@ -21,16 +21,15 @@ import sys
 import time
 import warnings
 
-SOLUTIONS = {
-    "PushCube-v1": "solvePushCube",
-    "PickCube-v1": "solvePickCube",
-    "PullCube-v1": "solvePullCube",
-    "StackCube-v1": "solveStackCube",
-    "LiftPegUpright-v1": "solveLiftPegUpright",
-    "PegInsertionSide-v1": "solvePegInsertionSide",
-    "PlaceSphere-v1": "solvePlaceSphere",
-}
-"""The tasks wpctrl builds and the name of ManiSkill's solution of each (``motionplanning.panda.solutions``)."""
+
+def solutions() -> dict:
+    """ManiSkill's motion-planning solution of each task wpctrl builds (its own ``MP_SOLUTIONS`` of
+    ``mani_skill.examples.motionplanning.panda.run``, restricted to :data:`wpctrl.tasks.names.TASK_MODULES`)."""
+    from mani_skill.examples.motionplanning.panda.run import MP_SOLUTIONS
+
+    from wpctrl.tasks.names import TASK_MODULES
+
+    return {task: solve for task, solve in MP_SOLUTIONS.items() if task in TASK_MODULES}
 
 
 def parse_seeds(text: str) -> range:
@@ -55,12 +54,11 @@ def record(task: str, seeds: range, out: str, robot: str = "panda", max_steps: i
                          "PYTHONPATH=/tmp/np1")  # fmt: skip
     import gymnasium as gym
     import mani_skill.envs  # noqa: F401  (registers the tasks)
-    from mani_skill.examples.motionplanning.panda import solutions
     from mani_skill.utils.wrappers.record import RecordEpisode
 
     from wpctrl.tasks.maniskill_side import no_visuals
 
-    solve = getattr(solutions, SOLUTIONS[task])
+    solve = solutions()[task]
     kept, failed = [], []
     with warnings.catch_warnings(), no_visuals():  # PegInsertionSide rebuilds its scene at every reset
         warnings.simplefilter("ignore")
@@ -86,7 +84,7 @@ def record(task: str, seeds: range, out: str, robot: str = "panda", max_steps: i
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--task", required=True, choices=sorted(SOLUTIONS))
+    p.add_argument("--task", required=True, choices=sorted(solutions()))
     p.add_argument("--seeds", required=True, help="FIRST:STOP, the reset seeds to try")
     p.add_argument("--out", required=True, help="folder for <task>.h5 and <task>.json")
     p.add_argument("--robot", default="panda", help="robot_uids (default: panda, as the public demos)")

@@ -8,6 +8,22 @@ _PHYSICS = ("tests/test_tasks.py", "tests/test_task_peg_insertion_side.py")
 
 MUTATIONS = [
     M(
+        "peg_physics_elliptic_cone",
+        "wpctrl/tasks/peg_insertion_side.py",
+        ', "cone": "pyramidal"}',
+        "}",
+        "PegInsertionSide's grip under the elliptic cone: the carried peg turns in the hand and insertions miss",
+        _PHYSICS,
+    ),
+    M(
+        "peg_physics_soft_finger_contacts",
+        "wpctrl/tasks/peg_insertion_side.py",
+        '"finger_solimp": (0.95, 0.95, 0.001), ',
+        "",
+        "PegInsertionSide's fingers keep the defaults' soft contacts (0.7): half of a larger demo sample misses",
+        _PHYSICS,
+    ),
+    M(
         "task_physics_ignored_by_make",
         "wpctrl/tasks/factory.py",
         "        physics = task_physics(env_id)\n",

@@ -142,23 +142,7 @@ def assert_demo_replays(path: Path):
     return report
 
 
-# With its task's physics one task's demos miss their goal, one demo of four (measured in docs/tasks.md and the task's
-# own tests): one of PlaceSphere's balls, let go a millimetre from PhysX's, lands on other edges of the bin and rests
-# after the demo's end.
-_TASK_PHYSICS_MISSES = {
-    "PlaceSphere-v1": "3 / 4 succeed: seed 104's ball, let go 0.9 mm from PhysX's near a corner of the bin, lands on "
-    "other edges, rolls and rests 4 steps after the demo's end (tests/test_task_place_sphere.py)",
-}
-_DEMO_PARAMS = [
-    pytest.param(
-        p,
-        id=p.name.split("__")[0],
-        marks=[pytest.mark.xfail(strict=True, reason=_TASK_PHYSICS_MISSES[p.name.split("__")[0]])]
-        if p.name.split("__")[0] in _TASK_PHYSICS_MISSES
-        else [],
-    )
-    for p in DEMO_FILES
-]
+_DEMO_PARAMS = [pytest.param(p, id=p.name.split("__")[0]) for p in DEMO_FILES]
 
 
 @pytest.mark.slow  # each file builds an env and replays 60-200 steps (15-60 s on a 2-core CPU)

@@ -94,7 +94,10 @@ def test_make_refuses_bad_input_naming_the_field(kwargs, field):
      ("finger_torsion", 5e-5), ("finger_torsion", float("nan")), ("finger_torsion", float("inf")),
      ("finger_torsion", "0.05"), ("finger_torsion", True), ("finger_solimp", (0.7, 0.6, 0.001)),
      ("finger_solimp", (0.0, 0.7, 0.001)), ("finger_solimp", (0.7, 0.7)), ("finger_solimp", 0.7),
-     ("finger_solref", (0.005, 0.0)), ("finger_solref", (float("nan"), 1.0))],
+     ("finger_solref", (0.005, 0.0)), ("finger_solref", (float("nan"), 1.0)), ("shape_solref", "cube"),
+     ("shape_solref", (("cube", (0,), (0.0, 1.0)),)), ("shape_solref", (("cube", (), (0.01, 1.0)),)),
+     ("shape_solref", (("cube", (-1,), (0.01, 1.0)),)), ("shape_solref", (("", (0,), (0.01, 1.0)),)),
+     ("shape_solref", (("cube", 0, (0.01, 1.0)),))],
 )  # fmt: skip
 def test_task_physics_refuses_values_outside_their_range(field, value):
     with pytest.raises(wpctrl.ConfigError, match=f"TaskPhysics.{field}"):
@@ -155,6 +158,28 @@ def test_task_physics_values_at_the_edge_reach_mujoco():
     # finger_torsion: condim 4 and the coefficient on the finger geoms only (test_finger_torsion_... below)
     assert np.unique(mw.geom_condim.numpy()).tolist() == [3, 4]
     np.testing.assert_array_equal(np.unique(mw.geom_friction.numpy()[..., 1]), np.float32([0.0, 1e-4]))
+
+
+def test_shape_solref_reaches_the_named_shapes_in_every_world_and_refuses_others():
+    """``TaskPhysics.shape_solref`` sets MuJoCo's solref of the named actor's named shapes in every env's copy and of
+    nothing else; a JSON record's lists are taken as tuples; an actor the task lacks or a shape index past its shapes
+    is refused before anything is built, naming the entry."""
+    physics = T.TaskPhysics(shape_solref=[["cube", [0], [0.02, 1.5]]])
+    assert physics.shape_solref == (("cube", (0,), (0.02, 1.5)),)
+    assert T.TaskPhysics(**physics.as_dict()) == physics
+    env = T.make("PushCube-v1", num_envs=3, physics=physics, graph=False)
+    solref = env.solver.mjw_model.geom_solref.numpy()  # (worlds, geoms, 2)
+    to_shape = env.solver.mjc_geom_to_newton_shape.numpy()
+    cube = {env.scene.actor_shapes0["cube"][0] + w * env.scene.shapes_per_env for w in range(3)}
+    named = np.isin(to_shape, sorted(cube))
+    assert named.sum() == 3 and named.any(axis=1).all()
+    np.testing.assert_allclose(solref[named], np.broadcast_to((0.02, 1.5), (3, 2)), rtol=1e-6)
+    np.testing.assert_allclose(solref[~named & (to_shape >= 0)], np.broadcast_to(
+        physics.contact_solref, solref[~named & (to_shape >= 0)].shape), rtol=1e-6)  # fmt: skip
+    for entry, match in ((("goal", (0,), (0.02, 1.0)), r"shape_solref\[0\]: actor expected one of \['cube'\]"),
+                         (("cube", (1,), (0.02, 1.0)), r"shape_solref\[0\]: shape index expected < 1")):  # fmt: skip
+        with pytest.raises(wpctrl.ConfigError, match=match):
+            T.make("PushCube-v1", num_envs=1, physics=T.TaskPhysics(shape_solref=(entry,)), graph=False)
 
 
 def _finger_geoms(env) -> np.ndarray:

@@ -8,10 +8,19 @@ MUTATIONS = [
     M(
         "place_sphere_physics_undamped",
         "wpctrl/tasks/place_sphere.py",
-        'PHYSICS = {"contact_solref": (0.0025, 2.0)}\n',
-        'PHYSICS = {"contact_solref": (0.0035, 1.43)}\n',
+        'PHYSICS = {"contact_solref": (0.0025, 2.0), ',
+        'PHYSICS = {"contact_solref": (0.0035, 1.43), ',
         "PlaceSphere's contacts damped less than twice the defaults at the same stiffness (the ball rolls off its "
         "landing)",
+        _TESTS,
+    ),
+    M(
+        "place_sphere_stiff_walls",
+        "wpctrl/tasks/place_sphere.py",
+        '"shape_solref": (("bin", WALLS, (0.03, 1.0)),)}',
+        '"shape_solref": ()}',
+        "PlaceSphere's bin walls get the other shapes' contacts (a ball rolled into a wall's edge pivots on it and "
+        "rolls back)",
         _TESTS,
     ),
     M(

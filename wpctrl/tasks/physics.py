@@ -21,7 +21,9 @@ differ where a task touches them. What :class:`TaskPhysics` sets, and why:
   the fingers then leaves them otherwise than PhysX's: PushCube's ``pd_ee_delta_pos`` replays land 1.2 -> 5.5 cm off
   (32 fresh episodes: 1.2 -> 4.7 cm), so 5 ms stays (``docs/tasks.md``; measured with stiff finger contacts).
   PlaceSphere's physics halves the time constant and doubles the damping ratio (the same stiffness, twice the
-  damping), so that a ball landing in its bin rests as PhysX's does (restitution 0) instead of rolling off.
+  damping), so that a ball landing in its bin rests as PhysX's does (restitution 0) instead of rolling off, and gives
+  the bin's walls contacts of 30 ms (``shape_solref``): PhysX takes a ball's impact on a wall's edge within one 10 ms
+  step and the ball stops there, where MuJoCo's short steps let it pivot on the edge and roll back.
 - **Finger contacts** (``finger_solimp``, impedance 0.7 on the finger shapes, 0.85 once MuJoCo mixes it with the
   other shape's): under load PhysX's fingertips sink into what they press, about 0.03 mm per newton (15 position
   iterations leave that overlap between a driven link and a light body), where the other shapes' impedance let a
@@ -124,6 +126,13 @@ class TaskPhysics:
     """MuJoCo ``solref`` (time constant [s], damping ratio) of the Panda's finger shapes; None gives them
     ``contact_solref``. MuJoCo mixes the two shapes' values of a pair half and half."""
 
+    shape_solref: tuple[tuple[str, tuple[int, ...], tuple[float, float]], ...] = ()
+    """MuJoCo ``solref`` (time constant [s], damping ratio) of some of a task actor's shapes: each entry is (the
+    actor's name, the shapes' indices in the actor's ``shapes``, the solref); every other shape keeps
+    ``contact_solref``. MuJoCo mixes the two shapes' values of a pair half and half. PlaceSphere-v1's physics gives its
+    bin's walls 30 ms, so that a ball rolled or dropped onto a wall's edge stops on it as on PhysX (``docs/tasks.md``);
+    the task's scene refuses an actor or index it does not have."""
+
     def __post_init__(self):
         _int_at_least(self, "substeps", 1)
         _int_at_least(self, "iterations", 1)
@@ -152,6 +161,7 @@ class TaskPhysics:
                 continue
             if not _numbers(v, 2) or not (v[0] > 0.0 and v[1] > 0.0):
                 raise ConfigError(f"TaskPhysics.{name}: expected (time constant > 0 [s], damping ratio > 0), got {v!r}")
+        object.__setattr__(self, "shape_solref", _shape_solref(self.shape_solref))
         for name in ("contact_solimp", "limit_solimp", "finger_solimp"):
             v = getattr(self, name)
             if v is None and name == "finger_solimp":
@@ -243,3 +253,22 @@ def _one_of(obj, name: str, allowed: tuple[str, ...]) -> None:
     v = getattr(obj, name)
     if v not in allowed:
         raise ConfigError(f"TaskPhysics.{name}: expected one of {allowed}, got {v!r}")
+
+
+def _shape_solref(v) -> tuple:
+    """``TaskPhysics.shape_solref`` checked and made tuples (a JSON record gives lists)."""
+    expected = "a sequence of (actor name, (shape index >= 0, ...), (time constant > 0 [s], damping ratio > 0))"
+    if not isinstance(v, (tuple, list)):
+        raise ConfigError(f"TaskPhysics.shape_solref: expected {expected}, got {v!r}")
+    out = []
+    for i, entry in enumerate(v):
+        ok = isinstance(entry, (tuple, list)) and len(entry) == 3 and isinstance(entry[0], str) and entry[0]
+        index = entry[1] if ok else None
+        ok = ok and isinstance(index, (tuple, list)) and len(index) > 0
+        ok = ok and all(isinstance(k, int) and not isinstance(k, bool) and k >= 0 for k in index)
+        ok = ok and _numbers(entry[2], 2) and entry[2][0] > 0.0 and entry[2][1] > 0.0
+        if not ok:
+            raise ConfigError(f"TaskPhysics.shape_solref[{i}]: expected (actor name, (shape index >= 0, ...), "
+                              f"(time constant > 0 [s], damping ratio > 0)), got {entry!r}")  # fmt: skip
+        out.append((entry[0], tuple(int(k) for k in index), (float(entry[2][0]), float(entry[2][1]))))
+    return tuple(out)

@@ -63,17 +63,29 @@ SPHERE, BIN = 0, 1
 """The actors' indices (the ball is also contact column 0)."""
 _FLOOR_TOP = WALL_HALF + RADIUS
 """The ball's centre above the bin's when it rests on the floor (``radius + block_half_size[0]``)."""
-PHYSICS = {"contact_solref": (0.0025, 2.0)}
-"""The task's departure from :class:`~wpctrl.tasks.TaskPhysics`'s defaults: contacts of the same stiffness with twice
-the damping, so an impact gives back as little as PhysX's (restitution 0). The ball, let go above the bin, lands at
-35 cm/s on the floor and a wall's top edge at once (the 4 cm inside leaves a 2 cm ball 2.7 mm of play). PhysX's
-contacts take the impact and the ball rests within one to four control steps; MuJoCo's critically damped contacts let
-it sink in and push it back out along the edge's slanted normal, so it rolls off its landing at 1.4-17 cm/s and rests
-4-10 steps after PhysX's, past the end of every demo. MuJoCo's stiffness is ``1 / (tau zeta)^2``: halving the time
-constant and doubling the damping ratio keeps it (and so the fingers' depth in what they press) and doubles the
-damping. Damping ratios 2 to 4 replay the demos alike; 1.4 does not stop the roll. The same at the training's 8
-substeps (2.5 ms is two of their MuJoCo steps). The other tasks keep the defaults: as every task's, it costs
-LiftPegUpright's demos (``docs/tasks.md``)."""
+WALLS = (1, 2, 3, 4)
+"""The bin's walls among its shapes (:func:`bin_boxes`)."""
+PHYSICS = {"contact_solref": (0.0025, 2.0), "shape_solref": (("bin", WALLS, (0.03, 1.0)),)}
+"""The task's departures from :class:`~wpctrl.tasks.TaskPhysics`'s defaults, both so that the ball comes to rest in
+the bin as soon as PhysX's does (ManiSkill's motion-planning demos end one to four steps after it rests).
+
+- ``contact_solref``: contacts of the same stiffness with twice the damping, so an impact gives back as little as
+  PhysX's (restitution 0). The ball, let go above the bin, lands at 35 cm/s on the floor and a wall's top edge at
+  once (the 4 cm inside leaves a 2 cm ball 2.7 mm of play). MuJoCo's critically damped contacts let it sink in and
+  push it back out along the edge's slanted normal, so it rolls off its landing. MuJoCo's stiffness is
+  ``1 / (tau zeta)^2``: halving the time constant and doubling the damping ratio keeps it (and so the fingers' depth
+  in what they press) and doubles the damping.
+- ``shape_solref``: the walls' contacts spread over about one PhysX step (10 ms). A ball rolling into a wall's top
+  edge (measured in ManiSkill at 2-8 cm/s, ``tests/test_task_place_sphere.py``): PhysX takes the whole impact in
+  the one step it arrives in, where the edge's upward push is a fifth of a step's weight; the ball rises 0.01 mm,
+  its floor and edge contacts hold it, and it is still from the next step on. MuJoCo's 0.6 ms steps resolve what
+  rigid Coulomb friction predicts instead: the ball sticks on the edge, pivots up on it (0.03 mm), swings back and
+  rolls away at a third of its speed (at 4 cm/s: 1.45 cm/s, over ManiSkill's 1 cm/s static threshold), resting
+  steps later. With the walls' time constant at 30 ms (a ball-wall pair's 16 ms, MuJoCo's mix of both shapes') the
+  edge pushes for as long as a PhysX step and the ball is left with 0.2-0.7 cm/s. Walls of 20-40 ms replay alike;
+  15 and 60 ms lose demos. The floor keeps the task's contacts: softer, it loses every demo.
+
+The other tasks keep the defaults: as every task's, the damping costs LiftPegUpright's demos (``docs/tasks.md``)."""
 
 
 def bin_boxes() -> tuple[Box, ...]:

@@ -20,6 +20,7 @@ import newton
 import numpy as np
 import warp as wp
 
+from ..config import ConfigError
 from ..maniskill.collision import filter_srdf_pairs
 from .definitions import PANDA_DOF, PANDA_ROOT_POSE, TABLE, TABLE_REST_QPOS, Actor, Box, Capsule, Sphere
 from .names import ROBOTS
@@ -121,6 +122,7 @@ def build_scene(task: Task, num_envs: int, device, physics: TaskPhysics, asset_d
                 robot_uids: str = "panda") -> Scene:  # fmt: skip
     """``num_envs`` worlds of ``task``'s scene (the robot ``robot_uids``, the table, the task's actors), finalized on
     ``device``."""
+    _check_shape_solref(task, physics)
     urdf = panda_urdf_path(asset_dir, robot_uids)
     materials = {"default": TABLE.static_friction, "gripper": PANDA_FINGER_MATERIAL["static_friction"]}
     materials.update({a.name: a.static_friction for a in task.bodies if a.static_friction is not None})
@@ -151,7 +153,7 @@ def build_scene(task: Task, num_envs: int, device, physics: TaskPhysics, asset_d
     newton.solvers.SolverMuJoCo.register_custom_attributes(builder)
     builder.replicate(env, int(num_envs))
     model = builder.finalize(device=device)
-    _apply_mujoco_attributes(model, physics, n_shapes * int(num_envs))
+    _apply_mujoco_attributes(model, physics, n_shapes, int(num_envs), shapes0)
 
     labels = [lb.rsplit("/", 1)[-1] for lb in model.body_label]
     jq = model.joint_q_start.numpy()
@@ -204,15 +206,30 @@ def _add_actor(env: newton.ModelBuilder, actor: Actor, mu: float) -> None:
             raise TypeError(f"actor {actor.name}: unknown shape {shape!r}")
 
 
-def _apply_mujoco_attributes(model: newton.Model, physics: TaskPhysics, n_shapes: int) -> None:
+def _check_shape_solref(task: Task, physics: TaskPhysics) -> None:
+    """Every ``physics.shape_solref`` entry names one of ``task``'s actors and shapes it has, refused before anything
+    is built."""
+    actors = {a.name: len(a.shapes) for a in task.bodies}
+    for i, (actor, index, _) in enumerate(physics.shape_solref):
+        if actor not in actors:
+            raise ConfigError(f"TaskPhysics.shape_solref[{i}]: actor expected one of {sorted(actors)} "
+                              f"({task.env_id}), got {actor!r}")  # fmt: skip
+        if max(index) >= actors[actor]:
+            raise ConfigError(f"TaskPhysics.shape_solref[{i}]: shape index expected < {actors[actor]} ({actor!r} has "
+                              f"{actors[actor]} shapes), got {max(index)}")  # fmt: skip
+
+
+def _apply_mujoco_attributes(model: newton.Model, physics: TaskPhysics, shapes_per_env: int, num_envs: int,
+                             actor_shapes0: dict[str, tuple[int, ...]]) -> None:  # fmt: skip
     """Raw MuJoCo contact and joint-limit parameters on every shape / DOF (SolverMuJoCo reads them at build); with
-    ``physics.finger_torsion`` the finger shapes' ``condim`` 4 and torsional friction (0 on every other shape)."""
+    ``physics.finger_torsion`` the finger shapes' ``condim`` 4 and torsional friction (0 on every other shape).
+    ``actor_shapes0``: each task actor's shapes in the first world, for ``physics.shape_solref``."""
     from newton._src.solvers.mujoco.constants import SOLREF_MODE_RAW
 
     ns = model.mujoco
-    if n_shapes != model.shape_count:
-        raise RuntimeError(f"scene: {model.shape_count} shapes, expected {n_shapes}")
-    ns.solref.assign(np.tile(np.asarray(physics.contact_solref, np.float32), (model.shape_count, 1)))
+    if shapes_per_env * num_envs != model.shape_count:
+        raise RuntimeError(f"scene: {model.shape_count} shapes, expected {shapes_per_env * num_envs}")
+    solref = np.tile(np.asarray(physics.contact_solref, np.float32), (model.shape_count, 1))
     ns.solref_mode.assign(np.full(model.shape_count, SOLREF_MODE_RAW, np.int32))
     solimp = np.tile(np.array([*physics.contact_solimp, 0.5, 2.0], np.float32), (model.shape_count, 1))
     labels = [lb.rsplit("/", 1)[-1] for lb in model.body_label]
@@ -221,9 +238,12 @@ def _apply_mujoco_attributes(model: newton.Model, physics: TaskPhysics, n_shapes
         solimp[fingers, 0:3] = physics.finger_solimp
     ns.geom_solimp.assign(solimp)
     if physics.finger_solref is not None:
-        solref = ns.solref.numpy()
         solref[fingers] = physics.finger_solref
-        ns.solref.assign(solref)
+    worlds = np.arange(num_envs) * shapes_per_env
+    for actor, index, value in physics.shape_solref:
+        shapes = np.array([actor_shapes0[actor][k] for k in index])
+        solref[(worlds[:, None] + shapes[None, :]).ravel()] = value
+    ns.solref.assign(solref)
     if physics.finger_torsion > 0.0:
         ns.condim.assign(np.where(fingers, 4, ns.condim.numpy()).astype(np.int32))
         model.shape_material_mu_torsional.assign(np.where(fingers, physics.finger_torsion, 0.0).astype(np.float32))

@@ -162,7 +162,10 @@ class TrainConfig:
                 physics = task_physics(self.task, self.substeps)
             else:
                 physics = TaskPhysics() if self.substeps is None else TaskPhysics(substeps=self.substeps)
-            shortest = min(physics.contact_solref[0], (physics.finger_solref or physics.contact_solref)[0])
+            shortest = min(
+                [physics.contact_solref[0], (physics.finger_solref or physics.contact_solref)[0]]
+                + [solref[0] for _, _, solref in physics.shape_solref]
+            )
             if spec is not None and (why := spec.contact_time_problem(shortest, 0.01 / physics.substeps)):
                 return f"{name('randomize')}: {why} (with {name('substeps')} {physics.substeps})"
         if self.time_limit is not None and not self.time_limit > 0:

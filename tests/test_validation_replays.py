@@ -1,8 +1,9 @@
 """A validation sample of real ManiSkill episodes, larger than the public one and of the same kinds, replayed open-loop
 on Newton with each task's own physics (``tests/data/validation``, README there):
 
-- ManiSkill's motion-planning demos of PegInsertionSide-v1 (26) and PlaceSphere-v1 (32), recorded in the real
-  ManiSkill by ``bench/tasks/record_demos.py`` from seeds 200 onwards, as ManiSkill's trajectory files;
+- ManiSkill's motion-planning demos of PegInsertionSide-v1 (26), PlaceSphere-v1 (32), LiftPegUpright-v1 (21),
+  StackCube-v1 (24) and PullCube-v1 (24), recorded in the real ManiSkill by ``bench/tasks/record_demos.py`` from seeds
+  200 onwards, as ManiSkill's trajectory files;
 - the public PushCube-v1 (``pd_joint_delta_pos``, 40) and PickCube-v1 (``pd_ee_delta_pos``, 30) policies run in the
   real ManiSkill from seed 20010 (``wpctrl evaluate --sim maniskill --record``).
 
@@ -27,7 +28,10 @@ DATA = Path(__file__).parent / "data" / "validation"
 # measured 2026-11-29, CPU, each task's own physics (16 substeps): episodes, success once agreeing, median final
 # error of the main object [m]
 MEASURED = {
+    "LiftPegUpright-v1.h5": (21, 21, 0.0032),
     "PegInsertionSide-v1.h5": (26, 24, 0.0107),
+    "PullCube-v1.h5": (24, 24, 0.0018),
+    "StackCube-v1.h5": (24, 24, 0.0006),
     "PlaceSphere-v1.h5": (32, 31, 0.0027),
     "PushCube-v1__pd_joint_delta_pos__policy_20010.json.gz": (40, 32, 0.078),
     "PickCube-v1__pd_ee_delta_pos__policy_20010.json.gz": (30, 27, 0.0034),

@@ -4,6 +4,22 @@ from .model import M
 
 MUTATIONS = [
     M(
+        "tasks_shape_solref_first_world_only",
+        "wpctrl/tasks/scene.py",
+        "    worlds = np.arange(num_envs) * shapes_per_env\n",
+        "    worlds = np.zeros(1, int)\n",
+        "TaskPhysics.shape_solref reaches the named shapes of the first env only",
+        ("tests/test_tasks.py",),
+    ),
+    M(
+        "tasks_shape_solref_index_past_the_end",
+        "wpctrl/tasks/scene.py",
+        "        if max(index) >= actors[actor]:\n",
+        "        if max(index) > actors[actor]:\n",
+        "a shape_solref index one past the actor's shapes is not refused before the build",
+        ("tests/test_tasks.py",),
+    ),
+    M(
         "tasks_push_success_height",
         "wpctrl/tasks/push_cube.py",
         "cube_p[2] < CUBE_HALF_SIZE + 5.0e-3",

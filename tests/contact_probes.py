@@ -173,9 +173,11 @@ class Probe:
 
     def press(self, where: str, overlap: float = 0.002, depth: float = 0.025, steps: int = 40) -> dict:
         """The closed fingertips pressed down on the cube's top ``where`` ("face": both tips on its centre; "edge":
-        both tips over one edge, ``overlap`` [m] onto the top face; "corner": the left tip over a corner, ``overlap``
-        onto it both ways) by a TCP target ramped from 4 mm above the touch to ``depth`` below it over the first
-        three quarters of ``steps`` and then held: the force rises with the arm's drive error."""
+        both tips over one edge, ``overlap`` [m] onto the top face; "corner": the tips moved along that edge until the
+        right one (``panda_rightfinger``) sits over a corner, about ``overlap`` onto the top both ways, the left one
+        beside it over the edge) by a TCP target ramped from 4 mm above the touch to ``depth`` below it over the first
+        three quarters of ``steps`` and then held: the force rises with the arm's drive error, and the tips' friction
+        drags the cube along the table by the arm's give (10-12 mm on both simulators)."""
         if where not in ("face", "edge", "corner"):
             raise ValueError(f"press: where expected 'face', 'edge' or 'corner', got {where!r}")
         g = self.geometry()

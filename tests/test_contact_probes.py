@@ -6,10 +6,11 @@ Measured (2026-11-28, default TaskPhysics): pressed at 35-40 N a fingertip sits 
 corner) deep in the cube on PhysX and 1.3 / 1.2 / 1.1 mm on Newton, within 0.35 mm at every force; with the fingers'
 contacts as stiff as the others' (``finger_solimp=None``) Newton's sank 0.15-0.3 mm, 0.7-1.1 mm short. The press
 tolerance, 0.45 mm, fails both that and the 2-3 mm corner sink a learned PushCube policy met. Where the tip reaches
-1-3 mm onto a corner, PhysX's slides off it at 22 / 39 / 54 N; Newton's stays on up to 85 N, creeping inward instead
-(a strict expected failure below). The two finger joints set 20 mm apart close on the gripper's one target on both,
-but PhysX's fixed tendon (ManiSkill's build of the URDF mimic) levels them within a control step and Newton's
-mimic equality leaves 11 mm (another strict expected failure). The grasp flag counts the fingers' push on the cube, not
+1-3 mm onto a corner, PhysX's slides off it at 22 / 39 / 54 N (the dragged cube turns until the corner tip's normal
+flips to the side face); Newton's stays on up to 85 N, creeping inward instead (a strict expected failure below).
+The two finger joints set 20 mm apart close on the gripper's one target on both, but PhysX's fixed tendon
+(ManiSkill's build of the URDF mimic) levels them within a control step and Newton's mimic equality leaves 11 mm
+(another strict expected failure). The grasp flag counts the fingers' push on the cube, not
 their friction, on both.
 """
 
@@ -72,10 +73,12 @@ def test_the_pressed_cube_stays_flat_and_moves_with_the_finger_as_on_physx(press
 
 
 @pytest.mark.xfail(strict=True, reason=(
-    "measured: with the tip 1 / 2 / 3 mm onto a corner PhysX's slides off at 22 / 39 / 54 N (its contact normal turns "
-    "to the cube's side while the tip sits ~60 % of that overlap deep); Newton's stays on the top face up to 85 N and "
-    "creeps 4-6 mm further onto it (MuJoCo's regularised friction lets a loaded contact slide slowly; impratio 100 "
-    "stops the creep and lets it slide off at 1 mm, but breaks LiftPegUpright's demos)"))  # fmt: skip
+    "measured: with the tips 1 / 2 / 3 mm onto a corner PhysX's slide off at 22 / 39 / 54 N: they hold the cube, "
+    "which turns ~4 degrees as they drag it, until the corner tip's depth passes its overlap across the side face and "
+    "its contact normal turns to that face; Newton's stay on the top face up to 85 N, creeping 4-6 mm further onto it "
+    "(MuJoCo's regularised friction lets a loaded contact slide slowly) while the cube turns half as much; no-slip "
+    "(10 iterations) stops the creep but leaves only the 1 mm corner (at 34 N); impratio 100 leaves it at 50-57 N "
+    "but breaks LiftPegUpright's demos"))  # fmt: skip
 def test_target_a_fingertip_on_a_corner_slides_off_as_on_physx(probe):
     for overlap in (0.001, 0.002, 0.003):
         out = probe.press("corner", overlap=overlap, depth=0.045)

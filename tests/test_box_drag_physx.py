@@ -1,0 +1,140 @@
+"""A cube pressed down on its top edge and dragged along the table, PhysX (SAPIEN, ManiSkill's scene settings) beside
+Newton (PickCube-v1's physics), with no robot: the contact behind the last PushCube policy episodes that part.
+
+A learned PushCube policy presses a fingertip on the cube's top back corner and drags it. On PhysX the cube then
+turns under the tip until the tip's contact normal flips to the side face and the tip slides off; on Newton it turns
+about half as much and the tip stays on (docs/tasks.md, "How a loaded tip leaves a corner"). This file holds the
+turn alone: 40 N down and a drag just over the friction limit (12.8 N along +x), both applied at one point on the
+cube's trailing top edge, centred or 12 mm off centre, every 10 ms (ManiSkill's physics step).
+
+Measured (2026-11-29, CPU): centred, neither cube turns (PhysX 0.13 degrees, Newton 0.0 in 100 ms). Off centre,
+PhysX's turns 0.41 degrees per millimetre slid and Newton's 0.20 (31.5 degrees over 76 mm against 6.5 over 32 mm).
+The turn per distance is compared, not the distance: with the drag 0.6 N over the limit the slide is sensitive to
+the effective friction, which is within 5 % on both (centred, PhysX's cube slides 68 mm in 100 ms, Newton's 24 mm).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+pytest.importorskip("torch")
+pytest.importorskip("mani_skill")
+pytestmark = pytest.mark.slow  # PhysX beside Newton: `-m slow` (CI runs it)
+
+HALF = 0.02
+"""PickCube's cube half size [m]."""
+DOWN, DRAG = 40.0, 12.8
+"""The load [N], pressed down and dragged along +x, at a point on the cube's trailing top edge."""
+STEPS = 10
+"""10 ms physics steps, 100 ms in all."""
+
+
+def _yaw_deg(q_xyzw) -> float:
+    x, y, z, w = q_xyzw
+    return math.degrees(math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
+
+
+def _load_point(p, q_xyzw, offset: float) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+
+    return np.asarray(p) + Rotation.from_quat(q_xyzw).apply([-HALF, offset, HALF])
+
+
+def physx_drag(offset: float) -> tuple[float, float]:
+    """(distance slid along x [m], yaw [deg]) after :data:`STEPS` steps on PhysX, ManiSkill's scene settings."""
+    import sapien
+    from mani_skill.utils.structs.types import DefaultMaterialsConfig, SceneConfig
+    from sapien import physx
+
+    sc = SceneConfig()
+    physx.set_shape_config(contact_offset=sc.contact_offset, rest_offset=sc.rest_offset)
+    physx.set_body_config(solver_position_iterations=sc.solver_position_iterations,
+                          solver_velocity_iterations=sc.solver_velocity_iterations,
+                          sleep_threshold=sc.sleep_threshold)  # fmt: skip
+    physx.set_scene_config(gravity=np.asarray(sc.gravity), bounce_threshold=sc.bounce_threshold,
+                           enable_pcm=sc.enable_pcm, enable_tgs=sc.enable_tgs, enable_ccd=sc.enable_ccd,
+                           enable_enhanced_determinism=sc.enable_enhanced_determinism,
+                           enable_friction_every_iteration=sc.enable_friction_every_iteration)  # fmt: skip
+    physx.set_default_material(**DefaultMaterialsConfig().dict())
+    scene = sapien.Scene([physx.PhysxCpuSystem()])
+    scene.set_timestep(0.01)
+    b = scene.create_actor_builder()
+    b.add_box_collision(half_size=[0.6, 0.6, 0.1])
+    b.build_static(name="table").set_pose(sapien.Pose([0.0, 0.0, -0.1]))
+    b = scene.create_actor_builder()
+    b.add_box_collision(half_size=[HALF] * 3, density=1000.0)
+    cube = b.build(name="cube")
+    cube.set_pose(sapien.Pose([0.0, 0.0, HALF]))
+    body = cube.find_component_by_type(physx.PhysxRigidDynamicComponent)
+    for _ in range(20):  # settle on the table
+        scene.step()
+    x0 = float(cube.pose.p[0])
+    for _ in range(STEPS):
+        w, x, y, z = cube.pose.q
+        body.add_force_at_point(np.array([DRAG, 0.0, -DOWN]), _load_point(cube.pose.p, [x, y, z, w], offset))
+        scene.step()
+    w, x, y, z = cube.pose.q
+    return float(cube.pose.p[0]) - x0, _yaw_deg([x, y, z, w])
+
+
+def newton_drag(offset: float) -> tuple[float, float]:
+    """The same on Newton: PickCube-v1's scene and physics (the Panda at rest, far from the cube), the load applied
+    as a wrench about the cube's centre at every MuJoCo step."""
+    import torch
+
+    import wpctrl.tasks as T
+
+    env = T.make("PickCube-v1", num_envs=1, control_mode="pd_joint_delta_pos")
+    env.reset(seed=0)
+    state = env.get_state_dict()
+    state["actors"]["cube"][0] = torch.tensor([0.05, 0.0, HALF, 1.0, 0, 0, 0, 0, 0, 0, 0, 0, 0])
+    env.set_state_dict({g: dict(d) for g, d in state.items() if g in ("actors", "articulations")})
+    for _ in range(4):  # settle on the table
+        env.step(torch.zeros(1, 8))
+    b = env.scene.actor_body0["cube"]
+    src, dst = env.state, env._other  # the env's step is a captured graph: step the solver directly
+    dt = 1.0 / (env.sim_freq * env.physics.substeps)
+    x0 = float(src.body_q.numpy()[b][0])
+    force = np.array([DRAG, 0.0, -DOWN])
+    for _ in range(STEPS):
+        pose = src.body_q.numpy()[b]
+        arm = _load_point(pose[:3], pose[3:], offset) - pose[:3]
+        wrench = np.zeros((src.body_f.shape[0], 6), np.float32)
+        wrench[b] = [*force, *np.cross(arm, force)]
+        for _ in range(env.physics.substeps):
+            src.body_f.assign(wrench)
+            env.solver.step(src, dst, env.control, env._contacts, dt)
+            src, dst = dst, src
+    pose = src.body_q.numpy()[b]
+    return float(pose[0]) - x0, _yaw_deg(pose[3:])
+
+
+@pytest.fixture(scope="module")
+def drags():
+    return {(side, off): f(off) for side, f in (("physx", physx_drag), ("newton", newton_drag)) for off in (0.0, 0.012)}
+
+
+def test_a_cube_loaded_on_its_centre_line_slides_without_turning_on_both(drags):
+    """Both cubes slide forward (over 1 cm in 100 ms; measured 68 / 24 mm) and turn under half a degree (measured
+    0.13 / 0.0)."""
+    for side in ("physx", "newton"):
+        dist, yaw = drags[(side, 0.0)]
+        assert dist > 0.01 and abs(yaw) < 0.5, (side, dist, yaw)
+
+
+def test_a_cube_loaded_off_centre_turns_the_same_way_on_both(drags):
+    """Loaded 12 mm off centre (+y), both cubes turn clockwise seen from above, by more than 2 degrees in 100 ms."""
+    for side in ("physx", "newton"):
+        dist, yaw = drags[(side, 0.012)]
+        assert yaw < -2.0, (side, dist, yaw)
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "measured: PhysX's cube turns 0.41 degrees per millimetre slid, Newton's 0.20; a friction bounded per contact "
+    "patch (PhysX) rather than at every contact point by its own load (MuJoCo) is the untested candidate"))  # fmt: skip
+def test_target_a_cube_loaded_off_centre_turns_as_far_per_distance_as_on_physx(drags):
+    per_mm = {side: drags[(side, 0.012)][1] / (drags[(side, 0.012)][0] * 1e3) for side in ("physx", "newton")}
+    assert per_mm["newton"] == pytest.approx(per_mm["physx"], rel=0.3), per_mm

@@ -17,8 +17,6 @@ and without PCM 0.64.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 
@@ -35,8 +33,9 @@ STEPS = 10
 
 
 def _yaw_deg(q_xyzw) -> float:
-    x, y, z, w = q_xyzw
-    return math.degrees(math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
+    from scipy.spatial.transform import Rotation
+
+    return float(Rotation.from_quat(q_xyzw).as_euler("xyz", degrees=True)[2])
 
 
 def _load_point(p, q_xyzw, offset: float) -> np.ndarray:

@@ -20,6 +20,22 @@ MUTATIONS = [
         ("tests/test_tasks_envs.py::test_partial_set_state_dict_leaves_the_other_envs_exactly_as_they_were",),
     ),
     M(
+        "tasks_external_wrench_one_buffer",
+        "wpctrl/tasks/external_wrench.py",
+        "        for view in self._wrench_views():\n",
+        "        for view in self._wrench_views()[:1]:\n",
+        "an external wrench is written into one of the env's two state buffers only (the solver alternates them)",
+        ("tests/test_task_external_wrench.py::test_a_lifting_force_and_a_torque_move_the_cube_as_newtons_laws_say",),
+    ),
+    M(
+        "tasks_external_wrench_torque_first",
+        "wpctrl/tasks/external_wrench.py",
+        '[_vectors(force, "force", rows), _vectors(torque, "torque", rows)]',
+        '[_vectors(torque, "torque", rows), _vectors(force, "force", rows)]',
+        "an external wrench's torque lands in body_f's force half and its force in the torque half",
+        ("tests/test_task_external_wrench.py::test_a_lifting_force_and_a_torque_move_the_cube_as_newtons_laws_say",),
+    ),
+    M(
         "tasks_final_info_misses_success",
         "wpctrl/tasks/env.py",
         '            done = t["terminated"] | t["truncated"]\n',

@@ -17,6 +17,7 @@ import numpy as np
 import warp as wp
 
 from .definitions import ROBOT_INIT_QPOS_NOISE
+from .external_wrench import ExternalWrenchMixin
 from .funcs import Sim
 from .geometry import GEOMETRY_FLAGS, apply_episode_geometry
 from .kernels import episode_kernel, task_kernels
@@ -35,7 +36,7 @@ RESET_OPTIONS = ("env_idx", "reconfigure")
 _REWARD_CODE = {"dense": 0, "normalized_dense": 1, "sparse": 2, "none": 3}
 
 
-class TaskEnv(StateDictMixin, gym.vector.VectorEnv):
+class TaskEnv(StateDictMixin, ExternalWrenchMixin, gym.vector.VectorEnv):
     """``num_envs`` copies of a ManiSkill task on Newton's MuJoCo-Warp, controlled by wpctrl (see the module docstring).
 
     ``step(action)`` returns ``obs, reward, terminated, truncated, info`` as torch tensors on :attr:`device`:

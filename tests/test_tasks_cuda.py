@@ -55,3 +55,29 @@ def test_scripted_policy_solves_the_task_on_cuda(task):
     for _ in range(env.max_episode_steps):
         obs, _, _, _, info = env.step(policy(obs))
     assert info["success"].float().mean().item() >= 0.9
+
+
+def test_an_external_wrench_moves_the_cube_on_cuda_as_on_the_cpu():
+    """The same lift (an upward force m (g + 2 m/s^2)) and, in env 1, a torque about z, given as a torch tensor on
+    the env's device: the cube's pose after two steps is the CPU env's (measured agreement on the CPU against the
+    closed form: tests/test_task_external_wrench.py)."""
+    poses = {}
+    for d in ("cpu", "cuda:0"):
+        env = T.make("PickCube-v1", num_envs=2, device=d, control_mode="pd_joint_delta_pos")
+        env.reset(seed=0)
+        s = env.get_state_dict()
+        s["actors"]["cube"][:] = torch.tensor([[0.1, 0.1, 0.02, 1.0, 0, 0, 0, 0, 0, 0, 0, 0, 0],
+                                               [0.1, -0.1, 0.02, 1.0, 0, 0, 0, 0, 0, 0, 0, 0, 0]])  # fmt: skip
+        env.set_state_dict({g: dict(v) for g, v in s.items() if g in ("actors", "articulations")})
+        for _ in range(4):
+            env.step(torch.zeros(2, 8, device=env.device))
+        m = float(env.model.body_mass.numpy()[env.scene.actor_body0["cube"]])
+        force = torch.tensor([0.0, 0.0, m * 11.81], device=env.device)
+        env.set_external_wrench("cube", force=force.expand(2, 3))
+        env.set_external_wrench("cube", force=force, torque=torch.tensor([0.0, 0.0, 1e-3], device=env.device),
+                                env_idx=[1])  # fmt: skip
+        for _ in range(2):
+            env.step(torch.zeros(2, 8, device=env.device))
+        poses[d] = env.get_state_dict()["actors"]["cube"][:, :7].cpu().numpy()
+    assert poses["cpu"][:, 2].min() > 0.028  # lifted about 1 cm
+    np.testing.assert_allclose(poses["cuda:0"], poses["cpu"], atol=1e-4)

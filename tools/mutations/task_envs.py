@@ -30,8 +30,8 @@ MUTATIONS = [
     M(
         "tasks_external_wrench_torque_first",
         "wpctrl/tasks/external_wrench.py",
-        '[_vectors(force, "force", rows), _vectors(torque, "torque", rows)]',
-        '[_vectors(torque, "torque", rows), _vectors(force, "force", rows)]',
+        "        wrench = np.concatenate([f, t], axis=1)\n",
+        "        wrench = np.concatenate([t, f], axis=1)\n",
         "an external wrench's torque lands in body_f's force half and its force in the torque half",
         ("tests/test_task_external_wrench.py::test_a_lifting_force_and_a_torque_move_the_cube_as_newtons_laws_say",),
     ),

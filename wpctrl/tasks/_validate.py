@@ -17,6 +17,7 @@ __all__ = [
     "action_tensor",
     "env_mask",
     "reset_options",
+    "row_vectors",
     "seed_value",
     "state_dict_arrays",
     "state_field",
@@ -66,6 +67,27 @@ def env_mask(env_idx, num_envs: int, device):
         mask = np.zeros(num_envs, np.bool_)
         mask[ids] = True
     return wp.array(mask, dtype=wp.bool, device=device)
+
+
+def row_vectors(value, name: str, rows: int, width: int, who: str) -> np.ndarray:
+    """``value`` (numpy, torch or nested lists) as a float32 (rows, width) array, one row per env selected; a
+    (width,) vector stands for every row. Refused unless numbers, of that shape, finite; ``who`` and ``name`` open
+    each message."""
+    v = value.detach().to("cpu") if hasattr(value, "detach") else value
+    try:
+        a = np.asarray(v)
+    except (ValueError, TypeError):
+        a = np.asarray(None)
+    if a.dtype.kind not in "iuf":
+        raise ConfigError(f"{who}: {name} expected an array of numbers, got {type(value).__name__}")
+    if a.shape == (width,):
+        a = np.broadcast_to(a, (rows, width))
+    if a.shape != (rows, width):
+        raise ConfigError(f"{who}: {name} expected shape ({rows}, {width}) or ({width},), got {tuple(np.shape(v))} "
+                          f"(a row per env selected, or one for all)")  # fmt: skip
+    if not np.isfinite(a).all():
+        raise ConfigError(f"{who}: {name} holds non-finite values (expected finite numbers)")
+    return np.ascontiguousarray(a, np.float32)
 
 
 def seed_value(seed) -> int:

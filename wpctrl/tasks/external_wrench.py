@@ -14,33 +14,11 @@ import numpy as np
 import warp as wp
 
 from ..config import ConfigError
+from ._validate import env_mask, row_vectors
 
 __all__ = ["ExternalWrenchMixin"]
 
 _WHO = "set_external_wrench"
-
-
-def _vectors(value, name: str, rows: int) -> np.ndarray:
-    """``value`` (None: zeros; (3,) for every env selected; (rows, 3) one per env) as a float32 (rows, 3) array,
-    checked: numbers, shape, finite."""
-    if value is None:
-        return np.zeros((rows, 3), np.float32)
-    v = value.detach().to("cpu") if hasattr(value, "detach") else value
-    try:
-        a = np.asarray(v)
-    except (ValueError, TypeError):
-        a = np.asarray(None)
-    if a.dtype.kind not in "iuf":
-        raise ConfigError(f"{_WHO}: {name} expected an array of numbers [{'N' if name == 'force' else 'N m'}], got "
-                          f"{type(value).__name__}")  # fmt: skip
-    if a.shape == (3,):
-        a = np.broadcast_to(a, (rows, 3))
-    if a.shape != (rows, 3):
-        raise ConfigError(f"{_WHO}: {name} expected shape (3,) or ({rows}, 3) (one row per env selected), got "
-                          f"{tuple(a.shape)}")  # fmt: skip
-    if not np.isfinite(a).all():
-        raise ConfigError(f"{_WHO}: {name} holds non-finite values (expected finite numbers)")
-    return np.ascontiguousarray(a, np.float32)
 
 
 class ExternalWrenchMixin:
@@ -65,14 +43,15 @@ class ExternalWrenchMixin:
         order); None is zero, so ``set_external_wrench(actor)`` removes the wrench. A force ``f`` at a world point
         ``p`` of a body whose centre of mass is at ``c`` is the force ``f`` with the torque ``(p - c) x f``.
         Everything is checked on the host before anything is written."""
-        from ._validate import env_mask
-
         torch = self._torch
         body = self._actor_body(actor)
         mask = self._all if env_idx is None else env_mask(env_idx, self.num_envs, self.wp_device)
         idx = torch.nonzero(wp.to_torch(mask), as_tuple=False).flatten()
         rows = int(idx.numel())
-        wrench = np.concatenate([_vectors(force, "force", rows), _vectors(torque, "torque", rows)], axis=1)
+        zero = np.zeros((rows, 3), np.float32)
+        f = zero if force is None else row_vectors(force, "force", rows, 3, _WHO)
+        t = zero if torque is None else row_vectors(torque, "torque", rows, 3, _WHO)
+        wrench = np.concatenate([f, t], axis=1)
         w = torch.as_tensor(wrench, device=self.device)
         for view in self._wrench_views():
             view[idx, body] = w

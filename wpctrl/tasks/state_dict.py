@@ -19,6 +19,7 @@ import warp as wp
 
 from ..config import ConfigError
 from ._validate import STATE_ACTOR_WIDTH as _ACTOR_DIM
+from ._validate import row_vectors
 from .definitions import PANDA_DOF, PANDA_ROOT_POSE, TABLE
 
 __all__ = ["StateDictMixin"]
@@ -162,22 +163,7 @@ class StateDictMixin:
                     raise ConfigError(f"set_state_dict: {name} is not part of the controller's state (expected "
                                       f"{sorted(current[uid])})")  # fmt: skip
                 arr = wp.to_torch(current[uid][k]).clone()
-                width = int(arr.shape[1])
-                v = v.detach().to("cpu") if hasattr(v, "detach") else v
-                try:
-                    a = np.asarray(v)
-                except (ValueError, TypeError):
-                    a = np.asarray(None)
-                if a.dtype.kind not in "iuf":
-                    raise ConfigError(f"set_state_dict: {name} expected an array of numbers, got {type(v).__name__}")
-                if a.shape == (width,):
-                    a = np.broadcast_to(a, (rows, width))
-                if a.shape != (rows, width):
-                    raise ConfigError(f"set_state_dict: {name} expected shape ({rows}, {width}) or ({width},), got "
-                                      f"{tuple(np.shape(v))}")  # fmt: skip
-                if not np.isfinite(a).all():
-                    raise ConfigError(f"set_state_dict: {name} holds non-finite values (expected finite numbers)")
-                arr[idx] = self._torch.as_tensor(np.ascontiguousarray(a, np.float32), dtype=arr.dtype,
-                                                 device=arr.device)  # fmt: skip
+                a = row_vectors(v, name, rows, int(arr.shape[1]), "set_state_dict")
+                arr[idx] = self._torch.as_tensor(a, dtype=arr.dtype, device=arr.device)
                 full[uid][k] = arr
         return full

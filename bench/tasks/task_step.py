@@ -44,11 +44,11 @@ from bench.common import (  # noqa: E402
 )
 
 
-def bench_one(task: str, n: int, device, substeps: int, control_mode: str) -> dict:
+def bench_one(task: str, n: int, device, substeps: int, control_mode: str, arm_drive: str | None = None) -> dict:
     import wpctrl.tasks as T
 
-    env = T.make(task, num_envs=n, device=device, control_mode=control_mode,
-                 physics=T.task_physics(task, substeps=substeps))
+    changes = {"substeps": substeps} if arm_drive is None else {"substeps": substeps, "arm_drive": arm_drive}
+    env = T.make(task, num_envs=n, device=device, control_mode=control_mode, physics=T.task_physics(task, **changes))
     env.reset(seed=0)
     sync = Sync(device)
     dev = wp.get_device(device)
@@ -62,7 +62,8 @@ def bench_one(task: str, n: int, device, substeps: int, control_mode: str) -> di
     graphs = {name: capture_graph(fn, dev) for name, fn in (("physics", physics), ("controller", controller),
                                                          ("task kernels", task_kernels))}  # fmt: skip
     env.reset(seed=0)
-    row = {"task": task, "envs": n, "substeps": substeps, "control_mode": control_mode}
+    row = {"task": task, "envs": n, "substeps": substeps, "control_mode": control_mode,
+           "arm_drive": env.physics.arm_drive}
     # the env step and its bare physics take their samples in turns: both advance the same state, so the solver's
     # load (contacts, constraint rows, iterations), which changes as a freshly reset scene settles, is the same for both
     timed = measure_interleaved({"env step": lambda: env.step(action),
@@ -85,10 +86,10 @@ def _load(row: dict) -> str:
 
 
 def render(meta: dict, rows: list[dict]) -> str:
-    header = ["task", "envs", "substeps", "env step [µs]", "env-steps/s", "physics [µs]", "env / physics",
+    header = ["task", "envs", "substeps", "arm drive", "env step [µs]", "env-steps/s", "physics [µs]", "env / physics",
               "controller [µs] (share)", "task kernels [µs] (share)",
               "contacts / rows"]  # fmt: skip
-    body = [[r["task"], fmt_envs(r["envs"]), r["substeps"], fmt_us(r["env step"]), f"{r['env_steps_per_s']:,.0f}",
+    body = [[r["task"], fmt_envs(r["envs"]), r["substeps"], r.get("arm_drive", ""), fmt_us(r["env step"]), f"{r['env_steps_per_s']:,.0f}",
              fmt_us(r["physics"]), f"{r['vs_physics'] * 100:.1f} %",
              f"{fmt_us(r['controller'])} ({100 * r['controller_share']:.2f} %)",
              f"{fmt_us(r['task kernels'])} ({100 * r['task_share']:.2f} %)", _load(r)] for r in rows]  # fmt: skip
@@ -107,6 +108,8 @@ def main(argv=None) -> int:
     p.add_argument("--tasks", default="PushCube-v1,PickCube-v1")
     p.add_argument("--substeps", default="8", help="MuJoCo steps per physics step, e.g. 4,8")
     p.add_argument("--control-mode", default="pd_joint_delta_pos")
+    p.add_argument("--arm-drive", default=None, help="TaskPhysics.arm_drive values to time in turn, e.g. "
+                   "physx_tgs,mujoco (default: the task's own)")
     p.add_argument("--out", default=str(DEFAULT_OUT))
     p.add_argument("--tag", default=None)
     args = p.parse_args(argv)
@@ -117,10 +120,10 @@ def main(argv=None) -> int:
     rows = []
     for task in args.tasks.split(","):
         for sub in (int(s) for s in args.substeps.split(",")):
-            for n in envs:
-                row = bench_one(task, n, device, sub, args.control_mode)
+            for n, drive in ((n, d) for n in envs for d in (args.arm_drive.split(",") if args.arm_drive else [None])):
+                row = bench_one(task, n, device, sub, args.control_mode, drive)
                 rows.append(row)
-                print(f"{task} {fmt_envs(n)} envs, {sub} substeps: env step {fmt_us(row['env step'])} µs "
+                print(f"{task} {fmt_envs(n)} envs, {sub} substeps, {row['arm_drive']}: env step {fmt_us(row['env step'])} µs "
                       f"({row['env_steps_per_s']:,.0f} env-steps/s), physics {fmt_us(row['physics'])} µs, "
                       f"controller {100 * row['controller_share']:.2f} %, task kernels "
                       f"{100 * row['task_share']:.2f} %", flush=True)  # fmt: skip

@@ -16,6 +16,7 @@ import newton
 import numpy as np
 import warp as wp
 
+from .arm_drive import ArmDrive
 from .definitions import ROBOT_INIT_QPOS_NOISE
 from .external_wrench import ExternalWrenchMixin
 from .funcs import Sim
@@ -109,13 +110,17 @@ class TaskEnv(StateDictMixin, ExternalWrenchMixin, gym.vector.VectorEnv):
                 if hasattr(cfg, "delta_solver_config"):
                     cfg.delta_solver_config = dict(cfg.delta_solver_config, solver_iterations=100)
         self.ctrl = wpctrl.build_controller(mode, model, self.control_freq, self.sim_freq)
+        self.dt = 1.0 / (self.sim_freq * physics.substeps)
+        self._arm_drive = None
+        if physics.arm_drive == "physx_tgs":  # before the solver: it makes no actuator for the arm's DOFs then
+            self._arm_drive = ArmDrive(self.ctrl, model, 1.0 / self.sim_freq, self.dt)
+            self._arm_drive.switch_off_solver_drive(model)
         self.solver = newton.solvers.SolverMuJoCo(model, **physics.solver_kwargs())
         contacts_per_world = -(-self.solver.get_max_contact_count() // n)
         rows = physics.constraint_rows(contacts_per_world, sc.dofs_per_env)
         if self.solver.mjw_data.njmax < rows:  # room for every contact's rows, else MuJoCo-Warp drops some
             self.solver = newton.solvers.SolverMuJoCo(model, njmax=rows, nconmax=contacts_per_world,
                                                       **physics.solver_kwargs())  # fmt: skip
-        self.dt = 1.0 / (self.sim_freq * physics.substeps)
         self.state = model.state()
         self._other = model.state()
         self.control = model.control()
@@ -251,9 +256,14 @@ class TaskEnv(StateDictMixin, ExternalWrenchMixin, gym.vector.VectorEnv):
         src, dst = self.state, self._other
         steps = ctrl.num_substeps * self.physics.substeps
         i = 0
+        drive = self._arm_drive
         for _ in range(ctrl.num_substeps):
             ctrl.before_simulation_step(src, self.control)
+            if drive is not None:
+                drive.begin_step(src)
             for _ in range(self.physics.substeps):
+                if drive is not None:
+                    drive.before_solver_step(src, self.control)
                 i += 1
                 obs = self._observables if i == steps else None
                 solver.step(src, dst, self.control, self._contacts if obs is not None else None, self.dt,

@@ -66,6 +66,8 @@ __all__ = ["TaskPhysics", "mujoco_friction", "physics_fields", "physics_from"]
 
 _INTEGRATORS = ("discrete", "implicitfast", "implicit", "euler")
 _CONES = ("elliptic", "pyramidal")
+ARM_DRIVES = ("physx_tgs", "mujoco")
+"""``TaskPhysics.arm_drive``'s values: PhysX's TGS pass (:mod:`wpctrl.tasks.arm_drive`) or MuJoCo's own drive."""
 _MIN_TORSION = 1e-4
 """The smallest torsional coefficient [m] TaskPhysics takes above 0: MuJoCo-Warp warns that a condim-4 geom's under
 its ``mjMINMU`` (1e-5, compared after Newton's float32) may give NaN."""
@@ -126,6 +128,13 @@ class TaskPhysics:
     """MuJoCo ``solref`` (time constant [s], damping ratio) of the Panda's finger shapes; None gives them
     ``contact_solref``. MuJoCo mixes the two shapes' values of a pair half and half."""
 
+    arm_drive: str = "physx_tgs"
+    """Who computes the arm's drive torques: ``"physx_tgs"`` (the default) runs PhysX's TGS pass over the arm's
+    drive rows before every MuJoCo step (:mod:`wpctrl.tasks.arm_drive`), so that a fast move of the coupled shoulder
+    joints falls as short as it does on ManiSkill's 15-iteration PhysX; ``"mujoco"`` keeps MuJoCo's built-in
+    implicit drive, which gives the converged rigid-body answer. The gripper keeps MuJoCo's drive either way.
+    PegInsertionSide-v1's physics keeps ``"mujoco"`` (``docs/tasks.md``)."""
+
     shape_solref: tuple[tuple[str, tuple[int, ...], tuple[float, float]], ...] = ()
     """MuJoCo ``solref`` (time constant [s], damping ratio) of some of a task actor's shapes: each entry is (the
     actor's name, the shapes' indices in the actor's ``shapes``, the solref); every other shape keeps
@@ -140,6 +149,7 @@ class TaskPhysics:
         _one_of(self, "integrator", _INTEGRATORS)
         _one_of(self, "cone", _CONES)
         _one_of(self, "friction_combine", ("average", "max"))
+        _one_of(self, "arm_drive", ARM_DRIVES)
         if (
             isinstance(self.contact_gap, bool)
             or not isinstance(self.contact_gap, (int, float))

@@ -338,10 +338,12 @@ def _hang_torque(peg_p: np.ndarray, tcp_p: np.ndarray) -> np.ndarray:
     return PEG_MASS * G * np.linalg.norm(peg_p[..., :2] - tcp_p[..., :2], axis=-1)
 
 
-PYRAMIDAL = T.TaskPhysics(cone="pyramidal", impratio=1.0, finger_solimp=None)
+PYRAMIDAL = T.TaskPhysics(cone="pyramidal", impratio=1.0, finger_solimp=None, arm_drive="mujoco")
 """MuJoCo's pyramidal friction cone at impratio 1 with the fingers' contacts as stiff as every other's: the fingers
 resist a twist of the peg about their closing axis with 0.29-0.30 Nm (PhysX 0.33 Nm). The default (elliptic cone at
-impratio 10, softer finger contacts) resists 0.43-0.44 Nm; the elliptic cone with stiff finger contacts 0.56-0.57."""
+impratio 10, softer finger contacts) resists 0.43-0.44 Nm; the elliptic cone with stiff finger contacts 0.56-0.57.
+Measured with MuJoCo's own drive of the arm; under PhysX's TGS pass the twist is resisted the same (0.31-0.32 Nm)
+but two of the four demos end 3.7-4.0 cm from PhysX's peg and fail."""
 
 
 def _replay(physics: T.TaskPhysics) -> list[dict]:

@@ -290,15 +290,17 @@ def test_the_common_defaults_let_the_peg_turn_in_the_grip_and_miss_the_hole():
 
 def test_the_tasks_physics_is_its_declared_departures():
     """``make`` without ``physics`` builds the task's own (``T.task_physics``): the defaults with the task's fields,
-    a change on top keeps them; the task's departures are the fingers' grip: torsional friction and contacts
-    stiffer than the defaults'."""
+    a change on top keeps them; the task's departures are the fingers' grip (torsional friction, contacts stiffer
+    than the defaults', the pyramidal cone) and MuJoCo's own drive of the arm."""
     from wpctrl.tasks.peg_insertion_side import PHYSICS
 
     own = T.task_physics(ENV_ID)
     assert own == T.TaskPhysics(**PHYSICS) and own != T.TaskPhysics()
     assert own.finger_torsion > 0.0 and own.finger_solimp[0] > T.TaskPhysics().finger_solimp[0]
     assert own.cone == "pyramidal" != T.TaskPhysics().cone
-    assert own == T.TaskPhysics(finger_torsion=own.finger_torsion, finger_solimp=own.finger_solimp, cone=own.cone)
+    assert own.arm_drive == "mujoco" != T.TaskPhysics().arm_drive
+    assert own == T.TaskPhysics(finger_torsion=own.finger_torsion, finger_solimp=own.finger_solimp, cone=own.cone,
+                                arm_drive=own.arm_drive)  # fmt: skip
     assert T.task_physics(ENV_ID, substeps=8) == T.TaskPhysics(**PHYSICS, substeps=8)
     assert T.task_physics("PushCube-v1") == T.TaskPhysics()
     env = T.make(ENV_ID, robot_uids=ROBOT, num_envs=1, auto_reset=False)

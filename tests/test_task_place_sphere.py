@@ -284,7 +284,7 @@ def test_maniskills_motion_planning_demos_replay_to_success(demo_replay):
 def test_the_ball_rests_in_the_bin_as_soon_as_on_physx(demo_replay):
     """With the task's physics the impact gives nothing back: every demo ends in success, each first succeeding within
     a step of PhysX's or before it (measured 2026-11-29: 4, 1 and 0 steps before it, 1 step after it), where the
-    common defaults' ball rests 4-10 steps after it (the next test)."""
+    common defaults' ball rests 4-15 steps after it (the next test)."""
     rested = [e for e in demo_replay.episodes if e.success_at_end and e.success_at_end_recorded]
     assert len(rested) == N, demo_replay.format()
     for e in rested:
@@ -294,16 +294,16 @@ def test_the_ball_rests_in_the_bin_as_soon_as_on_physx(demo_replay):
 def test_the_common_defaults_let_the_ball_roll_past_the_demos_end():
     """Why the task departs from :class:`~wpctrl.tasks.TaskPhysics`'s defaults (``PlaceSphere.physics``): with them
     the ball lands on the bin's floor at PhysX's step in every demo but rolls off its landing and is still rolling when
-    the demo ends (0 / 4); the four demos in one env, each held at its last action 15 steps more, show it then rests
-    and succeeds within 12 steps of PhysX's first success (measured 2026-11-28: 4, 10, 7 and 10 steps after it, where
-    the demos end 1-4 steps after it)."""
+    the demo ends (0 / 4); the four demos in one env, each held at its last action 20 steps more, show it then rests
+    and succeeds within 18 steps of PhysX's first success (measured 2026-11-30: 7, 14, 4 and 15 steps after it, where
+    the demos end 1-4 steps after it; with MuJoCo's own drive of the arm 4, 10, 7 and 10)."""
     eps = _demos()["episodes"]
     env = T.make(ENV_ID, num_envs=len(eps), control_mode="pd_joint_pos", max_episode_steps=300, auto_reset=False,
                  ignore_terminations=True, physics=T.TaskPhysics())  # fmt: skip
     env.reset(seed=[ep["seed"] for ep in eps])
     env.set_state_dict({g: {k: torch.tensor(np.array([ep["init_state_dict"][g][k] for ep in eps]), dtype=torch.float32)
                             for k in eps[0]["init_state_dict"][g]} for g in ("actors", "articulations")})  # fmt: skip
-    steps = max(len(ep["actions"]) for ep in eps) + 15
+    steps = max(len(ep["actions"]) for ep in eps) + 20
     actions = np.array([ep["actions"] + [ep["actions"][-1]] * (steps - len(ep["actions"])) for ep in eps], np.float32)
     on, success = np.zeros((steps, len(eps)), bool), np.zeros((steps, len(eps)), bool)
     for t in range(steps):
@@ -315,7 +315,7 @@ def test_the_common_defaults_let_the_ball_roll_past_the_demos_end():
         assert on[:, e].argmax() == physx_on, (ep["seed"], on[:, e].argmax(), physx_on)
         assert not success[len(ep["actions"]) - 1, e], ep["seed"]  # still rolling at the demo's end
         assert success[:, e].any(), ep["seed"]
-        assert success[:, e].argmax() - physx_success <= 12, (ep["seed"], success[:, e].argmax(), physx_success)
+        assert success[:, e].argmax() - physx_success <= 18, (ep["seed"], success[:, e].argmax(), physx_success)
 
 
 NEWTON_POLICY = Path(__file__).parent / "data" / "tasks" / "PlaceSphere-v1__pd_joint_delta_pos__newton_policy.json.gz"

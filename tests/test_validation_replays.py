@@ -25,16 +25,17 @@ import wpctrl.tasks as T  # noqa: E402
 
 DATA = Path(__file__).parent / "data" / "validation"
 
-# measured 2026-11-29, CPU, each task's own physics (16 substeps): episodes, success once agreeing, median final
-# error of the main object [m]
+# measured 2026-11-30, CPU, each task's own physics (16 substeps; the arm under PhysX's TGS pass but in
+# PegInsertionSide, whose physics keeps MuJoCo's drive): episodes, success once agreeing, median final error of the
+# main object [m]
 MEASURED = {
-    "LiftPegUpright-v1.h5": (21, 21, 0.0032),
+    "LiftPegUpright-v1.h5": (21, 21, 0.0043),
     "PegInsertionSide-v1.h5": (26, 24, 0.0107),
-    "PullCube-v1.h5": (24, 24, 0.0018),
+    "PullCube-v1.h5": (24, 24, 0.0031),
     "StackCube-v1.h5": (24, 24, 0.0006),
-    "PlaceSphere-v1.h5": (32, 31, 0.0027),
-    "PushCube-v1__pd_joint_delta_pos__policy_20010.json.gz": (40, 32, 0.078),
-    "PickCube-v1__pd_ee_delta_pos__policy_20010.json.gz": (30, 27, 0.0034),
+    "PlaceSphere-v1.h5": (32, 30, 0.0027),
+    "PushCube-v1__pd_joint_delta_pos__policy_20010.json.gz": (40, 36, 0.080),
+    "PickCube-v1__pd_ee_delta_pos__policy_20010.json.gz": (30, 30, 0.0015),
 }
 GOAL = 0.9
 """Success once agreeing with ManiSkill's in this share of the episodes (the issues' goal)."""
@@ -70,7 +71,7 @@ def test_the_replays_agree_as_measured(reports, name):
 @pytest.mark.parametrize(
     "name",
     [pytest.param(name, marks=pytest.mark.xfail(strict=True, reason=(
-        f"measured {MEASURED[name][1]} / {MEASURED[name][0]} episodes agree (2026-11-29); the rest part where "
+        f"measured {MEASURED[name][1]} / {MEASURED[name][0]} episodes agree (2026-11-30); the rest part where "
         "PhysX's and MuJoCo's contacts differ (docs/tasks.md)"))) if name in SHORT_OF_GOAL else name
      for name in sorted(MEASURED)],
 )  # fmt: skip

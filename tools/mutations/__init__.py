@@ -12,6 +12,7 @@ from .model import M, Mutation
 AREAS = (
     "response",
     "coupled_drive",
+    "arm_drive",
     "set_action",
     "substep",
     "reset",

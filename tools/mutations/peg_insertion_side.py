@@ -10,8 +10,8 @@ MUTATIONS = [
     M(
         "peg_physics_elliptic_cone",
         "wpctrl/tasks/peg_insertion_side.py",
-        ', "cone": "pyramidal"}',
-        "}",
+        ', "cone": "pyramidal", "arm_drive"',
+        ', "arm_drive"',
         "PegInsertionSide's grip under the elliptic cone: the carried peg turns in the hand and insertions miss",
         _PHYSICS,
     ),
@@ -21,6 +21,14 @@ MUTATIONS = [
         '"finger_solimp": (0.95, 0.95, 0.001), ',
         "",
         "PegInsertionSide's fingers keep the defaults' soft contacts (0.7): half of a larger demo sample misses",
+        _PHYSICS,
+    ),
+    M(
+        "peg_physics_tgs_arm_drive",
+        "wpctrl/tasks/peg_insertion_side.py",
+        ', "arm_drive": "mujoco"}',
+        "}",
+        "PegInsertionSide's arm under the TGS pass, with the grip chosen for MuJoCo's drive: a third of the demos miss",
         _PHYSICS,
     ),
     M(

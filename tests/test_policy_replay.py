@@ -307,7 +307,8 @@ def _first_steps(task, envs, steps: int) -> np.ndarray:
     return np.stack(errors)
 
 
-@pytest.mark.parametrize("task, bound_j1, bound_rest", [("PushCube-v1", 0.0015, 0.0015), ("PickCube-v1", 0.0015, 0.003)])
+@pytest.mark.parametrize("task, bound_j1, bound_rest", [("PushCube-v1", 0.0015, 0.0015),
+                                                       ("PickCube-v1", 0.0015, 0.003)])
 def test_the_arm_follows_physx_in_the_first_steps_within_the_measured_bounds(task, envs, bound_j1, bound_rest):
     """The first three recorded actions move the arm as on PhysX within what was measured, with a little slack
     (PushCube: every joint within 0.8 mrad; PickCube: panda_joint1 within 0.7, the others within 1.8 mrad). The arm's

@@ -89,7 +89,8 @@ def render(meta: dict, rows: list[dict]) -> str:
     header = ["task", "envs", "substeps", "arm drive", "env step [µs]", "env-steps/s", "physics [µs]", "env / physics",
               "controller [µs] (share)", "task kernels [µs] (share)",
               "contacts / rows"]  # fmt: skip
-    body = [[r["task"], fmt_envs(r["envs"]), r["substeps"], r.get("arm_drive", ""), fmt_us(r["env step"]), f"{r['env_steps_per_s']:,.0f}",
+    body = [[r["task"], fmt_envs(r["envs"]), r["substeps"], r.get("arm_drive", ""), fmt_us(r["env step"]),
+             f"{r['env_steps_per_s']:,.0f}",
              fmt_us(r["physics"]), f"{r['vs_physics'] * 100:.1f} %",
              f"{fmt_us(r['controller'])} ({100 * r['controller_share']:.2f} %)",
              f"{fmt_us(r['task kernels'])} ({100 * r['task_share']:.2f} %)", _load(r)] for r in rows]  # fmt: skip
@@ -123,7 +124,8 @@ def main(argv=None) -> int:
             for n, drive in ((n, d) for n in envs for d in (args.arm_drive.split(",") if args.arm_drive else [None])):
                 row = bench_one(task, n, device, sub, args.control_mode, drive)
                 rows.append(row)
-                print(f"{task} {fmt_envs(n)} envs, {sub} substeps, {row['arm_drive']}: env step {fmt_us(row['env step'])} µs "
+                print(f"{task} {fmt_envs(n)} envs, {sub} substeps, {row['arm_drive']}: "
+                      f"env step {fmt_us(row['env step'])} µs "
                       f"({row['env_steps_per_s']:,.0f} env-steps/s), physics {fmt_us(row['physics'])} µs, "
                       f"controller {100 * row['controller_share']:.2f} %, task kernels "
                       f"{100 * row['task_share']:.2f} %", flush=True)  # fmt: skip

@@ -6,6 +6,11 @@ articulation joint limits, implicit drives clamped at their force limit, each pa
 two materials) and MuJoCo (soft constraints, implicit damping, each pair's friction the *larger* of its two geoms')
 differ where a task touches them. What :class:`TaskPhysics` sets, and why:
 
+- **The arm's drive** (``arm_drive``): PhysX's TGS solver does not converge the arm's joint drives in its 15
+  position iterations; a fast move of the Panda's coupled shoulder joints falls a quarter short of the rigid-body
+  answer that MuJoCo's own drive gives. The default runs PhysX's pass itself before every MuJoCo step
+  (:mod:`wpctrl.tasks.arm_drive`): the arm within 0.5-1.8 mrad of PhysX's over a policy's first five steps instead
+  of 8-17, and a learned policy's ManiSkill episodes replay to their outcome 15 / 16 times instead of 13 / 16.
 - **Substeps**: 16 MuJoCo steps of 0.625 ms per 100 Hz physics step, as PhysX's TGS integrates in 15
   sub-iterations. MuJoCo clamps a saturated drive's force but keeps its damping implicit (``dt * kd`` in the mass
   matrix), so a saturated arm joint moves as if damped harder than on PhysX, by an amount that grows with the step: at
